@@ -1,0 +1,9 @@
+//! One module per subcommand.
+
+pub mod bake;
+pub mod bench;
+pub mod export;
+pub mod info;
+pub mod render;
+pub mod trace;
+pub mod view;

@@ -1,0 +1,53 @@
+//! `grin`: the one binary. Subcommands only parse arguments, call the libraries and print.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// Gradient-index renderer: trace, bake, render and inspect GRIN media.
+#[derive(Debug, Parser)]
+#[command(name = "grin", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Ray table in, ray table out.
+    Trace(cmd::trace::Args),
+    /// Bake a scene's field into a .grinf file.
+    Bake(cmd::bake::Args),
+    /// Render a scene to EXR (+ PNG preview).
+    Render(cmd::render::Args),
+    /// Real-time viewer.
+    View(cmd::view::Args),
+    /// Show what is inside a .vdb or .grinf file.
+    Info(cmd::info::Args),
+    /// Export a baked field to OpenVDB.
+    Export(cmd::export::Args),
+    /// Speed-vs-accuracy charts, stability matrix, speed ratios.
+    Bench(cmd::bench::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Trace(a) => cmd::trace::run(a),
+        Command::Bake(a) => cmd::bake::run(a),
+        Command::Render(a) => cmd::render::run(a),
+        Command::View(a) => cmd::view::run(a),
+        Command::Info(a) => cmd::info::run(a),
+        Command::Export(a) => cmd::export::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("grin: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,125 @@
+//! Medium bounds: a sphere or an axis-aligned box, with ray intersection.
+
+use glam::DVec3;
+use grin_scene::BoundsSpec;
+
+/// The region of space a medium occupies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Bounds {
+    Sphere { center: DVec3, radius: f64 },
+    Box { min: DVec3, max: DVec3 },
+}
+
+impl Bounds {
+    pub fn from_spec(spec: &BoundsSpec) -> Self {
+        match *spec {
+            BoundsSpec::Sphere { center, radius } => Bounds::Sphere {
+                center: DVec3::from_array(center),
+                radius,
+            },
+            BoundsSpec::Box { min, max } => Bounds::Box {
+                min: DVec3::from_array(min),
+                max: DVec3::from_array(max),
+            },
+        }
+    }
+
+    pub fn center(&self) -> DVec3 {
+        match *self {
+            Bounds::Sphere { center, .. } => center,
+            Bounds::Box { min, max } => (min + max) * 0.5,
+        }
+    }
+
+    /// Radius of a sphere, or half the smallest box extent: the length that profiles
+    /// given "relative to the bounds" scale by.
+    pub fn radius(&self) -> f64 {
+        match *self {
+            Bounds::Sphere { radius, .. } => radius,
+            Bounds::Box { min, max } => ((max - min) * 0.5).min_element(),
+        }
+    }
+
+    /// Axis-aligned box enclosing the bounds.
+    pub fn aabb(&self) -> (DVec3, DVec3) {
+        match *self {
+            Bounds::Sphere { center, radius } => (center - DVec3::splat(radius), center + DVec3::splat(radius)),
+            Bounds::Box { min, max } => (min, max),
+        }
+    }
+
+    /// Signed distance-like function: negative inside, zero on the surface, positive outside.
+    /// Exact distance for the sphere; for the box, exact outside and the (negative) distance
+    /// to the nearest face inside.
+    pub fn signed_distance(&self, p: DVec3) -> f64 {
+        match *self {
+            Bounds::Sphere { center, radius } => (p - center).length() - radius,
+            Bounds::Box { min, max } => {
+                let c = (min + max) * 0.5;
+                let h = (max - min) * 0.5;
+                let q = (p - c).abs() - h;
+                q.max(DVec3::ZERO).length() + q.max_element().min(0.0)
+            }
+        }
+    }
+
+    pub fn contains(&self, p: DVec3) -> bool {
+        self.signed_distance(p) <= 0.0
+    }
+
+    /// Outward unit normal of the surface nearest to `p`.
+    pub fn normal(&self, p: DVec3) -> DVec3 {
+        match *self {
+            Bounds::Sphere { center, .. } => (p - center).normalize(),
+            Bounds::Box { min, max } => {
+                let c = (min + max) * 0.5;
+                let h = (max - min) * 0.5;
+                let d = p - c;
+                let q = d.abs() - h;
+                let axis = if q.x >= q.y && q.x >= q.z {
+                    0
+                } else if q.y >= q.z {
+                    1
+                } else {
+                    2
+                };
+                let mut n = DVec3::ZERO;
+                n[axis] = d[axis].signum();
+                n
+            }
+        }
+    }
+
+    /// Ray `o + s d` against the bounds: the parameter interval (s_in, s_out) inside, if
+    /// the ray meets them at s_out >= 0. `d` need not be unit length; s is in units of |d|.
+    pub fn intersect(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
+        match *self {
+            Bounds::Sphere { center, radius } => {
+                let oc = o - center;
+                let a = d.length_squared();
+                let b = oc.dot(d);
+                let c = oc.length_squared() - radius * radius;
+                let disc = b * b - a * c;
+                if disc < 0.0 || a == 0.0 {
+                    return None;
+                }
+                let sq = disc.sqrt();
+                // Numerically stable roots.
+                let q = -(b + b.signum() * sq);
+                let (mut s0, mut s1) = if q != 0.0 { (q / a, c / q) } else { (0.0, 0.0) };
+                if s0 > s1 {
+                    std::mem::swap(&mut s0, &mut s1);
+                }
+                (s1 >= 0.0).then_some((s0, s1))
+            }
+            Bounds::Box { min, max } => {
+                let inv = d.recip();
+                let t0 = (min - o) * inv;
+                let t1 = (max - o) * inv;
+                let s_in = t0.min(t1).max_element();
+                let s_out = t0.max(t1).min_element();
+                (s_out >= s_in.max(0.0) && s_out.is_finite()).then_some((s_in, s_out))
+            }
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! The [`IndexField`] trait: n and grad n at a point, the bounds, the n range.
+
+use glam::{DVec3, Vec3};
+
+use crate::bounds::Bounds;
+use crate::real::Real;
+
+/// n and grad n at one point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldSample<R: Real> {
+    pub n: R,
+    pub grad_n: R::V3,
+}
+
+impl<R: Real> FieldSample<R> {
+    /// D = n grad n = grad(n^2 / 2), the right-hand side of r'' = D(r).
+    #[inline]
+    pub fn n_grad_n(&self) -> R::V3 {
+        self.grad_n * self.n
+    }
+}
+
+/// A refractive index field n(r) over a medium's bounds, in world coordinates.
+///
+/// `sample` may be called a little outside the bounds (Runge-Kutta stages of the step
+/// that leaves the medium land there): fields return their formula's smooth extension
+/// where it has one, and otherwise the value at the nearest point inside.
+pub trait IndexField: Send + Sync + std::fmt::Debug {
+    /// n and grad n at world point `p` (f64 reference).
+    fn sample(&self, p: DVec3) -> FieldSample<f64>;
+
+    /// The f32 path (what the GPU computes). Fields with native f32 storage override it;
+    /// the default rounds the f64 sample, keeping delta_n = n - ambient accurate.
+    fn sample_f32(&self, p: Vec3) -> FieldSample<f32> {
+        let s = self.sample(p.as_dvec3());
+        FieldSample {
+            n: s.n as f32,
+            grad_n: s.grad_n.as_vec3(),
+        }
+    }
+
+    /// n alone (cheaper for fields that can skip the gradient).
+    fn n(&self, p: DVec3) -> f64 {
+        self.sample(p).n
+    }
+
+    /// The medium's bounds in world space.
+    fn bounds(&self) -> Bounds;
+
+    /// Index outside the bounds.
+    fn ambient_index(&self) -> f64;
+
+    /// (min n, max n) over the bounds (exact where known, else a sampled estimate).
+    fn n_range(&self) -> (f64, f64);
+
+    /// Largest |grad n| over the bounds (exact or sampled), used by the step heuristic.
+    fn max_grad_n(&self) -> f64;
+
+    /// A short human description, e.g. `luneburg R=1`.
+    fn describe(&self) -> String;
+}
+
+/// Why a field could not be built or evaluated.
+#[derive(Debug, thiserror::Error)]
+pub enum FieldError {
+    /// n <= 0 (or non-finite) somewhere inside the medium.
+    #[error("{field}: n = {n} <= 0 at ({x}, {y}, {z}) inside the medium; n must be positive")]
+    NonPositive {
+        field: String,
+        n: f64,
+        x: f64,
+        y: f64,
+        z: f64,
+    },
+    #[error("{field}: n is not finite ({n}) at ({x}, {y}, {z})")]
+    NonFinite {
+        field: String,
+        n: f64,
+        x: f64,
+        y: f64,
+        z: f64,
+    },
+    #[error("expression `{expr}`: {message}")]
+    Expr { expr: String, message: String },
+    #[error("{field}: invalid parameter `{param}`: {message}")]
+    Param {
+        field: String,
+        param: String,
+        message: String,
+    },
+    #[error("{path}: {message}")]
+    File { path: String, message: String },
+    #[error("{0}")]
+    Other(String),
+}

@@ -1,0 +1,11 @@
+//! Refractive index fields: the [`IndexField`] trait every tracer samples, the bounds of a
+//! medium, and the scalar/vector abstraction ([`Real`]) that lets the integrators run in
+//! f64 (the reference) and f32 (what the GPU does).
+
+pub mod bounds;
+pub mod field;
+pub mod real;
+
+pub use bounds::Bounds;
+pub use field::{FieldError, FieldSample, IndexField};
+pub use real::{Real, Vec3Like};

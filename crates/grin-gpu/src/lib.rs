@@ -1,0 +1,1 @@
+//! GPU rendering with wgpu: device, textures, the WGSL RK marcher, readback.

@@ -1,0 +1,11 @@
+//! The grin scene description: a TOML file (camera, objects, medium, lights, render
+//! settings) parsed with serde and validated, with errors that name the file, the
+//! line/column and the key. See ../shared/ARCHITECTURE.md for the contract.
+
+mod error;
+mod load;
+mod types;
+
+pub use error::SceneError;
+pub use load::{load_scene, parse_scene};
+pub use types::*;

@@ -1,0 +1,641 @@
+//! The scene types, one struct per TOML table. Field names are the TOML keys.
+//! Vectors are `[f64; 3]` in world space; lengths are world units (metres where a
+//! scene says so).
+
+use serde::{Deserialize, Serialize};
+
+/// A whole scene file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    pub camera: Camera,
+    #[serde(default, rename = "object")]
+    pub objects: Vec<Object>,
+    pub medium: Option<MediumSpec>,
+    #[serde(default, rename = "light")]
+    pub lights: Vec<Light>,
+    #[serde(default)]
+    pub sky: Sky,
+    #[serde(default)]
+    pub render: RenderSettings,
+}
+
+/// Pinhole camera.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    pub position: [f64; 3],
+    pub look_at: [f64; 3],
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    #[serde(default = "default_fov")]
+    pub fov_y_deg: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_fov() -> f64 {
+    40.0
+}
+
+/// A scene object: a shape and its material.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Object {
+    pub shape: Shape,
+    #[serde(default)]
+    pub material: Material,
+}
+
+/// Geometric primitives. TOML: `shape = { sphere = { center = [..], radius = .. } }`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shape {
+    Sphere { center: [f64; 3], radius: f64 },
+    /// Infinite plane through `point` with unit `normal` (normalised on load).
+    Plane {
+        #[serde(default)]
+        point: [f64; 3],
+        #[serde(default = "default_up")]
+        normal: [f64; 3],
+    },
+    Box { min: [f64; 3], max: [f64; 3] },
+}
+
+/// Surface materials. TOML: either a bare name (`material = "glass"`, defaults for all
+/// parameters) or a table (`material = { glass = { ior = 1.5 } }`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Material {
+    Diffuse {
+        color: [f64; 3],
+    },
+    /// Two-colour checkerboard in world x/z with square size `scale`.
+    Checker {
+        color_a: [f64; 3],
+        color_b: [f64; 3],
+        scale: f64,
+    },
+    /// Perfect mirror with a tint.
+    Mirror {
+        color: [f64; 3],
+    },
+    /// Metal: mirror with Schlick Fresnel from `color` (the normal-incidence reflectance).
+    Metal {
+        color: [f64; 3],
+    },
+    /// Dielectric with Fresnel reflection and total internal reflection.
+    Glass {
+        ior: f64,
+        color: [f64; 3],
+    },
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material::Diffuse {
+            color: [0.8, 0.8, 0.8],
+        }
+    }
+}
+
+/// The medium: a region of space (the bounds) where n varies, set in ambient space of
+/// index `ambient_index`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MediumSpec {
+    pub bounds: BoundsSpec,
+    #[serde(default = "default_ambient")]
+    pub ambient_index: f64,
+    pub field: FieldSpec,
+}
+
+fn default_ambient() -> f64 {
+    1.0
+}
+
+/// Medium bounds. TOML: `{ sphere = { center, radius } }` or `{ box = { min, max } }`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoundsSpec {
+    Sphere { center: [f64; 3], radius: f64 },
+    Box { min: [f64; 3], max: [f64; 3] },
+}
+
+/// The refractive index field of the medium, selected by `kind`. The parameters of each
+/// profile, their defaults and formulas are documented in grin-field's `analytic`
+/// module; coordinates are relative to the bounds' centre unless a field says otherwise.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum FieldSpec {
+    /// n = `n` everywhere inside the bounds (a constant-index ball or box).
+    Uniform { n: f64 },
+    /// n^2 = n0^2 + k * (coordinate along `axis` relative to the bounds' centre).
+    LinearN2 {
+        n0: f64,
+        k: f64,
+        #[serde(default = "default_axis_y")]
+        axis: Axis,
+    },
+    /// GRIN rod (SELFOC) along `axis`: n^2 = n0^2 (1 - a^2 rho^2), rho the distance from
+    /// the axis through the bounds' centre.
+    GrinRod {
+        n0: f64,
+        a: f64,
+        #[serde(default = "default_axis_z")]
+        axis: Axis,
+    },
+    /// Luneburg lens: n^2 = 2 - (r/R)^2, R the bounds' radius (or `radius`).
+    Luneburg {
+        #[serde(default)]
+        radius: Option<f64>,
+    },
+    /// Maxwell fish-eye: n = n0 / (1 + (r/a)^2).
+    MaxwellFishEye { n0: f64, a: f64 },
+    /// Eaton lens: n^2 = 2R/r - 1 with the core r < core * R replaced by its value at the core.
+    Eaton {
+        #[serde(default)]
+        radius: Option<f64>,
+        #[serde(default = "default_eaton_core")]
+        core: f64,
+    },
+    /// Stratified exponential atmosphere: n = 1 + e * exp(-h / scale_height), h the height
+    /// along `axis` above `base` (world coordinate).
+    ExponentialAtmosphere {
+        e: f64,
+        scale_height: f64,
+        #[serde(default)]
+        base: f64,
+        #[serde(default = "default_axis_y")]
+        axis: Axis,
+    },
+    /// Gaussian hot-air plumes: n = n_amb - sum a_i exp(-|r - c_i|^2 / s_i^2) (world coordinates).
+    Plume { plumes: Vec<PlumeBlob> },
+    /// A user formula in x, y, z (world coordinates) and t (time, seconds).
+    Expr {
+        n: String,
+        #[serde(default)]
+        t: f64,
+    },
+    /// Perlin / fBm / turbulence noise in index units (grin-field `noise` module).
+    Noise(NoiseSpec),
+    /// An OpenVDB grid mapped to n (grin-field `vdb` module).
+    Vdb(VdbSpec),
+    /// A baked `.grinf` file.
+    Baked { path: String },
+}
+
+fn default_axis_y() -> Axis {
+    Axis::Y
+}
+fn default_axis_z() -> Axis {
+    Axis::Z
+}
+fn default_eaton_core() -> f64 {
+    0.02
+}
+
+/// A coordinate axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+/// One Gaussian plume: amplitude `a` (index units, positive = hotter = lower n),
+/// centre `center` (world), width `s` (world).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlumeBlob {
+    pub a: f64,
+    pub center: [f64; 3],
+    pub s: f64,
+}
+
+/// Procedural noise medium. delta_n = amplitude * noise(frequency * p + drift * t) * envelope.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseSpec {
+    #[serde(default = "default_noise_type")]
+    pub noise: NoiseType,
+    #[serde(default = "default_octaves")]
+    pub octaves: u32,
+    #[serde(default = "default_frequency")]
+    pub frequency: f64,
+    /// Peak delta_n in index units.
+    pub amplitude: f64,
+    #[serde(default)]
+    pub seed: u32,
+    #[serde(default = "default_lacunarity")]
+    pub lacunarity: f64,
+    #[serde(default = "default_persistence")]
+    pub persistence: f64,
+    /// Fraction of the bounds' half-size over which the field fades to ambient.
+    #[serde(default = "default_envelope")]
+    pub envelope: f64,
+    /// Drift velocity of the noise pattern (world units per second) for animation.
+    #[serde(default)]
+    pub drift: [f64; 3],
+    /// Time (seconds) at which the field is evaluated.
+    #[serde(default)]
+    pub t: f64,
+}
+
+fn default_noise_type() -> NoiseType {
+    NoiseType::Fbm
+}
+fn default_octaves() -> u32 {
+    4
+}
+fn default_frequency() -> f64 {
+    3.0
+}
+fn default_lacunarity() -> f64 {
+    2.0
+}
+fn default_persistence() -> f64 {
+    0.5
+}
+fn default_envelope() -> f64 {
+    0.25
+}
+
+/// Which noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseType {
+    Perlin,
+    Fbm,
+    Turbulence,
+}
+
+/// An OpenVDB grid as the index source.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct VdbSpec {
+    pub path: String,
+    pub grid: String,
+    pub map: VdbMap,
+    /// Metres per VDB world unit.
+    #[serde(default = "default_units")]
+    pub units: f64,
+    /// What to do with NaN/Inf voxels.
+    #[serde(default)]
+    pub non_finite: NonFinitePolicy,
+}
+
+fn default_units() -> f64 {
+    1.0
+}
+
+/// How a VDB grid value becomes n.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VdbMap {
+    /// The grid is n itself (`delta = false`) or n - n_ambient (`delta = true`).
+    Index {
+        #[serde(default)]
+        delta: bool,
+    },
+    /// n = n_amb + k * value.
+    Linear { k: f64 },
+    /// Air by Gladstone-Dale: T_K = ambient_temperature_k + scale_k * value,
+    /// rho = pressure_pa / (r_specific * T_K), n = 1 + k_gd * rho.
+    GladstoneDale {
+        #[serde(default = "default_t_amb")]
+        ambient_temperature_k: f64,
+        #[serde(default = "default_scale_k")]
+        scale_k: f64,
+        #[serde(default = "default_pressure")]
+        pressure_pa: f64,
+        #[serde(default = "default_k_gd")]
+        k_gd: f64,
+        #[serde(default = "default_r_specific")]
+        r_specific: f64,
+    },
+}
+
+fn default_t_amb() -> f64 {
+    293.15
+}
+fn default_scale_k() -> f64 {
+    300.0
+}
+/// Standard atmosphere (REFERENCES.md).
+fn default_pressure() -> f64 {
+    101_325.0
+}
+/// Gladstone-Dale constant of air in the visible, m^3/kg (REFERENCES.md).
+fn default_k_gd() -> f64 {
+    2.26e-4
+}
+/// Specific gas constant of dry air, J/(kg K).
+fn default_r_specific() -> f64 {
+    287.05
+}
+
+/// Policy for NaN/Inf voxels in imported grids.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NonFinitePolicy {
+    #[default]
+    Reject,
+    Ambient,
+}
+
+/// Lights. TOML: `point = { position, intensity }` or `directional = { direction, intensity }`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Light {
+    Point {
+        position: [f64; 3],
+        intensity: [f64; 3],
+    },
+    /// `direction` is the direction the light travels.
+    Directional {
+        direction: [f64; 3],
+        intensity: [f64; 3],
+    },
+}
+
+/// Background seen by rays that leave the scene.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Sky {
+    /// A vertical gradient from `horizon` to `zenith`, `ground` below the horizon.
+    Gradient {
+        horizon: [f64; 3],
+        zenith: [f64; 3],
+        ground: [f64; 3],
+    },
+    /// An equirectangular EXR or HDR environment map (path relative to the scene file).
+    Map {
+        path: String,
+        #[serde(default = "default_one")]
+        intensity: f64,
+    },
+}
+
+fn default_one() -> f64 {
+    1.0
+}
+
+impl Default for Sky {
+    fn default() -> Self {
+        Sky::Gradient {
+            horizon: [0.9, 0.9, 0.95],
+            zenith: [0.35, 0.55, 0.9],
+            ground: [0.3, 0.28, 0.25],
+        }
+    }
+}
+
+/// The ray integrators (t-parameter form r'' = n grad n).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum IntegratorKind {
+    Euler,
+    SymplecticEuler,
+    Verlet,
+    Sharma,
+    Rk4,
+    /// Embedded Dormand-Prince 5(4) pair with error control.
+    Adaptive,
+}
+
+impl IntegratorKind {
+    pub const ALL: [IntegratorKind; 6] = [
+        IntegratorKind::Euler,
+        IntegratorKind::SymplecticEuler,
+        IntegratorKind::Verlet,
+        IntegratorKind::Sharma,
+        IntegratorKind::Rk4,
+        IntegratorKind::Adaptive,
+    ];
+
+    /// The TOML / command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            IntegratorKind::Euler => "euler",
+            IntegratorKind::SymplecticEuler => "symplectic-euler",
+            IntegratorKind::Verlet => "verlet",
+            IntegratorKind::Sharma => "sharma",
+            IntegratorKind::Rk4 => "rk4",
+            IntegratorKind::Adaptive => "adaptive",
+        }
+    }
+
+    /// Parse a command-line name.
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+}
+
+/// How long each step is. Lengths are world lengths ds (the integrator converts to the
+/// t parameter by dt = ds / n at the step's start).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StepSpec {
+    Fixed(f64),
+    /// The paper's heuristic: lerp(max, min, |dir . grad n| / amplitude); amplitude
+    /// defaults to the field's max |grad n|.
+    Heuristic {
+        min: f64,
+        max: f64,
+        #[serde(default)]
+        amplitude: Option<f64>,
+    },
+    /// Error-controlled: local error per step <= tolerance (world length units).
+    Adaptive {
+        tolerance: f64,
+        #[serde(default)]
+        initial: Option<f64>,
+    },
+}
+
+/// How the exit point on the bounds is found on the step that leaves the medium.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExitMethod {
+    /// Bisection on the step length (the paper's method).
+    Bisection,
+    /// Root of the step's cubic Hermite dense output, then a re-step to it.
+    #[default]
+    Hermite,
+}
+
+/// Render and tracing settings (`[render]`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub max_depth: u32,
+    pub integrator: IntegratorKind,
+    pub step: StepSpec,
+    /// Per-ray cap on integration steps; a ray that hits it ends as `max_steps`.
+    pub max_steps: u32,
+    pub exit: ExitMethod,
+    /// Fly straight through macro cells where |grad n| is ~0 (baked fields).
+    pub macro_cells: bool,
+    /// Jitter each pixel ray's first step by a random fraction (turns banding into noise).
+    pub jitter: bool,
+    /// Bend shadow rays through the medium (false: straight, as in the paper).
+    pub bend_shadow_rays: bool,
+    /// Bilinear (trilinear) or tricubic sampling of baked fields.
+    pub interpolation: Interpolation,
+    /// Seed for jitter and sampling.
+    pub seed: u64,
+}
+
+/// Sampling of baked grids.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Interpolation {
+    #[default]
+    Trilinear,
+    Tricubic,
+}
+
+/// Default per-ray step cap: 2^16 steps covers a 0.5-voxel march through a 1024^3 grid
+/// dozens of times over, while bounding a ray that orbits forever.
+pub const DEFAULT_MAX_STEPS: u32 = 65_536;
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            width: 640,
+            height: 360,
+            spp: 1,
+            max_depth: 6,
+            integrator: IntegratorKind::Sharma,
+            step: StepSpec::Fixed(0.01),
+            max_steps: DEFAULT_MAX_STEPS,
+            exit: ExitMethod::Hermite,
+            macro_cells: true,
+            jitter: true,
+            bend_shadow_rays: false,
+            interpolation: Interpolation::Trilinear,
+            seed: 0,
+        }
+    }
+}
+
+mod material_serde {
+    //! `material = "glass"` or `material = { glass = { ior = 1.5 } }`.
+    use super::Material;
+    use serde::{Deserialize, Deserializer};
+
+    #[derive(Deserialize)]
+    #[serde(rename_all = "kebab-case", deny_unknown_fields)]
+    enum Table {
+        Diffuse {
+            #[serde(default = "grey")]
+            color: [f64; 3],
+        },
+        Checker {
+            #[serde(default = "white")]
+            color_a: [f64; 3],
+            #[serde(default = "dark")]
+            color_b: [f64; 3],
+            #[serde(default = "one")]
+            scale: f64,
+        },
+        Mirror {
+            #[serde(default = "white")]
+            color: [f64; 3],
+        },
+        Metal {
+            #[serde(default = "steel")]
+            color: [f64; 3],
+        },
+        Glass {
+            #[serde(default = "glass_ior")]
+            ior: f64,
+            #[serde(default = "white")]
+            color: [f64; 3],
+        },
+    }
+
+    fn grey() -> [f64; 3] {
+        [0.8, 0.8, 0.8]
+    }
+    fn white() -> [f64; 3] {
+        [1.0, 1.0, 1.0]
+    }
+    fn dark() -> [f64; 3] {
+        [0.1, 0.1, 0.1]
+    }
+    /// Normal-incidence reflectance of polished steel, roughly.
+    fn steel() -> [f64; 3] {
+        [0.56, 0.57, 0.58]
+    }
+    fn one() -> f64 {
+        1.0
+    }
+    /// Crown glass.
+    fn glass_ior() -> f64 {
+        1.5
+    }
+
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Repr {
+        Name(String),
+        Table(Table),
+    }
+
+    impl From<Table> for Material {
+        fn from(t: Table) -> Self {
+            match t {
+                Table::Diffuse { color } => Material::Diffuse { color },
+                Table::Checker {
+                    color_a,
+                    color_b,
+                    scale,
+                } => Material::Checker {
+                    color_a,
+                    color_b,
+                    scale,
+                },
+                Table::Mirror { color } => Material::Mirror { color },
+                Table::Metal { color } => Material::Metal { color },
+                Table::Glass { ior, color } => Material::Glass { ior, color },
+            }
+        }
+    }
+
+    impl<'de> Deserialize<'de> for Material {
+        fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            match Repr::deserialize(d)? {
+                Repr::Table(t) => Ok(t.into()),
+                Repr::Name(name) => {
+                    let table = match name.as_str() {
+                        "diffuse" => Table::Diffuse { color: grey() },
+                        "checker" => Table::Checker {
+                            color_a: white(),
+                            color_b: dark(),
+                            scale: one(),
+                        },
+                        "mirror" => Table::Mirror { color: white() },
+                        "metal" => Table::Metal { color: steel() },
+                        "glass" => Table::Glass {
+                            ior: glass_ior(),
+                            color: white(),
+                        },
+                        other => {
+                            return Err(serde::de::Error::custom(format!(
+                                "unknown material `{other}`, expected one of diffuse, checker, mirror, metal, glass"
+                            )));
+                        }
+                    };
+                    Ok(table.into())
+                }
+            }
+        }
+    }
+}

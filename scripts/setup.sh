@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Install the system packages grin needs (Debian): OpenVDB for vdb-sys, Mesa's lavapipe
+# for wgpu without a GPU, python3-openvdb and the OpenVDB tools for the example data.
+# Idempotent: does nothing when everything is present.
+set -euo pipefail
+pkgs=(libopenvdb-dev libboost-dev libtbb-dev libopenvdb-tools python3-openvdb
+      mesa-vulkan-drivers libvulkan1 g++ pkg-config)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${missing[*]}" >&2
+  sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2
+fi

@@ -1,0 +1,1 @@
+//! Safe access to OpenVDB files through a C++ shim (see shim/). Not yet built.
