@@ -58,6 +58,14 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
 
     /// A short human description, e.g. `luneburg R=1`.
     fn describe(&self) -> String;
+
+    /// Macro-cell query (the paper's "infinite step"): if grad n is ~0 around `p`, the
+    /// world length a ray from `p` along unit `dir` can fly straight before it may meet
+    /// a varying region. `None` where the field varies here or the field has no
+    /// macro-cell grid. Baked fields override it.
+    fn homogeneous_span(&self, _p: DVec3, _dir: DVec3) -> Option<f64> {
+        None
+    }
 }
 
 /// Why a field could not be built or evaluated.

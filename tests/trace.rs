@@ -1,0 +1,9 @@
+//! End-to-end tests of `grin` (trace).
+
+#![allow(dead_code)]
+
+use std::process::Command;
+
+fn grin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_grin"))
+}
