@@ -3,14 +3,9 @@
 //! f64 (the reference) and f32 (what the GPU does).
 
 pub mod analytic;
-pub mod bake;
-pub mod baked;
 pub mod bounds;
 pub mod field;
-pub mod grinf;
-pub mod noise;
 pub mod real;
-pub mod vdb;
 
 pub use bounds::Bounds;
 pub use field::{FieldError, FieldSample, IndexField};
