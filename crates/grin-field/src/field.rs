@@ -98,6 +98,9 @@ pub enum FieldError {
     },
     #[error("{path}: {message}")]
     File { path: String, message: String },
+    /// Reading an OpenVDB file failed (names the file and grid).
+    #[error(transparent)]
+    Vdb(#[from] vdb_sys::VdbError),
     #[error("{0}")]
     Other(String),
 }

@@ -6,6 +6,7 @@ pub mod analytic;
 pub mod bounds;
 pub mod field;
 pub mod real;
+pub mod vdb;
 
 pub use bounds::Bounds;
 pub use field::{FieldError, FieldSample, IndexField};
