@@ -1,1 +1,10 @@
-//! The CPU reference tracer: integrators (t-parameter form r'' = n grad n), step policies, boundaries.
+//! The CPU reference tracer: integrators (t-parameter form r'' = n grad n), step policies,
+//! boundaries, the per-ray loop and ray tables.
+
+pub mod boundary;
+pub mod integrate;
+pub mod step;
+pub mod trace;
+
+pub use boundary::{Interface, Segment, fresnel, refract};
+pub use trace::{Control, RayResult, RayStatus, TraceError, TraceSettings, trace_ray, trace_ray_observed};

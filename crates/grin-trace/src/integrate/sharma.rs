@@ -1,0 +1,20 @@
+//! The Runge-Kutta-Nystrom step of Sharma, Kumar & Ghatak (1982) used by the paper:
+//! A = h D(r); B = h D(r + h/2 T + h/8 A); C = h D(r + h T + h/2 B);
+//! r1 = r + h (T + (A + 2B)/6); T1 = T + (A + 4B + C)/6. Fourth order, 3 evaluations
+//! per step (A is the start sample).
+
+use grin_field::{IndexField, Real};
+
+use super::{RayState, Step, c, sample_d};
+
+/// One Sharma RKN step; 2 evaluations beyond the start sample.
+pub fn sharma_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h: R) -> Step<R> {
+    let (r, t) = (s.r, s.t);
+    let a = d0 * h;
+    let b = sample_d::<R>(field, r + t * (h * c::<R>(0.5)) + a * (h * c::<R>(0.125))) * h;
+    let cc = sample_d::<R>(field, r + t * h + b * (h * c::<R>(0.5))) * h;
+    let sixth = c::<R>(1.0 / 6.0);
+    let r1 = r + (t + (a + b * c::<R>(2.0)) * sixth) * h;
+    let t1 = t + (a + b * c::<R>(4.0) + cc) * sixth;
+    Step::plain(r1, t1, 2)
+}

@@ -1,0 +1,197 @@
+//! Step policies: how long the next step is. Lengths are world lengths ds; the tracer
+//! converts them to the t parameter by h = ds / n at the step start. Fixed, the paper's
+//! gradient heuristic, and error control (the adaptive pair's embedded estimate, or step
+//! doubling with Richardson's error estimate for the fixed-order integrators).
+
+use glam::DVec3;
+use grin_field::{FieldSample, IndexField, Real, Vec3Like};
+use grin_scene::{IntegratorKind, StepSpec};
+
+use crate::integrate::{self, RayState, Step};
+
+/// Error-controlled steps never grow beyond this fraction of the bounds' radius, so the
+/// step that leaves the medium stays short enough for a well-conditioned exit search.
+pub const ADAPTIVE_MAX_DS_REL: f64 = 0.25;
+/// ... nor shrink below this fraction (then the step is taken anyway: no endless loop).
+pub const ADAPTIVE_MIN_DS_REL: f64 = 1e-12;
+/// Default first error-controlled step, as a fraction of the bounds' radius.
+pub const ADAPTIVE_INITIAL_DS_REL: f64 = 0.01;
+/// Safety factor and growth limits of the step-size controller (Hairer, Norsett & Wanner, II.4).
+const SAFETY: f64 = 0.9;
+const MAX_GROWTH: f64 = 5.0;
+const MIN_SHRINK: f64 = 0.2;
+/// Rejections allowed for one step before it is taken at the smallest size.
+const MAX_REJECTIONS: u32 = 60;
+
+/// Chooses step lengths along one ray (error control keeps its state between steps).
+#[derive(Debug, Clone)]
+pub struct StepController {
+    spec: StepSpec,
+    kind: IntegratorKind,
+    /// Length scale of the medium (bounds radius): the error norm weighs direction errors
+    /// by it, and it bounds adaptive steps.
+    len_scale: f64,
+    /// Heuristic amplitude (|grad n| at which the step is the minimum).
+    amplitude: f64,
+    /// Current error-controlled step (world length).
+    ds_adapt: f64,
+}
+
+/// An accepted step with the t-length it covered.
+#[derive(Debug, Clone, Copy)]
+pub struct Taken<R: Real> {
+    pub step: Step<R>,
+    pub h: R,
+    /// Field evaluations made, including rejected attempts.
+    pub evals: u32,
+}
+
+impl StepController {
+    pub fn new(spec: StepSpec, kind: IntegratorKind, field: &dyn IndexField) -> Self {
+        let len_scale = field.bounds().radius();
+        let amplitude = match spec {
+            StepSpec::Heuristic {
+                amplitude: Some(a), ..
+            } => a,
+            _ => field.max_grad_n(),
+        };
+        let ds_adapt = match spec {
+            StepSpec::Adaptive {
+                initial: Some(ds), ..
+            } => ds,
+            _ => ADAPTIVE_INITIAL_DS_REL * len_scale,
+        };
+        StepController {
+            spec,
+            kind,
+            len_scale,
+            amplitude,
+            ds_adapt,
+        }
+    }
+
+    /// The paper's heuristic: lerp(min, max, clamp(1 - |dir . grad n| / amplitude, 0, 1)).
+    pub fn heuristic_ds(min: f64, max: f64, amplitude: f64, dir: DVec3, grad_n: DVec3) -> f64 {
+        let w = if amplitude > 0.0 {
+            (1.0 - dir.dot(grad_n).abs() / amplitude).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        min + (max - min) * w
+    }
+
+    /// Take one step from `s` (field sample `s0` there), choosing its length by the policy.
+    /// Error-controlled policies retry rejected steps.
+    pub fn take<R: Real>(
+        &mut self,
+        field: &dyn IndexField,
+        s: RayState<R>,
+        s0: &FieldSample<R>,
+    ) -> Taken<R> {
+        let n0 = s0.n.to_f64();
+        let d0 = s0.n_grad_n();
+        match self.spec {
+            StepSpec::Fixed(ds) => {
+                let h = R::from_f64(ds / n0);
+                let step = integrate::step(self.kind, field, s, d0, h);
+                Taken {
+                    evals: step.evals,
+                    step,
+                    h,
+                }
+            }
+            StepSpec::Heuristic { min, max, .. } => {
+                let dir = s.t.to_dvec3().normalize_or_zero();
+                let ds = Self::heuristic_ds(min, max, self.amplitude, dir, s0.grad_n.to_dvec3());
+                let h = R::from_f64(ds / n0);
+                let step = integrate::step(self.kind, field, s, d0, h);
+                Taken {
+                    evals: step.evals,
+                    step,
+                    h,
+                }
+            }
+            StepSpec::Adaptive { tolerance, .. } => self.take_adaptive(field, s, s0, tolerance),
+        }
+    }
+
+    fn take_adaptive<R: Real>(
+        &mut self,
+        field: &dyn IndexField,
+        s: RayState<R>,
+        s0: &FieldSample<R>,
+        tol: f64,
+    ) -> Taken<R> {
+        let n0 = s0.n.to_f64();
+        let d0 = s0.n_grad_n();
+        let p = integrate::order(self.kind);
+        // Error of the lower-order member: the exponent of the controller is 1/(p_low + 1).
+        let exponent = 1.0 / p as f64;
+        let ds_min = ADAPTIVE_MIN_DS_REL * self.len_scale;
+        let ds_max = ADAPTIVE_MAX_DS_REL * self.len_scale;
+        let mut evals = 0;
+        let mut rejections = 0;
+        loop {
+            let ds = self.ds_adapt.clamp(ds_min, ds_max);
+            let h = R::from_f64(ds / n0);
+            let (step, err) = if self.kind == IntegratorKind::Adaptive {
+                let st = integrate::dopri_step(field, s, d0, h);
+                let err = st.error.map_or(0.0, |(er, et)| self.norm::<R>(er, et, n0));
+                (st, err)
+            } else {
+                self.doubled(field, s, d0, h, p)
+            };
+            evals += step.evals;
+            let accept = err <= tol || ds <= ds_min || rejections >= MAX_REJECTIONS;
+            let factor = if err > 0.0 && err.is_finite() {
+                (SAFETY * (tol / err).powf(exponent)).clamp(MIN_SHRINK, MAX_GROWTH)
+            } else if err == 0.0 {
+                MAX_GROWTH
+            } else {
+                MIN_SHRINK
+            };
+            self.ds_adapt = (ds * factor).clamp(ds_min, ds_max);
+            if accept {
+                return Taken { step, h, evals };
+            }
+            rejections += 1;
+        }
+    }
+
+    /// Step doubling: one step of h and two of h/2; the two half steps are kept and their
+    /// difference to the full step, / (2^p - 1), estimates their error (Richardson).
+    fn doubled<R: Real>(
+        &self,
+        field: &dyn IndexField,
+        s: RayState<R>,
+        d0: R::V3,
+        h: R,
+        p: u32,
+    ) -> (Step<R>, f64) {
+        let half = h * R::from_f64(0.5);
+        let big = integrate::step(self.kind, field, s, d0, h);
+        let first = integrate::step(self.kind, field, s, d0, half);
+        let (mid, mid_evals) = match first.end {
+            Some(e) => (e, 0),
+            None => (R::sample_field(field, first.state.r), 1),
+        };
+        let second = integrate::step(self.kind, field, first.state, mid.n_grad_n(), half);
+        let scale = R::from_f64(1.0 / ((1u32 << p) as f64 - 1.0));
+        let er = (second.state.r - big.state.r) * scale;
+        let et = (second.state.t - big.state.t) * scale;
+        let err = self.norm::<R>(er, et, mid.n.to_f64());
+        let step = Step {
+            evals: big.evals + first.evals + mid_evals + second.evals,
+            ..second
+        };
+        (step, err)
+    }
+
+    /// Error norm in world length: the position error, or the direction error carried
+    /// across the medium (|e_T| / n times its radius), whichever is larger.
+    fn norm<R: Real>(&self, er: R::V3, et: R::V3, n: f64) -> f64 {
+        let pos = er.length().to_f64();
+        let dir = et.length().to_f64() / n.abs().max(f64::MIN_POSITIVE) * self.len_scale;
+        pos.max(dir)
+    }
+}

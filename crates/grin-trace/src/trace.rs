@@ -1,0 +1,471 @@
+//! The per-ray loop: enter the medium (refracting at its surface), step through it with
+//! the chosen integrator and step policy, find where the ray leaves, refract out (Fresnel
+//! weight, total internal reflection sends it back in), and account for the optical path.
+
+use glam::DVec3;
+use grin_field::{Bounds, FieldSample, IndexField, Real, Vec3Like};
+use grin_scene::{ExitMethod, IntegratorKind, RenderSettings, StepSpec};
+
+use crate::boundary::{
+    EXIT_TOL_REL, Interface, MAX_BISECTIONS, Segment, project_to_surface, refract,
+};
+use crate::integrate::{self, RayState, is_finite_v};
+use crate::step::{StepController, Taken};
+
+/// A macro-cell span shorter than this fraction of the bounds' radius is not worth a
+/// straight flight (and could otherwise stall a ray at a cell face).
+pub const MIN_SPAN_REL: f64 = 1e-9;
+
+/// How a ray's trace ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RayStatus {
+    /// Never met the medium.
+    Missed,
+    /// Left the medium (position and direction are where and how).
+    Exited,
+    /// Stopped inside the medium by the caller (e.g. it hit an object there).
+    Absorbed,
+    /// Ran out of steps (`TraceSettings::max_steps`) inside the medium.
+    MaxSteps,
+    /// Bad input (zero or non-finite direction, non-finite origin) or the field failed
+    /// (non-finite state, n <= 0).
+    Error,
+}
+
+impl RayStatus {
+    pub const ALL: [RayStatus; 5] = [
+        RayStatus::Missed,
+        RayStatus::Exited,
+        RayStatus::Absorbed,
+        RayStatus::MaxSteps,
+        RayStatus::Error,
+    ];
+
+    /// The name used in ray tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            RayStatus::Missed => "missed",
+            RayStatus::Exited => "exited",
+            RayStatus::Absorbed => "absorbed",
+            RayStatus::MaxSteps => "max_steps",
+            RayStatus::Error => "error",
+        }
+    }
+}
+
+/// What the tracer needs from a scene's `[render]` settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceSettings {
+    pub integrator: IntegratorKind,
+    pub step: StepSpec,
+    /// Per-ray cap on steps (accepted steps and straight flights).
+    pub max_steps: u32,
+    pub exit: ExitMethod,
+    /// Fly straight where `IndexField::homogeneous_span` says the field is constant.
+    pub macro_cells: bool,
+}
+
+/// Settings that cannot drive a trace.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TraceError {
+    #[error("step: {0}")]
+    Step(String),
+    #[error("max_steps must be at least 1")]
+    MaxSteps,
+}
+
+impl TraceSettings {
+    pub fn from_render(render: &RenderSettings) -> Self {
+        TraceSettings {
+            integrator: render.integrator,
+            step: render.step,
+            max_steps: render.max_steps,
+            exit: render.exit,
+            macro_cells: render.macro_cells,
+        }
+    }
+
+    /// Check that step lengths and tolerances are positive and finite.
+    pub fn validate(&self) -> Result<(), TraceError> {
+        let pos = |x: f64| x.is_finite() && x > 0.0;
+        match self.step {
+            StepSpec::Fixed(ds) if !pos(ds) => {
+                return Err(TraceError::Step(format!(
+                    "fixed step {ds} must be positive and finite"
+                )));
+            }
+            StepSpec::Heuristic {
+                min,
+                max,
+                amplitude,
+            } => {
+                if !pos(min) || !pos(max) || min > max {
+                    return Err(TraceError::Step(format!(
+                        "heuristic needs 0 < min <= max, got min {min}, max {max}"
+                    )));
+                }
+                if let Some(a) = amplitude
+                    && !pos(a)
+                {
+                    return Err(TraceError::Step(format!(
+                        "heuristic amplitude {a} must be positive"
+                    )));
+                }
+            }
+            StepSpec::Adaptive { tolerance, initial } => {
+                if !pos(tolerance) {
+                    return Err(TraceError::Step(format!(
+                        "adaptive tolerance {tolerance} must be positive"
+                    )));
+                }
+                if let Some(i) = initial
+                    && !pos(i)
+                {
+                    return Err(TraceError::Step(format!(
+                        "adaptive initial step {i} must be positive"
+                    )));
+                }
+            }
+            StepSpec::Fixed(_) => {}
+        }
+        if self.max_steps == 0 {
+            return Err(TraceError::MaxSteps);
+        }
+        Ok(())
+    }
+}
+
+/// The outcome of tracing one ray through the medium.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayResult {
+    pub status: RayStatus,
+    /// Where the ray leaves the medium (or stops; the origin for missed rays).
+    pub position: DVec3,
+    /// Unit direction there (after refraction out of the medium).
+    pub direction: DVec3,
+    /// Optical path length inside the medium, integral of n ds.
+    pub opl: f64,
+    /// Geometric length inside the medium.
+    pub length: f64,
+    /// Steps taken (straight macro-cell flights count as steps).
+    pub steps: u32,
+    /// Field evaluations, including rejected adaptive attempts and exit searches.
+    pub evals: u64,
+    /// Product of the Fresnel transmittances at the surface crossings.
+    pub transmittance: f64,
+}
+
+/// Tell the tracer to keep going after a segment, or to stop the ray there (`absorbed`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    Continue,
+    Stop,
+}
+
+/// Trace one ray from `origin` along `dir` (any length) through `field`, integrating in
+/// precision `R` (f64: the reference; f32: what the GPU does). Surface geometry and the
+/// accumulated sums are f64.
+pub fn trace_ray<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    origin: DVec3,
+    dir: DVec3,
+) -> RayResult {
+    trace_ray_observed::<R>(field, settings, origin, dir, &mut |_| Control::Continue)
+}
+
+/// [`trace_ray`], calling `observer` with each step's segment (cubic Hermite dense
+/// output) inside the medium; `Control::Stop` ends the ray there as `absorbed`.
+pub fn trace_ray_observed<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    origin: DVec3,
+    dir: DVec3,
+    observer: &mut dyn FnMut(&Segment) -> Control,
+) -> RayResult {
+    let mut res = RayResult {
+        status: RayStatus::Error,
+        position: origin,
+        direction: DVec3::ZERO,
+        opl: 0.0,
+        length: 0.0,
+        steps: 0,
+        evals: 0,
+        transmittance: 1.0,
+    };
+    let len2 = dir.length_squared();
+    if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
+        res.direction = if dir.is_finite() && len2 > 0.0 {
+            dir.normalize()
+        } else {
+            DVec3::ZERO
+        };
+        return res;
+    }
+    let d = dir / len2.sqrt();
+    res.direction = d;
+    let bounds = field.bounds();
+    let n_amb = field.ambient_index();
+
+    // Entry.
+    let (start, d_in) = if bounds.signed_distance(origin) < 0.0 {
+        (origin, d)
+    } else {
+        let Some((s_in, s_out)) = bounds.intersect(origin, d) else {
+            res.status = RayStatus::Missed;
+            return res;
+        };
+        if s_out < 0.0 || s_out <= s_in {
+            res.status = RayStatus::Missed;
+            return res;
+        }
+        let p = origin + d * s_in.max(0.0);
+        let n_in = R::sample_field(field, R::V3::from_dvec3(p)).n.to_f64();
+        res.evals += 1;
+        if !(n_in.is_finite() && n_in > 0.0) {
+            res.position = p;
+            return res;
+        }
+        match refract(d, bounds.normal(p), n_amb, n_in) {
+            Interface::Transmitted { dir, reflectance } => {
+                res.transmittance *= 1.0 - reflectance;
+                (p, dir)
+            }
+            Interface::Reflected { dir } => {
+                res.status = RayStatus::Exited;
+                res.position = p;
+                res.direction = dir;
+                return res;
+            }
+        }
+    };
+
+    let mut r = R::V3::from_dvec3(start);
+    let mut s0 = R::sample_field(field, r);
+    res.evals += 1;
+    let mut state = RayState {
+        r,
+        t: R::V3::from_dvec3(d_in) * s0.n,
+    };
+    let mut ctrl = StepController::new(settings.step, settings.integrator, field);
+    let len_scale = bounds.radius();
+    let exit_tol = EXIT_TOL_REL * len_scale;
+
+    loop {
+        r = state.r;
+        res.position = r.to_dvec3();
+        res.direction = Vec3Like::to_dvec3(state.t).normalize_or_zero();
+        if !is_finite_v::<R>(r)
+            || !is_finite_v::<R>(state.t)
+            || !(s0.n > R::zero())
+            || !s0.n.is_finite()
+        {
+            res.status = RayStatus::Error;
+            return res;
+        }
+        if res.steps >= settings.max_steps {
+            res.status = RayStatus::MaxSteps;
+            return res;
+        }
+
+        // Straight flight through a homogeneous macro cell.
+        if settings.macro_cells
+            && let Some(span) = field.homogeneous_span(res.position, res.direction)
+            && span > MIN_SPAN_REL * len_scale
+        {
+            let p = res.position;
+            let dir_w = res.direction;
+            let to_exit = bounds
+                .intersect(p, dir_w)
+                .map_or(0.0, |(_, s_out)| s_out.max(0.0));
+            let fly = span.min(to_exit);
+            let exits = span >= to_exit;
+            let mut p1 = p + dir_w * fly;
+            if exits {
+                p1 = project_to_surface(&bounds, p1);
+            }
+            let n = s0.n.to_f64();
+            res.length += fly;
+            res.opl += n * fly;
+            res.steps += 1;
+            let seg = Segment {
+                r0: p,
+                t0: dir_w * n,
+                r1: p1,
+                t1: dir_w * n,
+                h: fly / n,
+            };
+            if observer(&seg) == Control::Stop {
+                res.status = RayStatus::Absorbed;
+                res.position = p1;
+                return res;
+            }
+            state.r = R::V3::from_dvec3(p1);
+            s0 = R::sample_field(field, state.r);
+            res.evals += 1;
+            if exits {
+                match leave(&bounds, &mut res, &mut state, &s0, n_amb, p1) {
+                    Some(done) => return done,
+                    None => continue,
+                }
+            }
+            continue;
+        }
+
+        let taken: Taken<R> = ctrl.take(field, state, &s0);
+        res.evals += u64::from(taken.evals);
+        let mut next = taken.step.state;
+        let mut h = taken.h;
+        let outside = bounds.signed_distance(next.r.to_dvec3()) > 0.0;
+        if outside && is_finite_v::<R>(next.r) {
+            let (exit_state, exit_h, evals) =
+                exit_medium(field, settings, &bounds, state, &s0, &taken, exit_tol);
+            res.evals += u64::from(evals);
+            next = exit_state;
+            h = exit_h;
+        }
+        let s1 = match taken.step.end {
+            Some(e) if !outside => e,
+            _ => {
+                res.evals += 1;
+                R::sample_field(field, next.r)
+            }
+        };
+        let seg = accumulate(&mut res, state, &s0, next, &s1, h);
+        res.steps += 1;
+        if observer(&seg) == Control::Stop {
+            res.status = RayStatus::Absorbed;
+            res.position = seg.r1;
+            res.direction = seg.t1.normalize_or_zero();
+            return res;
+        }
+        state = next;
+        s0 = s1;
+        if outside {
+            let p = state.r.to_dvec3();
+            if let Some(done) = leave(&bounds, &mut res, &mut state, &s0, n_amb, p) {
+                return done;
+            }
+        }
+    }
+}
+
+/// At the surface point `p` with the inside state `state`: refract out (returns the
+/// finished result) or reflect totally back inside (updates `state`, returns None).
+fn leave<R: Real>(
+    bounds: &Bounds,
+    res: &mut RayResult,
+    state: &mut RayState<R>,
+    s: &FieldSample<R>,
+    n_amb: f64,
+    p: DVec3,
+) -> Option<RayResult> {
+    let n_in = s.n.to_f64();
+    let d_in = state.t.to_dvec3().normalize_or_zero();
+    match refract(d_in, bounds.normal(p), n_in, n_amb) {
+        Interface::Transmitted { dir, reflectance } => {
+            res.transmittance *= 1.0 - reflectance;
+            res.status = RayStatus::Exited;
+            res.position = p;
+            res.direction = dir;
+            Some(*res)
+        }
+        Interface::Reflected { dir } => {
+            state.t = R::V3::from_dvec3(dir) * s.n;
+            None
+        }
+    }
+}
+
+/// Add one step's length and optical path (n and n^2 integrated over t by the cubic
+/// Hermite rule: h/2 (f0 + f1) + h^2/12 (f0' - f1'), f' from grad n . T) and return its
+/// segment.
+fn accumulate<R: Real>(
+    res: &mut RayResult,
+    a: RayState<R>,
+    sa: &FieldSample<R>,
+    b: RayState<R>,
+    sb: &FieldSample<R>,
+    h: R,
+) -> Segment {
+    let h = h.to_f64();
+    let (n0, n1) = (sa.n.to_f64(), sb.n.to_f64());
+    let (t0, t1) = (a.t.to_dvec3(), b.t.to_dvec3());
+    let dn0 = sa.grad_n.to_dvec3().dot(t0);
+    let dn1 = sb.grad_n.to_dvec3().dot(t1);
+    let h2 = h * h / 12.0;
+    res.length += 0.5 * h * (n0 + n1) + h2 * (dn0 - dn1);
+    res.opl += 0.5 * h * (n0 * n0 + n1 * n1) + h2 * 2.0 * (n0 * dn0 - n1 * dn1);
+    Segment {
+        r0: a.r.to_dvec3(),
+        t0,
+        r1: b.r.to_dvec3(),
+        t1,
+        h,
+    }
+}
+
+/// The step from `s` ended outside the bounds: find where it crosses the surface.
+/// Returns the state on the surface (projected onto it for the Hermite method), the step
+/// length in t that reaches it and the field evaluations spent.
+pub fn exit_medium<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    bounds: &Bounds,
+    s: RayState<R>,
+    s0: &FieldSample<R>,
+    taken: &Taken<R>,
+    tol: f64,
+) -> (RayState<R>, R, u32) {
+    let kind = settings.integrator;
+    let d0 = s0.n_grad_n();
+    let sd = |p: DVec3| bounds.signed_distance(p);
+    match settings.exit {
+        ExitMethod::Bisection => {
+            let mut lo = 0.0;
+            let mut hi = taken.h.to_f64();
+            let mut evals = 0;
+            let mut best = (s, R::zero());
+            for _ in 0..MAX_BISECTIONS {
+                let mid = 0.5 * (lo + hi);
+                let hm = R::from_f64(mid);
+                let st = integrate::step(kind, field, s, d0, hm);
+                evals += st.evals;
+                let dist = sd(st.state.r.to_dvec3());
+                if dist <= 0.0 {
+                    best = (st.state, hm);
+                }
+                if dist.abs() <= tol {
+                    return (st.state, hm, evals);
+                }
+                if dist > 0.0 {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+                if hi - lo <= mid * R::EPS.to_f64() {
+                    break;
+                }
+            }
+            // Precision exhausted (f32): the last point inside, on the surface.
+            let (mut st, hm) = best;
+            st.r = R::V3::from_dvec3(project_to_surface(bounds, st.r.to_dvec3()));
+            (st, hm, evals)
+        }
+        ExitMethod::Hermite => {
+            let seg = Segment {
+                r0: s.r.to_dvec3(),
+                t0: s.t.to_dvec3(),
+                r1: taken.step.state.r.to_dvec3(),
+                t1: taken.step.state.t.to_dvec3(),
+                h: taken.h.to_f64(),
+            };
+            let tau = seg.first_crossing(sd);
+            let hm = R::from_f64(tau);
+            let st = integrate::step(kind, field, s, d0, hm);
+            let mut state = st.state;
+            state.r = R::V3::from_dvec3(project_to_surface(bounds, state.r.to_dvec3()));
+            (state, hm, st.evals)
+        }
+    }
+}
