@@ -4,10 +4,14 @@
 
 pub mod analytic;
 pub mod bounds;
+pub mod build;
+pub mod check;
+pub mod expr;
 pub mod field;
 pub mod real;
 pub mod vdb;
 
 pub use bounds::Bounds;
+pub use build::build_field;
 pub use field::{FieldError, FieldSample, IndexField};
 pub use real::{Real, Vec3Like};

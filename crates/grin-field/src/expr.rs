@@ -1,0 +1,280 @@
+//! Expression fields: a user formula n(x, y, z, t) in world coordinates (t = time in
+//! seconds, fixed per field) parsed with exmex, with its exact gradient from exmex's
+//! symbolic partial derivatives. Rejected at load: formulas that do not parse, unknown
+//! variables, and n <= 0 or non-finite anywhere on the check grid inside the medium.
+
+use exmex::prelude::*;
+use glam::DVec3;
+
+use crate::bounds::Bounds;
+use crate::check::{CHECK_RESOLUTION, sample_stats};
+use crate::field::{FieldError, FieldSample, IndexField};
+
+/// The variables a formula may use, in the order of [`Vars`].
+pub const VARIABLES: [&str; 4] = ["x", "y", "z", "t"];
+
+/// Relative margin added to the sampled n range and max |grad n| (they are estimates
+/// from the check grid, not bounds: the grid can step over a narrow peak).
+const SAMPLED_MARGIN: f64 = 0.05;
+
+/// One compiled formula and, for each of its variables, where to find it in (x, y, z, t).
+#[derive(Debug, Clone)]
+struct Compiled {
+    ex: FlatEx<f64>,
+    /// Index into (x, y, z, t) of each exmex variable (exmex orders them alphabetically).
+    slots: Vec<usize>,
+}
+
+impl Compiled {
+    fn new(ex: FlatEx<f64>) -> Self {
+        let slots = ex
+            .var_names()
+            .iter()
+            .map(|v| VARIABLES.iter().position(|k| k == v).unwrap_or(0))
+            .collect();
+        Compiled { ex, slots }
+    }
+
+    /// Evaluate; NaN if exmex refuses (cannot happen for a formula that passed `new`,
+    /// and a NaN is caught by the load-time check).
+    fn eval(&self, xyzt: &[f64; 4]) -> f64 {
+        let mut vars = [0.0; 4];
+        for (v, &s) in vars.iter_mut().zip(&self.slots) {
+            *v = xyzt[s];
+        }
+        self.ex.eval(&vars[..self.slots.len()]).unwrap_or(f64::NAN)
+    }
+}
+
+/// n(x, y, z, t) from a formula, with exact partial derivatives.
+#[derive(Debug, Clone)]
+pub struct ExprField {
+    text: String,
+    t: f64,
+    n: Compiled,
+    /// d n / d(x, y, z); `None` where the formula does not use that coordinate.
+    grad: [Option<Compiled>; 3],
+    bounds: Bounds,
+    ambient: f64,
+    n_range: (f64, f64),
+    max_grad_n: f64,
+}
+
+// IndexField requires Send + Sync: exmex's FlatEx<f64> holds plain data and fn pointers.
+const _: fn() = || {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<FlatEx<f64>>();
+};
+
+impl ExprField {
+    /// Parse `text`, differentiate it, and check n > 0 on the check grid inside `bounds`.
+    pub fn new(text: &str, bounds: Bounds, ambient: f64, t: f64) -> Result<Self, FieldError> {
+        let err = |message: String| FieldError::Expr {
+            expr: text.to_owned(),
+            message,
+        };
+        if !t.is_finite() {
+            return Err(err(format!("time t = {t} is not finite")));
+        }
+        let ex =
+            FlatEx::<f64>::parse(text).map_err(|e| err(format!("does not parse: {}", e.msg())))?;
+        if let Some(bad) = ex
+            .var_names()
+            .iter()
+            .find(|v| !VARIABLES.contains(&v.as_str()))
+        {
+            return Err(err(format!(
+                "unknown variable `{bad}` (allowed: x, y, z in world coordinates and t in seconds)"
+            )));
+        }
+        let mut grad = [None, None, None];
+        for (axis, g) in grad.iter_mut().enumerate() {
+            if let Some(idx) = ex.var_names().iter().position(|v| v == VARIABLES[axis]) {
+                let d = ex.clone().partial(idx).map_err(|e| {
+                    err(format!(
+                        "cannot differentiate with respect to {}: {}",
+                        VARIABLES[axis],
+                        e.msg()
+                    ))
+                })?;
+                *g = Some(Compiled::new(d));
+            }
+        }
+        let mut field = ExprField {
+            text: text.to_owned(),
+            t,
+            n: Compiled::new(ex),
+            grad,
+            bounds,
+            ambient,
+            n_range: (0.0, 0.0),
+            max_grad_n: 0.0,
+        };
+        let stats = sample_stats(&field, &format!("expression `{text}`"), CHECK_RESOLUTION)?;
+        let pad = SAMPLED_MARGIN * (stats.n_max - stats.n_min);
+        field.n_range = (
+            (stats.n_min - pad).max(stats.n_min * 0.5),
+            stats.n_max + pad,
+        );
+        field.max_grad_n = stats.max_grad_n * (1.0 + SAMPLED_MARGIN);
+        Ok(field)
+    }
+
+    /// The formula as written.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// The time at which the formula is evaluated.
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+}
+
+impl IndexField for ExprField {
+    fn sample(&self, p: DVec3) -> FieldSample<f64> {
+        let xyzt = [p.x, p.y, p.z, self.t];
+        let d = |g: &Option<Compiled>| g.as_ref().map_or(0.0, |c| c.eval(&xyzt));
+        FieldSample {
+            n: self.n.eval(&xyzt),
+            grad_n: DVec3::new(d(&self.grad[0]), d(&self.grad[1]), d(&self.grad[2])),
+        }
+    }
+    fn n(&self, p: DVec3) -> f64 {
+        self.n.eval(&[p.x, p.y, p.z, self.t])
+    }
+    fn bounds(&self) -> Bounds {
+        self.bounds
+    }
+    fn ambient_index(&self) -> f64 {
+        self.ambient
+    }
+    /// Sampled on the check grid, widened by 5% of the span.
+    fn n_range(&self) -> (f64, f64) {
+        self.n_range
+    }
+    /// Sampled on the check grid, plus 5%.
+    fn max_grad_n(&self) -> f64 {
+        self.max_grad_n
+    }
+    fn describe(&self) -> String {
+        format!("expr n = {}", self.text)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analytic::Luneburg;
+    use crate::analytic::test_util::points_inside;
+
+    fn ball() -> Bounds {
+        Bounds::Sphere {
+            center: DVec3::new(0.0, 0.5, 0.0),
+            radius: 0.6,
+        }
+    }
+
+    #[test]
+    fn gaussian_gradient_is_exact() {
+        let f = ExprField::new(
+            "1 + 0.05*exp(-(x*x + (y-0.5)^2 + z*z)/0.1)",
+            ball(),
+            1.0,
+            0.0,
+        )
+        .expect("valid");
+        for p in points_inside(&f, 7) {
+            let d = p - DVec3::new(0.0, 0.5, 0.0);
+            let g = 0.05 * (-d.length_squared() / 0.1).exp();
+            let s = f.sample(p);
+            assert!((s.n - (1.0 + g)).abs() < 1e-14);
+            let want = d * (-2.0 * g / 0.1);
+            assert!(
+                (s.grad_n - want).length() <= 1e-12 * want.length().max(1e-3),
+                "{p}: {} vs {want}",
+                s.grad_n
+            );
+        }
+        let (lo, hi) = f.n_range();
+        assert!(lo <= 1.0 + 0.05 * (-3.6f64).exp() && hi >= 1.05);
+    }
+
+    #[test]
+    fn luneburg_as_expression_matches_the_analytic_profile() {
+        let lens = Luneburg::new(ball(), 1.0, None).expect("valid");
+        let f = ExprField::new(
+            "sqrt(2 - (x^2 + (y - 0.5)^2 + z^2) / 0.36)",
+            ball(),
+            1.0,
+            0.0,
+        )
+        .expect("valid");
+        for p in points_inside(&f, 7) {
+            let (a, b) = (lens.sample(p), f.sample(p));
+            assert!((a.n - b.n).abs() < 1e-14, "{p}");
+            assert!(
+                (a.grad_n - b.grad_n).length() <= 1e-12 * a.grad_n.length().max(1e-3),
+                "{p}: {} vs {}",
+                a.grad_n,
+                b.grad_n
+            );
+        }
+        // Sampled estimates bracket the exact values of the analytic lens.
+        let (lo, hi) = f.n_range();
+        assert!(lo <= lens.n_range().0 + 0.02 && hi >= std::f64::consts::SQRT_2 - 1e-12);
+        assert!(
+            f.max_grad_n() <= lens.max_grad_n() * 1.05 && f.max_grad_n() >= lens.max_grad_n() * 0.9
+        );
+    }
+
+    #[test]
+    fn time_and_missing_coordinates() {
+        let f = ExprField::new("1.2 + 0.01*sin(x - t)", ball(), 1.0, 0.5).expect("valid");
+        let s = f.sample(DVec3::new(0.1, 0.4, 0.0));
+        assert!((s.n - (1.2 + 0.01 * (0.1f64 - 0.5).sin())).abs() < 1e-15);
+        assert!((s.grad_n.x - 0.01 * (0.1f64 - 0.5).cos()).abs() < 1e-15);
+        assert_eq!((s.grad_n.y, s.grad_n.z), (0.0, 0.0));
+        let c = ExprField::new("1.33", ball(), 1.0, 0.0).expect("constant");
+        assert_eq!(c.sample(DVec3::ZERO).grad_n, DVec3::ZERO);
+    }
+
+    #[test]
+    fn parse_error_shows_expression_and_reason() {
+        let e = ExprField::new("1 + (x*", ball(), 1.0, 0.0).expect_err("unbalanced");
+        let m = e.to_string();
+        assert!(
+            m.starts_with("expression `1 + (x*`: does not parse: "),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn unknown_variable_is_named() {
+        let e = ExprField::new("1 + 0.1*w", ball(), 1.0, 0.0).expect_err("w");
+        assert_eq!(
+            e.to_string(),
+            "expression `1 + 0.1*w`: unknown variable `w` (allowed: x, y, z in world coordinates and t in seconds)"
+        );
+    }
+
+    #[test]
+    fn nonpositive_n_names_the_point() {
+        // n = 1 - 2 (y - 0.5) is <= 0 for y >= 1, i.e. near the top of the ball (y up to 1.1).
+        let e = ExprField::new("1 - 2*(y - 0.5)", ball(), 1.0, 0.0).expect_err("n <= 0 at the top");
+        let FieldError::NonPositive { n, x, y, z, .. } = &e else {
+            panic!("wrong error: {e}")
+        };
+        assert!(*n <= 0.0 && *y >= 1.0, "{e}");
+        assert!(ball().contains(DVec3::new(*x, *y, *z)));
+        let m = e.to_string();
+        assert!(m.starts_with("expression `1 - 2*(y - 0.5)`: n = "), "{m}");
+        assert!(
+            m.contains(&format!("at ({x}, {y}, {z}) inside the medium")),
+            "{m}"
+        );
+        // Non-finite: sqrt of a negative number.
+        let e = ExprField::new("sqrt(0.5 - x)", ball(), 1.0, 0.0).expect_err("NaN for x > 0.5");
+        assert!(e.to_string().contains("n is not finite (NaN)"), "{e}");
+    }
+}
