@@ -1,9 +1,202 @@
-//! `grin render`.
+//! `grin render`: scene file -> linear HDR EXR (beauty + AOV channels) and a PNG preview
+//! beside it, on the GPU (wgpu) or the CPU reference.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use grin_trace::image::Frame;
+use grin_trace::render::{RenderScene, render_cpu};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Which renderer runs the frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    /// The WGSL marcher through wgpu (lavapipe without a GPU).
+    Gpu,
+    /// The CPU reference (rayon).
+    Cpu,
+}
+
+impl Backend {
+    fn name(self) -> &'static str {
+        match self {
+            Backend::Gpu => "gpu",
+            Backend::Cpu => "cpu",
+        }
+    }
+}
 
 /// Arguments of `grin render`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The scene file (TOML).
+    pub scene: PathBuf,
+    /// Output EXR; the PNG preview is written beside it with the extension `.png`.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Renderer.
+    #[arg(long, value_enum, default_value_t = Backend::Gpu)]
+    pub backend: Backend,
+    /// Image size, overriding the scene's [render] width and height.
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Samples per pixel, overriding the scene's [render] spp.
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Print a machine-readable summary (JSON) on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`grin render` is not implemented yet")
+/// Largest accepted image side: keeps `width * height * spp` and the frame buffer sane.
+const MAX_SIDE: u32 = 16_384;
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WxH (e.g. 640x360)"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("`{s}` is not WxH (e.g. 640x360)"))
+    };
+    let (w, h) = (parse(w)?, parse(h)?);
+    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
+        return Err(format!(
+            "size {w}x{h} must be between 1 and {MAX_SIDE} on each side"
+        ));
+    }
+    Ok((w, h))
+}
+
+/// What a render produced, for the summary.
+#[derive(Debug, serde::Serialize)]
+struct Summary {
+    backend: &'static str,
+    adapter: String,
+    width: u32,
+    height: u32,
+    spp: u32,
+    seconds: f64,
+    rays_per_second: f64,
+    steps_per_ray: f64,
+    evals_per_ray: f64,
+    exr: PathBuf,
+    png: PathBuf,
+}
+
+fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
+    if !path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", path.display());
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        bail!(
+            "{}: directory {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    Ok(path.with_extension("png"))
+}
+
+fn progress_bar(rows: u32) -> ProgressBar {
+    let bar = ProgressBar::new(u64::from(rows));
+    if let Ok(style) =
+        ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} rows {elapsed}<{eta}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_prefix("rendering");
+    bar
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // Everything that can be wrong with the input fails here, before any GPU work.
+    let png = check_output(&args.output)?;
+    let mut scene = grin_scene::load_scene(&args.scene)?;
+    if let Some((w, h)) = args.size {
+        scene.render.width = w;
+        scene.render.height = h;
+    }
+    if let Some(spp) = args.spp {
+        scene.render.spp = spp;
+    }
+    let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
+    let field = scene
+        .medium
+        .as_ref()
+        .map(|m| grin_field::build_field(m, scene_dir))
+        .transpose()
+        .with_context(|| format!("{}: [medium]", args.scene.display()))?;
+    let rs = RenderScene::new(&scene, scene_dir, field)
+        .with_context(|| format!("{}", args.scene.display()))?;
+
+    let cancel = AtomicBool::new(false);
+    let bar = progress_bar(scene.render.height);
+    let tick = |rows: u32| bar.inc(u64::from(rows));
+    let start = Instant::now();
+    let (frame, adapter): (Frame, String) = match args.backend {
+        Backend::Cpu => {
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            (
+                render_cpu(&rs, &tick, &cancel)?,
+                format!("cpu ({threads} threads)"),
+            )
+        }
+        Backend::Gpu => {
+            bail!("the GPU backend is not available in this build yet; use --backend cpu")
+        }
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+
+    frame.write_exr(&args.output)?;
+    frame.write_png(&png)?;
+
+    let n_pixels = f64::from(frame.width) * f64::from(frame.height);
+    let rays = n_pixels * f64::from(scene.render.spp);
+    let mean = |f: fn(&grin_trace::image::PixelOut) -> f32| {
+        frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / n_pixels.max(1.0)
+    };
+    let summary = Summary {
+        backend: args.backend.name(),
+        adapter,
+        width: frame.width,
+        height: frame.height,
+        spp: scene.render.spp,
+        seconds,
+        rays_per_second: rays / seconds.max(1e-9),
+        steps_per_ray: mean(|p| p.steps),
+        evals_per_ray: mean(|p| p.evals),
+        exr: args.output.clone(),
+        png,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!(
+            "rendered {}x{} x {} spp on {} ({}) in {:.3} s: {:.3} Mrays/s, {:.1} steps/ray, {:.1} field evals/ray\nwrote {} and {}",
+            summary.width,
+            summary.height,
+            summary.spp,
+            summary.backend,
+            summary.adapter,
+            summary.seconds,
+            summary.rays_per_second * 1e-6,
+            summary.steps_per_ray,
+            summary.evals_per_ray,
+            summary.exr.display(),
+            summary.png.display(),
+        );
+    }
+    Ok(())
 }
