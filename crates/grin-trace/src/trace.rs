@@ -370,8 +370,11 @@ fn leave<R: Real>(
             res.direction = dir;
             Some(*res)
         }
-        Interface::Reflected { dir } => {
-            state.t = R::V3::from_dvec3(dir) * s.n;
+        Interface::Reflected { .. } => {
+            // Mirror T itself (not n times the unit direction), so |T| and the components
+            // along the surface are kept exactly.
+            let normal = R::V3::from_dvec3(bounds.normal(p));
+            state.t = state.t - normal * (R::from_f64(2.0) * state.t.dot(normal));
             None
         }
     }
