@@ -3,11 +3,15 @@
 //! f64 (the reference) and f32 (what the GPU does).
 
 pub mod analytic;
+pub mod bake;
+pub mod baked;
 pub mod bounds;
 pub mod build;
 pub mod check;
 pub mod expr;
 pub mod field;
+pub mod grinf;
+pub mod noise;
 pub mod real;
 pub mod vdb;
 

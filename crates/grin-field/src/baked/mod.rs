@@ -1,0 +1,586 @@
+//! [`BakedField`]: a dense grid of (delta_n, grad n) with its world transform, sampled by
+//! trilinear interpolation or a tricubic B-spline, plus a macro-cell grid for straight
+//! flights. It implements [`IndexField`], so every tracer runs on baked fields unchanged.
+//!
+//! Data layout (shared with the GPU and the `.grinf` file): nodes at grid coordinates
+//! (i, j, k), world = origin + spacing * (i, j, k); one voxel = 4 channels
+//! `[delta_n, dn/dx, dn/dy, dn/dz]` (delta_n = n - ambient, gradient in index units per
+//! world unit); voxel index `i + nx * (j + ny * k)` (x fastest). Storage is f32, or i16
+//! with a per-channel scale (value = q * scale[c]).
+
+pub mod bspline;
+pub mod macrocell;
+
+use glam::{DMat4, DVec3};
+use rayon::prelude::*;
+
+use crate::bounds::Bounds;
+use crate::field::{FieldError, FieldSample, IndexField};
+pub use macrocell::MacroGrid;
+
+/// How voxels are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Storage {
+    F32,
+    /// Signed 16-bit with a per-channel scale.
+    I16,
+}
+
+impl Storage {
+    pub fn bytes_per_voxel(self) -> usize {
+        match self {
+            Storage::F32 => 16,
+            Storage::I16 => 8,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Storage::F32 => "f32",
+            Storage::I16 => "i16",
+        }
+    }
+}
+
+/// How the grid is sampled between nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Interp {
+    /// Trilinear interpolation of delta_n and of the stored grad n (C0; 2nd order).
+    Trilinear,
+    /// Interpolating cubic B-spline of each channel (prefiltered; C2; 4th order).
+    Tricubic,
+}
+
+impl Interp {
+    pub fn name(self) -> &'static str {
+        match self {
+            Interp::Trilinear => "trilinear",
+            Interp::Tricubic => "tricubic",
+        }
+    }
+    /// Parse `trilinear` | `tricubic`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "trilinear" => Some(Interp::Trilinear),
+            "tricubic" => Some(Interp::Tricubic),
+            _ => None,
+        }
+    }
+}
+
+/// What the field is beyond the grid's nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outside {
+    /// The value at the nearest node (the grid covers the whole medium plus a margin).
+    Clamp,
+    /// Ambient index, zero gradient (the grid is cropped to where the field is active).
+    Ambient,
+}
+
+/// Voxel storage.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Voxels {
+    F32(Vec<[f32; 4]>),
+    I16 {
+        data: Vec<[i16; 4]>,
+        scale: [f32; 4],
+    },
+}
+
+impl Voxels {
+    pub fn len(&self) -> usize {
+        match self {
+            Voxels::F32(v) => v.len(),
+            Voxels::I16 { data, .. } => data.len(),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    pub fn storage(&self) -> Storage {
+        match self {
+            Voxels::F32(_) => Storage::F32,
+            Voxels::I16 { .. } => Storage::I16,
+        }
+    }
+    /// Per-channel scale (all 1 for f32).
+    pub fn scale(&self) -> [f32; 4] {
+        match self {
+            Voxels::F32(_) => [1.0; 4],
+            Voxels::I16 { scale, .. } => *scale,
+        }
+    }
+    /// Voxel `idx` decoded to f32 channels.
+    #[inline]
+    pub fn get(&self, idx: usize) -> [f32; 4] {
+        match self {
+            Voxels::F32(v) => v[idx],
+            Voxels::I16 { data, scale } => {
+                let q = data[idx];
+                [
+                    f32::from(q[0]) * scale[0],
+                    f32::from(q[1]) * scale[1],
+                    f32::from(q[2]) * scale[2],
+                    f32::from(q[3]) * scale[3],
+                ]
+            }
+        }
+    }
+    /// Quantize f32 voxels to i16 with a per-channel scale (delta_n alone, gradient
+    /// components sharing one scale so the vector keeps its direction).
+    pub fn quantize(v: &[[f32; 4]]) -> Voxels {
+        let mut max = [0.0f32; 2];
+        for x in v {
+            max[0] = max[0].max(x[0].abs());
+            max[1] = max[1].max(x[1].abs()).max(x[2].abs()).max(x[3].abs());
+        }
+        let s = max.map(|m| {
+            if m > 0.0 {
+                m / f32::from(i16::MAX)
+            } else {
+                1.0
+            }
+        });
+        let scale = [s[0], s[1], s[1], s[1]];
+        let data = v
+            .iter()
+            .map(|x| {
+                let q = |c: usize| {
+                    (x[c] / scale[c])
+                        .round()
+                        .clamp(-f32::from(i16::MAX), f32::from(i16::MAX)) as i16
+                };
+                [q(0), q(1), q(2), q(3)]
+            })
+            .collect();
+        Voxels::I16 { data, scale }
+    }
+    /// All voxels decoded to f32 (for upload as an rgba32float texture).
+    pub fn to_f32(&self) -> Vec<[f32; 4]> {
+        match self {
+            Voxels::F32(v) => v.clone(),
+            Voxels::I16 { .. } => (0..self.len()).map(|i| self.get(i)).collect(),
+        }
+    }
+}
+
+/// The grid's placement: node (i, j, k) sits at world `origin + spacing * (i, j, k)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridGeometry {
+    pub dims: [usize; 3],
+    pub origin: DVec3,
+    pub spacing: DVec3,
+}
+
+impl GridGeometry {
+    pub fn voxel_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+    #[inline]
+    pub fn node_world(&self, i: usize, j: usize, k: usize) -> DVec3 {
+        self.origin + self.spacing * DVec3::new(i as f64, j as f64, k as f64)
+    }
+    #[inline]
+    pub fn grid_from_world_point(&self, p: DVec3) -> DVec3 {
+        (p - self.origin) / self.spacing
+    }
+    /// Largest grid coordinate per axis (dims - 1).
+    pub fn grid_max(&self) -> DVec3 {
+        DVec3::new(
+            (self.dims[0] - 1) as f64,
+            (self.dims[1] - 1) as f64,
+            (self.dims[2] - 1) as f64,
+        )
+    }
+    /// World corners (first node, last node).
+    pub fn world_box(&self) -> (DVec3, DVec3) {
+        (self.origin, self.origin + self.spacing * self.grid_max())
+    }
+    pub fn world_from_grid(&self) -> DMat4 {
+        DMat4::from_translation(self.origin) * DMat4::from_scale(self.spacing)
+    }
+    pub fn grid_from_world(&self) -> DMat4 {
+        self.world_from_grid().inverse()
+    }
+}
+
+/// What the bake measured and where the field came from (stored in the file header).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BakeProvenance {
+    /// `describe()` of the source field.
+    pub source: String,
+    /// Max and RMS |n_baked - n_source| on random points inside the medium.
+    pub max_err_n: f64,
+    pub rms_err_n: f64,
+    /// Max and RMS |grad_baked - grad_source|.
+    pub max_err_grad: f64,
+    pub rms_err_grad: f64,
+}
+
+/// A baked index field.
+#[derive(Debug, Clone)]
+pub struct BakedField {
+    geometry: GridGeometry,
+    voxels: Voxels,
+    interp: Interp,
+    outside: Outside,
+    bounds: Bounds,
+    ambient: f64,
+    provenance: BakeProvenance,
+    n_range: (f64, f64),
+    max_grad: f64,
+    /// B-spline coefficients of the 4 channels (tricubic only).
+    coeffs: Option<Vec<[f32; 4]>>,
+    macro_grid: MacroGrid,
+}
+
+impl BakedField {
+    /// Assemble a baked field; checks that the voxel count matches the dims.
+    pub fn new(
+        geometry: GridGeometry,
+        voxels: Voxels,
+        interp: Interp,
+        outside: Outside,
+        bounds: Bounds,
+        ambient: f64,
+        provenance: BakeProvenance,
+    ) -> Result<Self, FieldError> {
+        if geometry.dims.iter().any(|&d| d < 2) {
+            return Err(FieldError::Other(format!(
+                "baked grid {:?} needs at least 2 nodes per axis",
+                geometry.dims
+            )));
+        }
+        if voxels.len() != geometry.voxel_count() {
+            return Err(FieldError::Other(format!(
+                "baked grid {:?} needs {} voxels, got {}",
+                geometry.dims,
+                geometry.voxel_count(),
+                voxels.len()
+            )));
+        }
+        if !(geometry.spacing.min_element() > 0.0
+            && geometry.spacing.is_finite()
+            && geometry.origin.is_finite())
+        {
+            return Err(FieldError::Other(format!(
+                "baked grid spacing {} / origin {} must be positive and finite",
+                geometry.spacing, geometry.origin
+            )));
+        }
+        let (mut lo, mut hi, mut g2) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
+        for i in 0..voxels.len() {
+            let v = voxels.get(i);
+            if !v.iter().all(|x| x.is_finite()) {
+                return Err(FieldError::Other(format!(
+                    "baked voxel {i} is not finite: {v:?}"
+                )));
+            }
+            lo = lo.min(v[0]);
+            hi = hi.max(v[0]);
+            g2 = g2.max(v[1] * v[1] + v[2] * v[2] + v[3] * v[3]);
+        }
+        if outside == Outside::Ambient {
+            lo = lo.min(0.0);
+            hi = hi.max(0.0);
+        }
+        let mut field = BakedField {
+            geometry,
+            voxels,
+            interp,
+            outside,
+            bounds,
+            ambient,
+            provenance,
+            n_range: (ambient + f64::from(lo), ambient + f64::from(hi)),
+            max_grad: f64::from(g2.sqrt()),
+            coeffs: None,
+            macro_grid: MacroGrid {
+                cell: 1,
+                dims: [1; 3],
+                max_grad: vec![0.0],
+                threshold: 0.0,
+            },
+        };
+        field.prepare();
+        Ok(field)
+    }
+
+    /// The same field sampled with `interp`.
+    pub fn with_interp(mut self, interp: Interp) -> Self {
+        if interp != self.interp {
+            self.interp = interp;
+            self.prepare();
+        }
+        self
+    }
+
+    /// Spline coefficients (tricubic) and the macro-cell grid for the current interp.
+    fn prepare(&mut self) {
+        let dims = self.geometry.dims;
+        let idx = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
+        self.coeffs = match self.interp {
+            Interp::Trilinear => None,
+            Interp::Tricubic => Some(prefilter(&self.voxels, dims)),
+        };
+        let (reach, grads): (usize, Vec<f32>) = match &self.coeffs {
+            None => (
+                1,
+                (0..self.voxels.len())
+                    .map(|i| {
+                        let v = self.voxels.get(i);
+                        (v[1] * v[1] + v[2] * v[2] + v[3] * v[3]).sqrt()
+                    })
+                    .collect(),
+            ),
+            // The spline's gradient channels are convex combinations of the coefficients.
+            Some(c) => (
+                2,
+                c.iter()
+                    .map(|v| v[1].abs() + v[2].abs() + v[3].abs())
+                    .collect(),
+            ),
+        };
+        self.macro_grid =
+            MacroGrid::build(dims, reach, self.max_grad, |i, j, k| grads[idx(i, j, k)]);
+    }
+
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+    pub fn dims(&self) -> [usize; 3] {
+        self.geometry.dims
+    }
+    pub fn world_from_grid(&self) -> DMat4 {
+        self.geometry.world_from_grid()
+    }
+    pub fn grid_from_world(&self) -> DMat4 {
+        self.geometry.grid_from_world()
+    }
+    pub fn voxels(&self) -> &Voxels {
+        &self.voxels
+    }
+    pub fn storage(&self) -> Storage {
+        self.voxels.storage()
+    }
+    pub fn interp(&self) -> Interp {
+        self.interp
+    }
+    pub fn outside(&self) -> Outside {
+        self.outside
+    }
+    pub fn provenance(&self) -> &BakeProvenance {
+        &self.provenance
+    }
+    pub fn set_provenance(&mut self, p: BakeProvenance) {
+        self.provenance = p;
+    }
+    /// Cubic B-spline coefficients of the 4 channels, same layout as the voxels (tricubic
+    /// only): a GPU evaluates the spline from these with 8 trilinear fetches.
+    pub fn spline_coefficients(&self) -> Option<&[[f32; 4]]> {
+        self.coeffs.as_deref()
+    }
+    pub fn macro_grid(&self) -> &MacroGrid {
+        &self.macro_grid
+    }
+    /// Bytes of voxel data.
+    pub fn data_bytes(&self) -> usize {
+        self.voxels.len() * self.storage().bytes_per_voxel()
+    }
+
+    /// [delta_n, grad n] at grid point g (already known to be inside, or clamped).
+    #[inline]
+    fn interpolate(&self, g: DVec3) -> [f64; 4] {
+        let gmax = self.geometry.grid_max();
+        let g = g.clamp(DVec3::ZERO, gmax);
+        match &self.coeffs {
+            None => self.trilinear(g),
+            Some(c) => self.tricubic(c, g),
+        }
+    }
+
+    fn trilinear(&self, g: DVec3) -> [f64; 4] {
+        let d = self.geometry.dims;
+        let base = |x: f64, n: usize| -> (usize, f64) {
+            let i = (x.floor() as usize).min(n - 2);
+            (i, x - i as f64)
+        };
+        let (i, tx) = base(g.x, d[0]);
+        let (j, ty) = base(g.y, d[1]);
+        let (k, tz) = base(g.z, d[2]);
+        let mut out = [0.0; 4];
+        for (dk, wz) in [(0, 1.0 - tz), (1, tz)] {
+            for (dj, wy) in [(0, 1.0 - ty), (1, ty)] {
+                let row = self.geometry.index(i, j + dj, k + dk);
+                for (di, wx) in [(0, 1.0 - tx), (1, tx)] {
+                    let w = wx * wy * wz;
+                    let v = self.voxels.get(row + di);
+                    for c in 0..4 {
+                        out[c] += w * f64::from(v[c]);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn tricubic(&self, coeffs: &[[f32; 4]], g: DVec3) -> [f64; 4] {
+        let d = self.geometry.dims;
+        let fl = g.floor();
+        let (wx, wy, wz) = (
+            bspline::weights(g.x - fl.x),
+            bspline::weights(g.y - fl.y),
+            bspline::weights(g.z - fl.z),
+        );
+        let (bi, bj, bk) = (fl.x as isize - 1, fl.y as isize - 1, fl.z as isize - 1);
+        let ix: [usize; 4] = std::array::from_fn(|a| bspline::mirror(bi + a as isize, d[0]));
+        let mut out = [0.0; 4];
+        for (c_k, w_k) in wz.iter().enumerate() {
+            let k = bspline::mirror(bk + c_k as isize, d[2]);
+            for (c_j, w_j) in wy.iter().enumerate() {
+                let j = bspline::mirror(bj + c_j as isize, d[1]);
+                let row = d[0] * (j + d[1] * k);
+                let wjk = w_k * w_j;
+                for (a, w_i) in wx.iter().enumerate() {
+                    let w = wjk * w_i;
+                    let v = coeffs[row + ix[a]];
+                    for c in 0..4 {
+                        out[c] += w * f64::from(v[c]);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Is grid point g beyond the nodes (where `Outside::Ambient` applies)?
+    #[inline]
+    fn beyond_grid(&self, g: DVec3) -> bool {
+        let gmax = self.geometry.grid_max();
+        g.cmplt(DVec3::ZERO).any() || g.cmpgt(gmax).any()
+    }
+}
+
+/// Prefilter every channel along x, y, z into cubic B-spline coefficients.
+fn prefilter(voxels: &Voxels, dims: [usize; 3]) -> Vec<[f32; 4]> {
+    let [nx, ny, nz] = dims;
+    let mut data: Vec<[f64; 4]> = (0..voxels.len())
+        .map(|i| voxels.get(i).map(f64::from))
+        .collect();
+    // x lines are contiguous.
+    data.par_chunks_mut(nx)
+        .for_each(|line| filter_strided(line, 1, nx));
+    // y lines: within each z slab, stride nx.
+    data.par_chunks_mut(nx * ny).for_each(|slab| {
+        for i in 0..nx {
+            filter_strided(&mut slab[i..], nx, ny);
+        }
+    });
+    // z lines: stride nx * ny; split the x-y plane across threads by gathering lines.
+    let plane = nx * ny;
+    let lines: Vec<Vec<[f64; 4]>> = (0..plane)
+        .into_par_iter()
+        .map(|o| {
+            let mut line: Vec<[f64; 4]> = (0..nz).map(|k| data[o + plane * k]).collect();
+            filter_strided(&mut line, 1, nz);
+            line
+        })
+        .collect();
+    for (o, line) in lines.into_iter().enumerate() {
+        for (k, v) in line.into_iter().enumerate() {
+            data[o + plane * k] = v;
+        }
+    }
+    data.into_iter().map(|v| v.map(|x| x as f32)).collect()
+}
+
+/// Prefilter the 4 channels of the `n` values at `line[0], line[stride], ...`.
+fn filter_strided(line: &mut [[f64; 4]], stride: usize, n: usize) {
+    let mut buf = vec![0.0; n];
+    for c in 0..4 {
+        for (k, b) in buf.iter_mut().enumerate() {
+            *b = line[k * stride][c];
+        }
+        bspline::prefilter_line(&mut buf);
+        for (k, b) in buf.iter().enumerate() {
+            line[k * stride][c] = *b;
+        }
+    }
+}
+
+impl IndexField for BakedField {
+    fn sample(&self, p: DVec3) -> FieldSample<f64> {
+        let g = self.geometry.grid_from_world_point(p);
+        if self.outside == Outside::Ambient && self.beyond_grid(g) {
+            return FieldSample {
+                n: self.ambient,
+                grad_n: DVec3::ZERO,
+            };
+        }
+        let v = self.interpolate(g);
+        FieldSample {
+            n: self.ambient + v[0],
+            grad_n: DVec3::new(v[1], v[2], v[3]),
+        }
+    }
+
+    fn bounds(&self) -> Bounds {
+        self.bounds
+    }
+
+    fn ambient_index(&self) -> f64 {
+        self.ambient
+    }
+
+    fn n_range(&self) -> (f64, f64) {
+        self.n_range
+    }
+
+    fn max_grad_n(&self) -> f64 {
+        self.max_grad
+    }
+
+    fn describe(&self) -> String {
+        let [nx, ny, nz] = self.geometry.dims;
+        format!(
+            "baked {nx}x{ny}x{nz} {} {} of [{}]",
+            self.interp.name(),
+            self.storage().name(),
+            self.provenance.source
+        )
+    }
+
+    fn homogeneous_span(&self, p: DVec3, dir: DVec3) -> Option<f64> {
+        let g = self.geometry.grid_from_world_point(p);
+        let dg = dir / self.geometry.spacing;
+        if self.beyond_grid(g) {
+            if self.outside == Outside::Clamp {
+                return None;
+            }
+            // Ambient outside a cropped grid: straight to the grid box (or out of the medium).
+            let (lo, hi) = self.geometry.world_box();
+            let to_grid = Bounds::Box { min: lo, max: hi }
+                .intersect(p, dir)
+                .map(|(s_in, _)| s_in.max(0.0));
+            let to_exit = self
+                .bounds
+                .intersect(p, dir)
+                .map(|(_, s_out)| s_out.max(0.0));
+            return match (to_grid, to_exit) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (Some(a), None) => Some(a),
+                (None, b) => b,
+            }
+            .filter(|&s| s > 0.0);
+        }
+        self.macro_grid
+            .span(g, dg, self.geometry.dims)
+            .filter(|&s| s > 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,404 @@
+//! The `.grinf` baked-field file: a versioned, little-endian, CRC-32-checksummed header
+//! (transform, ambient index, storage, scale, bounds, source, measured error) followed by
+//! the voxels. The layout is documented in docs/grinf.md (with a numpy loader).
+
+use std::io::Write;
+use std::path::Path;
+
+use glam::DVec3;
+
+use crate::baked::{BakeProvenance, BakedField, GridGeometry, Interp, Outside, Storage, Voxels};
+use crate::bounds::Bounds;
+use crate::field::FieldError;
+
+/// First 8 bytes of every .grinf file.
+pub const MAGIC: [u8; 8] = *b"GRINF\0\0\0";
+/// The format version this code writes and reads.
+pub const VERSION: u32 = 1;
+/// Bytes of the fixed part of the header (the description follows it).
+pub const FIXED_HEADER_BYTES: usize = 208;
+/// The voxel data starts at a multiple of this (so numpy/GPU views are aligned).
+const DATA_ALIGN: usize = 16;
+/// Bytes of the trailing CRC-32.
+const CRC_BYTES: usize = 4;
+/// Longest source description kept in the header.
+const MAX_DESCRIPTION_BYTES: usize = 4096;
+
+/// Why a .grinf file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum GrinfError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a .grinf file (bad magic {found:?}, expected {MAGIC:?})")]
+    Magic { path: String, found: Vec<u8> },
+    #[error("{path}: unsupported .grinf version {found} (this grin reads version {VERSION})")]
+    Version { path: String, found: u32 },
+    #[error("{path}: file is {actual} bytes but its header says {expected} (truncated or padded)")]
+    Size {
+        path: String,
+        expected: u64,
+        actual: u64,
+    },
+    #[error(
+        "{path}: checksum mismatch (stored {stored:#010x}, computed {computed:#010x}): the file is corrupt"
+    )]
+    Checksum {
+        path: String,
+        stored: u32,
+        computed: u32,
+    },
+    #[error("{path}: bad header: {message}")]
+    Header { path: String, message: String },
+}
+
+impl From<GrinfError> for FieldError {
+    fn from(e: GrinfError) -> Self {
+        match e {
+            GrinfError::Io { path, source } => FieldError::File {
+                path,
+                message: source.to_string(),
+            },
+            other => FieldError::Other(other.to_string()),
+        }
+    }
+}
+
+/// The header of a .grinf file (everything but the voxels).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GrinfHeader {
+    pub version: u32,
+    pub data_offset: usize,
+    pub geometry: GridGeometry,
+    pub storage: Storage,
+    pub interp: Interp,
+    pub outside: Outside,
+    pub ambient: f64,
+    pub scale: [f32; 4],
+    pub bounds: Bounds,
+    pub provenance: BakeProvenance,
+    pub file_bytes: u64,
+    pub crc32: u32,
+}
+
+/// Serialize a baked field to bytes.
+pub fn to_bytes(field: &BakedField) -> Vec<u8> {
+    let g = field.geometry();
+    let prov = field.provenance();
+    let mut desc = prov.source.as_bytes().to_vec();
+    desc.truncate(MAX_DESCRIPTION_BYTES);
+    let data_offset = (FIXED_HEADER_BYTES + desc.len()).div_ceil(DATA_ALIGN) * DATA_ALIGN;
+    let mut b = Vec::with_capacity(data_offset + field.data_bytes() + CRC_BYTES);
+    b.extend_from_slice(&MAGIC);
+    let u32s =
+        |b: &mut Vec<u8>, v: &[u32]| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    let f64s =
+        |b: &mut Vec<u8>, v: &[f64]| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    u32s(&mut b, &[VERSION, data_offset as u32]);
+    u32s(&mut b, &g.dims.map(|d| d as u32));
+    let storage = match field.storage() {
+        Storage::F32 => 0,
+        Storage::I16 => 1,
+    };
+    let interp = match field.interp() {
+        Interp::Trilinear => 0,
+        Interp::Tricubic => 1,
+    };
+    let outside = match field.outside() {
+        Outside::Clamp => 0,
+        Outside::Ambient => 1,
+    };
+    u32s(&mut b, &[storage, interp, outside]);
+    f64s(&mut b, &[crate::field::IndexField::ambient_index(field)]);
+    f64s(&mut b, &g.origin.to_array());
+    f64s(&mut b, &g.spacing.to_array());
+    for s in field.voxels().scale() {
+        b.extend_from_slice(&s.to_le_bytes());
+    }
+    match crate::field::IndexField::bounds(field) {
+        Bounds::Sphere { center, radius } => {
+            u32s(&mut b, &[0, 0]);
+            f64s(&mut b, &[center.x, center.y, center.z, radius, 0.0, 0.0]);
+        }
+        Bounds::Box { min, max } => {
+            u32s(&mut b, &[1, 0]);
+            f64s(&mut b, &[min.x, min.y, min.z, max.x, max.y, max.z]);
+        }
+    }
+    f64s(
+        &mut b,
+        &[
+            prov.max_err_n,
+            prov.rms_err_n,
+            prov.max_err_grad,
+            prov.rms_err_grad,
+        ],
+    );
+    u32s(&mut b, &[desc.len() as u32, 0]);
+    debug_assert_eq!(b.len(), FIXED_HEADER_BYTES);
+    b.extend_from_slice(&desc);
+    b.resize(data_offset, 0);
+    match field.voxels() {
+        Voxels::F32(v) => v
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+        Voxels::I16 { data, .. } => data
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+    }
+    let crc = crc32fast::hash(&b);
+    b.extend_from_slice(&crc.to_le_bytes());
+    b
+}
+
+/// Write `field` to `path` atomically: a temporary file in the same directory, renamed
+/// into place, so an interrupted write leaves no partial file.
+pub fn save(field: &BakedField, path: &Path) -> Result<(), GrinfError> {
+    let bytes = to_bytes(field);
+    write_atomic(path, &bytes)
+}
+
+/// Write bytes to `path` via a temporary file in the same directory and a rename.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), GrinfError> {
+    let io = |source| GrinfError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io)
+}
+
+/// Read a .grinf file.
+pub fn load(path: &Path) -> Result<BakedField, GrinfError> {
+    let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    from_bytes(&bytes, &path.display().to_string())
+}
+
+/// Read only the header of a .grinf file (still checks size and checksum).
+pub fn read_header(path: &Path) -> Result<GrinfHeader, GrinfError> {
+    let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse_header(&bytes, &path.display().to_string())
+}
+
+/// Little-endian reader over the header.
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let mut out = [0u8; N];
+        out.copy_from_slice(&self.b[self.at..self.at + N]);
+        self.at += N;
+        out
+    }
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes(self.take())
+    }
+    fn f32(&mut self) -> f32 {
+        f32::from_le_bytes(self.take())
+    }
+    fn f64(&mut self) -> f64 {
+        f64::from_le_bytes(self.take())
+    }
+    fn dvec3(&mut self) -> DVec3 {
+        DVec3::new(self.f64(), self.f64(), self.f64())
+    }
+}
+
+/// Parse and validate the header: magic, version, size, checksum, then the fields.
+pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
+    let header_err = |message: String| GrinfError::Header {
+        path: path.into(),
+        message,
+    };
+    if b.len() < MAGIC.len() || b[..MAGIC.len()] != MAGIC {
+        return Err(GrinfError::Magic {
+            path: path.into(),
+            found: b[..b.len().min(MAGIC.len())].to_vec(),
+        });
+    }
+    if b.len() < FIXED_HEADER_BYTES + CRC_BYTES {
+        return Err(GrinfError::Size {
+            path: path.into(),
+            expected: (FIXED_HEADER_BYTES + CRC_BYTES) as u64,
+            actual: b.len() as u64,
+        });
+    }
+    let mut r = Reader { b, at: MAGIC.len() };
+    let version = r.u32();
+    if version != VERSION {
+        return Err(GrinfError::Version {
+            path: path.into(),
+            found: version,
+        });
+    }
+    let data_offset = r.u32() as usize;
+    let dims = [r.u32() as usize, r.u32() as usize, r.u32() as usize];
+    let storage = match r.u32() {
+        0 => Storage::F32,
+        1 => Storage::I16,
+        s => return Err(header_err(format!("unknown storage code {s}"))),
+    };
+    let voxel_count = dims.iter().try_fold(1u64, |a, &d| a.checked_mul(d as u64));
+    let expected = voxel_count
+        .and_then(|n| n.checked_mul(storage.bytes_per_voxel() as u64))
+        .and_then(|n| n.checked_add((data_offset + CRC_BYTES) as u64));
+    let Some(expected) = expected else {
+        return Err(header_err(format!("grid {dims:?} is too large")));
+    };
+    if expected != b.len() as u64 {
+        return Err(GrinfError::Size {
+            path: path.into(),
+            expected,
+            actual: b.len() as u64,
+        });
+    }
+    let body = b.len() - CRC_BYTES;
+    let stored = u32::from_le_bytes([b[body], b[body + 1], b[body + 2], b[body + 3]]);
+    let computed = crc32fast::hash(&b[..body]);
+    if stored != computed {
+        return Err(GrinfError::Checksum {
+            path: path.into(),
+            stored,
+            computed,
+        });
+    }
+    let interp = match r.u32() {
+        0 => Interp::Trilinear,
+        1 => Interp::Tricubic,
+        s => return Err(header_err(format!("unknown interpolation code {s}"))),
+    };
+    let outside = match r.u32() {
+        0 => Outside::Clamp,
+        1 => Outside::Ambient,
+        s => return Err(header_err(format!("unknown outside code {s}"))),
+    };
+    let ambient = r.f64();
+    let origin = r.dvec3();
+    let spacing = r.dvec3();
+    let scale = [r.f32(), r.f32(), r.f32(), r.f32()];
+    let kind = r.u32();
+    let _reserved = r.u32();
+    let bv = [r.f64(), r.f64(), r.f64(), r.f64(), r.f64(), r.f64()];
+    let bounds = match kind {
+        0 => Bounds::Sphere {
+            center: DVec3::new(bv[0], bv[1], bv[2]),
+            radius: bv[3],
+        },
+        1 => Bounds::Box {
+            min: DVec3::new(bv[0], bv[1], bv[2]),
+            max: DVec3::new(bv[3], bv[4], bv[5]),
+        },
+        s => return Err(header_err(format!("unknown bounds code {s}"))),
+    };
+    let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = (r.f64(), r.f64(), r.f64(), r.f64());
+    let desc_len = r.u32() as usize;
+    if FIXED_HEADER_BYTES + desc_len > data_offset || data_offset % DATA_ALIGN != 0 {
+        return Err(header_err(format!(
+            "description of {desc_len} bytes does not fit before the data at {data_offset}"
+        )));
+    }
+    let source =
+        String::from_utf8_lossy(&b[FIXED_HEADER_BYTES..FIXED_HEADER_BYTES + desc_len]).into_owned();
+    if !(ambient.is_finite() && ambient > 0.0) {
+        return Err(header_err(format!(
+            "ambient index {ambient} must be positive"
+        )));
+    }
+    if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+        return Err(header_err(format!("scale {scale:?} must be positive")));
+    }
+    Ok(GrinfHeader {
+        version,
+        data_offset,
+        geometry: GridGeometry {
+            dims,
+            origin,
+            spacing,
+        },
+        storage,
+        interp,
+        outside,
+        ambient,
+        scale,
+        bounds,
+        provenance: BakeProvenance {
+            source,
+            max_err_n,
+            rms_err_n,
+            max_err_grad,
+            rms_err_grad,
+        },
+        file_bytes: b.len() as u64,
+        crc32: stored,
+    })
+}
+
+/// Parse a whole .grinf image.
+pub fn from_bytes(b: &[u8], path: &str) -> Result<BakedField, GrinfError> {
+    let h = parse_header(b, path)?;
+    let data = &b[h.data_offset..b.len() - CRC_BYTES];
+    let voxels = match h.storage {
+        Storage::F32 => Voxels::F32(
+            data.chunks_exact(16)
+                .map(|v| {
+                    std::array::from_fn(|c| {
+                        f32::from_le_bytes([v[4 * c], v[4 * c + 1], v[4 * c + 2], v[4 * c + 3]])
+                    })
+                })
+                .collect(),
+        ),
+        Storage::I16 => Voxels::I16 {
+            data: data
+                .chunks_exact(8)
+                .map(|v| std::array::from_fn(|c| i16::from_le_bytes([v[2 * c], v[2 * c + 1]])))
+                .collect(),
+            scale: h.scale,
+        },
+    };
+    BakedField::new(
+        h.geometry,
+        voxels,
+        h.interp,
+        h.outside,
+        h.bounds,
+        h.ambient,
+        h.provenance,
+    )
+    .map_err(|e| GrinfError::Header {
+        path: path.into(),
+        message: e.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,155 @@
+//! Round trip and corruption tests of the .grinf format.
+
+use glam::DVec3;
+
+use super::*;
+use crate::bake::{BakeOptions, bake, random_points_inside};
+use crate::field::{FieldSample, IndexField};
+
+#[derive(Debug)]
+struct Wave;
+
+impl IndexField for Wave {
+    fn sample(&self, p: DVec3) -> FieldSample<f64> {
+        let n = 1.0 + 3e-4 * (4.0 * p.x).sin() * (3.0 * p.y).cos();
+        let g = DVec3::new(
+            1.2e-3 * (4.0 * p.x).cos() * (3.0 * p.y).cos(),
+            -9e-4 * (4.0 * p.x).sin() * (3.0 * p.y).sin(),
+            0.0,
+        );
+        FieldSample { n, grad_n: g }
+    }
+    fn bounds(&self) -> Bounds {
+        Bounds::Box {
+            min: DVec3::new(-1.0, -0.5, -0.25),
+            max: DVec3::new(1.0, 0.5, 0.25),
+        }
+    }
+    fn ambient_index(&self) -> f64 {
+        1.0
+    }
+    fn n_range(&self) -> (f64, f64) {
+        (1.0 - 3e-4, 1.0 + 3e-4)
+    }
+    fn max_grad_n(&self) -> f64 {
+        1.5e-3
+    }
+    fn describe(&self) -> String {
+        "test wave".into()
+    }
+}
+
+fn baked(storage: Storage, interp: Interp) -> BakedField {
+    let opts = BakeOptions {
+        resolution: Some(20),
+        storage: Some(storage),
+        interp,
+        error_points: 500,
+        ..Default::default()
+    };
+    bake(&Wave, &opts, &|_: &str, _: u64, _: u64| {})
+        .expect("bake")
+        .0
+}
+
+#[test]
+fn round_trip_gives_bit_identical_samples() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for storage in [Storage::F32, Storage::I16] {
+        for interp in [Interp::Trilinear, Interp::Tricubic] {
+            let f = baked(storage, interp);
+            let path = dir.path().join("w.grinf");
+            save(&f, &path).expect("save");
+            let g = load(&path).expect("load");
+            assert_eq!(g.voxels(), f.voxels());
+            assert_eq!(g.geometry(), f.geometry());
+            assert_eq!(g.provenance(), f.provenance());
+            assert_eq!(
+                (g.storage(), g.interp(), g.outside()),
+                (storage, interp, f.outside())
+            );
+            assert_eq!(g.bounds(), Wave.bounds());
+            for p in random_points_inside(Wave.bounds(), 300, 5) {
+                let (a, b) = (f.sample(p), g.sample(p));
+                assert_eq!(a.n.to_bits(), b.n.to_bits());
+                assert_eq!(
+                    a.grad_n.to_array().map(f64::to_bits),
+                    b.grad_n.to_array().map(f64::to_bits)
+                );
+            }
+            let h = read_header(&path).expect("header");
+            assert_eq!(
+                h.file_bytes,
+                std::fs::metadata(&path).expect("metadata").len()
+            );
+            assert_eq!(h.provenance.source, "test wave");
+            // No temporary file is left behind.
+            let names: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").collect();
+            assert_eq!(names.len(), 1);
+        }
+    }
+}
+
+#[test]
+fn corrupt_files_are_clear_errors() {
+    let f = baked(Storage::I16, Interp::Trilinear);
+    let good = to_bytes(&f);
+    let p = "x.grinf";
+    let err = |b: &[u8]| from_bytes(b, p).expect_err("corrupt").to_string();
+
+    let mut b = good.clone();
+    b[0] = b'X';
+    assert!(err(&b).contains("not a .grinf file"), "{}", err(&b));
+
+    let mut b = good.clone();
+    b[8] = 9;
+    assert!(
+        err(&b).contains("unsupported .grinf version 9"),
+        "{}",
+        err(&b)
+    );
+
+    let mut b = good.clone();
+    let mid = b.len() / 2;
+    b[mid] ^= 0x40;
+    assert!(err(&b).contains("checksum mismatch"), "{}", err(&b));
+
+    let b = &good[..good.len() - 100];
+    assert!(err(b).contains("truncated"), "{}", err(b));
+    let b = &good[..20];
+    assert!(err(b).contains("truncated"), "{}", err(b));
+
+    // Absurd dims in the header: a size error, not an allocation.
+    let mut b = good.clone();
+    b[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+    b[20..24].copy_from_slice(&u32::MAX.to_le_bytes());
+    let e = err(&b);
+    assert!(e.contains("truncated") || e.contains("too large"), "{e}");
+
+    assert!(from_bytes(&good, p).is_ok());
+}
+
+#[test]
+fn layout_matches_the_documentation() {
+    let f = baked(Storage::F32, Interp::Trilinear);
+    let b = to_bytes(&f);
+    let u32_at = |o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
+    let f32_at = |o: usize| f32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
+    let f64_at = |o: usize| f64::from_le_bytes(std::array::from_fn(|i| b[o + i]));
+    assert_eq!(&b[0..8], b"GRINF\0\0\0");
+    let data = u32_at(12) as usize;
+    assert_eq!(data % 16, 0);
+    let dims = [u32_at(16), u32_at(20), u32_at(24)].map(|d| d as usize);
+    assert_eq!(dims, f.dims());
+    assert_eq!(f64_at(40), 1.0);
+    let origin = DVec3::new(f64_at(48), f64_at(56), f64_at(64));
+    let h = f64_at(72);
+    // Voxel (i, j, k) channel c at data + 16 * (i + nx (j + ny k)) + 4 c.
+    let (i, j, k) = (3, 4, 2);
+    let off = data + 16 * (i + dims[0] * (j + dims[1] * k));
+    let p = origin + DVec3::new(i as f64, j as f64, k as f64) * h;
+    let want = Wave.sample(p);
+    assert!((f64::from(f32_at(off)) - (want.n - 1.0)).abs() < 1e-9);
+    assert!((f64::from(f32_at(off + 4)) - want.grad_n.x).abs() < 1e-8);
+    assert_eq!(u32_at(b.len() - 4), crc32fast::hash(&b[..b.len() - 4]));
+}
