@@ -60,9 +60,9 @@ pub fn build_field(
         FieldSpec::Expr { n, t } => return Ok(Arc::new(ExprField::new(n, bounds, ambient, *t)?)),
 
         // Kinds built by other modules: each arm is one call into its module.
-        FieldSpec::Noise(_) => return Err(unavailable("noise", scene_dir)),
+        FieldSpec::Noise(spec) => Arc::new(crate::noise::NoiseField::new(spec, bounds, ambient)?),
         FieldSpec::Vdb(_) => return Err(unavailable("vdb", scene_dir)),
-        FieldSpec::Baked { .. } => return Err(unavailable("baked", scene_dir)),
+        FieldSpec::Baked { path } => Arc::new(crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)?),
     };
     check_positive(field.as_ref(), &field.describe())?;
     Ok(field)

@@ -198,6 +198,38 @@ pub fn load(path: &Path) -> Result<BakedField, GrinfError> {
     from_bytes(&bytes, &path.display().to_string())
 }
 
+/// The field of a scene's `field = { kind = "baked", path }`: `path` is resolved against
+/// `scene_dir`; the file's bounds and ambient index must match the scene's medium.
+pub fn load_for_medium(
+    path: &str,
+    scene_dir: &Path,
+    bounds: Bounds,
+    ambient: f64,
+) -> Result<BakedField, FieldError> {
+    let full = scene_dir.join(path);
+    let field = load(&full)?;
+    let name = full.display().to_string();
+    let file_ambient = crate::field::IndexField::ambient_index(&field);
+    if (file_ambient - ambient).abs() > 1e-12 * ambient {
+        return Err(FieldError::File {
+            path: name,
+            message: format!(
+                "baked with ambient index {file_ambient}, but the scene's medium has {ambient}"
+            ),
+        });
+    }
+    let file_bounds = crate::field::IndexField::bounds(&field);
+    if file_bounds != bounds {
+        return Err(FieldError::File {
+            path: name,
+            message: format!(
+                "baked for bounds {file_bounds:?}, but the scene's medium has {bounds:?}"
+            ),
+        });
+    }
+    Ok(field)
+}
+
 /// Read only the header of a .grinf file (still checks size and checksum).
 pub fn read_header(path: &Path) -> Result<GrinfHeader, GrinfError> {
     let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
