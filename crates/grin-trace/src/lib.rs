@@ -4,6 +4,7 @@
 pub mod boundary;
 pub mod integrate;
 pub mod step;
+pub mod table;
 pub mod trace;
 
 pub use boundary::{Interface, Segment, fresnel, refract};
