@@ -43,11 +43,21 @@ pub fn fresnel_schlick(cos_i: f64, f0: DVec3) -> DVec3 {
     f0 + (DVec3::ONE - f0) * m
 }
 
-/// Checkerboard in world x/z with squares of side `scale`: true on the `color_a` squares.
-pub fn checker_is_a(p: DVec3, scale: f64) -> bool {
-    let ix = (p.x / scale).floor() as i64;
-    let iz = (p.z / scale).floor() as i64;
-    (ix + iz).rem_euclid(2) == 0
+/// Checkerboard with squares of side `scale` in the two world axes across the surface's
+/// dominant normal axis (x/z on a floor, x/y on a wall facing z): true on `color_a`.
+/// Keying on the normal keeps a plane lying at a coordinate of 0 from flickering.
+pub fn checker_is_a(p: DVec3, normal: DVec3, scale: f64) -> bool {
+    let a = normal.abs();
+    let (u, v) = if a.y >= a.x && a.y >= a.z {
+        (p.x, p.z)
+    } else if a.z >= a.x {
+        (p.x, p.y)
+    } else {
+        (p.y, p.z)
+    };
+    let iu = (u / scale).floor() as i64;
+    let iv = (v / scale).floor() as i64;
+    (iu + iv).rem_euclid(2) == 0
 }
 
 #[cfg(test)]
@@ -80,9 +90,18 @@ mod tests {
 
     #[test]
     fn checker_alternates() {
-        assert!(checker_is_a(DVec3::new(0.5, 0.0, 0.5), 1.0));
-        assert!(!checker_is_a(DVec3::new(1.5, 0.0, 0.5), 1.0));
-        assert!(!checker_is_a(DVec3::new(-0.5, 0.0, 0.5), 1.0));
+        let up = DVec3::Y;
+        assert!(checker_is_a(DVec3::new(0.5, 0.0, 0.5), up, 1.0));
+        assert!(!checker_is_a(DVec3::new(1.5, 0.0, 0.5), up, 1.0));
+        assert!(!checker_is_a(DVec3::new(-0.5, 0.0, 0.5), up, 1.0));
+        // A floor at y = 0 does not flicker with the sign of y's rounding error.
+        assert_eq!(
+            checker_is_a(DVec3::new(0.5, 1e-17, 0.5), up, 1.0),
+            checker_is_a(DVec3::new(0.5, -1e-17, 0.5), up, 1.0)
+        );
+        // A wall facing -z alternates in x and y.
+        assert!(!checker_is_a(DVec3::new(0.5, 1.5, 3.0), -DVec3::Z, 1.0));
+        assert!(checker_is_a(DVec3::new(1.5, 1.5, 3.0), -DVec3::Z, 1.0));
         assert!(reflect_dir(DVec3::new(1.0, -1.0, 0.0), DVec3::Y) == DVec3::new(1.0, 1.0, 0.0));
     }
 }

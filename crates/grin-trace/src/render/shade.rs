@@ -231,7 +231,7 @@ impl RenderScene {
                 color_b,
                 scale,
             } => {
-                let albedo = if checker_is_a(hit.point, scale) {
+                let albedo = if checker_is_a(hit.point, hit.normal, scale) {
                     color_a
                 } else {
                     color_b
