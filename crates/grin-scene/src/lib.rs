@@ -4,8 +4,13 @@
 
 mod error;
 mod load;
+mod span;
+#[cfg(test)]
+mod tests;
 mod types;
+mod validate;
 
 pub use error::SceneError;
 pub use load::{load_scene, parse_scene};
 pub use types::*;
+pub use validate::{MAX_IMAGE_SIDE, MAX_NOISE_OCTAVES};

@@ -1,8 +1,11 @@
-//! Reading a scene file: TOML -> [`Scene`], then validation.
+//! Reading a scene file: TOML -> [`Scene`], then validation, with every error located
+//! at file:line:column and named by its dotted key path.
 
 use std::path::Path;
 
-use crate::{Scene, SceneError};
+use crate::span::{Document, line_column};
+use crate::validate::validate;
+use crate::{Scene, SceneError, Shape};
 
 /// Read and validate a scene file.
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
@@ -15,26 +18,48 @@ pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
 
 /// Parse and validate scene text; `path` is used in error messages.
 pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
-    let scene: Scene = toml::from_str(text).map_err(|e| {
-        let (line, column) = e
-            .span()
-            .map(|s| line_column(text, s.start))
-            .unwrap_or((0, 0));
+    let mut scene: Scene = toml::from_str(text).map_err(|e| {
+        let offset = e.span().map_or(0, |s| s.start);
+        let (line, column) = line_column(text, offset);
+        let key = Document::parse(text)
+            .key_at(offset)
+            .unwrap_or_else(|| "(document)".to_owned());
         SceneError::Parse {
             path: path.to_owned(),
             line,
             column,
-            key: String::new(),
-            message: e.message().to_owned(),
+            key,
+            message: one_line(e.message()),
         }
     })?;
+    validate(&scene).map_err(|p| {
+        let offset = Document::parse(text).span_of(&p.key).map_or(0, |s| s.start);
+        let (line, column) = line_column(text, offset);
+        SceneError::Invalid {
+            path: path.to_owned(),
+            line,
+            column,
+            key: p.key,
+            message: p.message,
+        }
+    })?;
+    normalize(&mut scene);
     Ok(scene)
 }
 
-/// 1-based line and column of a byte offset.
-fn line_column(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, column)
+/// Unit plane normals (validated non-zero above).
+fn normalize(scene: &mut Scene) {
+    for o in &mut scene.objects {
+        if let Shape::Plane { normal, .. } = &mut o.shape {
+            let len = normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+            for c in normal.iter_mut() {
+                *c /= len;
+            }
+        }
+    }
+}
+
+/// Errors are one line on stderr.
+fn one_line(message: &str) -> String {
+    message.trim().replace('\n', "; ")
 }

@@ -52,7 +52,10 @@ pub struct Object {
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Shape {
-    Sphere { center: [f64; 3], radius: f64 },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+    },
     /// Infinite plane through `point` with unit `normal` (normalised on load).
     Plane {
         #[serde(default)]
@@ -60,7 +63,10 @@ pub enum Shape {
         #[serde(default = "default_up")]
         normal: [f64; 3],
     },
-    Box { min: [f64; 3], max: [f64; 3] },
+    Box {
+        min: [f64; 3],
+        max: [f64; 3],
+    },
 }
 
 /// Surface materials. TOML: either a bare name (`material = "glass"`, defaults for all
@@ -71,7 +77,8 @@ pub enum Material {
     Diffuse {
         color: [f64; 3],
     },
-    /// Two-colour checkerboard in world x/z with square size `scale`.
+    /// Two-colour checkerboard with square size `scale`, in the two world axes across the
+    /// surface's dominant normal axis (x/z on a floor, x/y on a wall facing z).
     Checker {
         color_a: [f64; 3],
         color_b: [f64; 3],
@@ -528,6 +535,8 @@ impl Default for RenderSettings {
 mod material_serde {
     //! `material = "glass"` or `material = { glass = { ior = 1.5 } }`.
     use super::Material;
+    use serde::de::value::MapAccessDeserializer;
+    use serde::de::{MapAccess, Visitor};
     use serde::{Deserialize, Deserializer};
 
     #[derive(Deserialize)]
@@ -582,13 +591,6 @@ mod material_serde {
         1.5
     }
 
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum Repr {
-        Name(String),
-        Table(Table),
-    }
-
     impl From<Table> for Material {
         fn from(t: Table) -> Self {
             match t {
@@ -609,33 +611,48 @@ mod material_serde {
         }
     }
 
+    /// A string names a material with default parameters; a table is parsed as [`Table`]
+    /// directly so its errors (unknown keys, wrong types) keep their message and span.
+    struct MaterialVisitor;
+
+    impl<'de> Visitor<'de> for MaterialVisitor {
+        type Value = Material;
+
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a material name or a table like { glass = { ior = 1.5 } }")
+        }
+
+        fn visit_str<E: serde::de::Error>(self, name: &str) -> Result<Material, E> {
+            let table = match name {
+                "diffuse" => Table::Diffuse { color: grey() },
+                "checker" => Table::Checker {
+                    color_a: white(),
+                    color_b: dark(),
+                    scale: one(),
+                },
+                "mirror" => Table::Mirror { color: white() },
+                "metal" => Table::Metal { color: steel() },
+                "glass" => Table::Glass {
+                    ior: glass_ior(),
+                    color: white(),
+                },
+                other => {
+                    return Err(E::custom(format!(
+                        "unknown material `{other}`, expected one of diffuse, checker, mirror, metal, glass"
+                    )));
+                }
+            };
+            Ok(table.into())
+        }
+
+        fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Material, A::Error> {
+            Table::deserialize(MapAccessDeserializer::new(map)).map(Into::into)
+        }
+    }
+
     impl<'de> Deserialize<'de> for Material {
         fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-            match Repr::deserialize(d)? {
-                Repr::Table(t) => Ok(t.into()),
-                Repr::Name(name) => {
-                    let table = match name.as_str() {
-                        "diffuse" => Table::Diffuse { color: grey() },
-                        "checker" => Table::Checker {
-                            color_a: white(),
-                            color_b: dark(),
-                            scale: one(),
-                        },
-                        "mirror" => Table::Mirror { color: white() },
-                        "metal" => Table::Metal { color: steel() },
-                        "glass" => Table::Glass {
-                            ior: glass_ior(),
-                            color: white(),
-                        },
-                        other => {
-                            return Err(serde::de::Error::custom(format!(
-                                "unknown material `{other}`, expected one of diffuse, checker, mirror, metal, glass"
-                            )));
-                        }
-                    };
-                    Ok(table.into())
-                }
-            }
+            d.deserialize_any(MaterialVisitor)
         }
     }
 }

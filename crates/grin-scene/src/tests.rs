@@ -1,0 +1,395 @@
+//! Scene parsing and validation errors: one test per kind of error, asserting on the
+//! message text (file:line:column: key: reason).
+
+use std::path::Path;
+
+use crate::{FieldSpec, Material, SceneError, Shape, parse_scene};
+
+/// A valid scene; tests replace one line to break it.
+const BASE: &str = r#"[camera]
+position = [0.0, 1.0, -4.0]
+look_at = [0.0, 0.5, 0.0]
+fov_y_deg = 40.0
+
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 2.0, 0.0] } }
+material = { checker = { scale = 0.5 } }
+
+[[object]]
+shape = { sphere = { center = [0.8, 0.5, 1.0], radius = 0.5 } }
+material = "glass"
+
+[medium]
+bounds = { sphere = { center = [0.0, 0.5, 0.0], radius = 0.6 } }
+ambient_index = 1.0
+field = { kind = "luneburg" }
+
+[[light]]
+point = { position = [2.0, 4.0, -2.0], intensity = [40.0, 40.0, 40.0] }
+
+[render]
+width = 64
+height = 36
+step = { heuristic = { min = 0.002, max = 0.05 } }
+"#;
+
+/// BASE with the first occurrence of `from` replaced by `to`; the error message.
+fn error_of(from: &str, to: &str) -> String {
+    assert!(BASE.contains(from), "test bug: `{from}` not in BASE");
+    let text = BASE.replacen(from, to, 1);
+    match parse_scene(&text, Path::new("scene.toml")) {
+        Ok(_) => panic!("`{to}` was accepted"),
+        Err(e @ SceneError::Invalid { .. }) => {
+            assert_points_at_key(&text, &e.to_string());
+            e.to_string()
+        }
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The line:column of a validation error is where its key (last path segment) is written.
+fn assert_points_at_key(text: &str, message: &str) {
+    let mut parts = message.splitn(4, ':');
+    let (_, line, col, rest) = (
+        parts.next(),
+        parts.next(),
+        parts.next(),
+        parts.next().unwrap_or(""),
+    );
+    let line: usize = line
+        .and_then(|l| l.parse().ok())
+        .unwrap_or_else(|| panic!("no line in {message}"));
+    let col: usize = col
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("no column in {message}"));
+    let key = rest.trim_start().split(':').next().unwrap_or("");
+    let last = key
+        .rsplit('.')
+        .next()
+        .unwrap_or("")
+        .split('[')
+        .next()
+        .unwrap_or("");
+    let at: String = text
+        .lines()
+        .nth(line - 1)
+        .unwrap_or("")
+        .chars()
+        .skip(col - 1)
+        .collect();
+    assert!(
+        at.starts_with(last),
+        "{message}: column points at `{at}`, not at `{last}`"
+    );
+}
+
+#[test]
+fn base_scene_is_valid_and_plane_normal_is_normalised() {
+    let s = parse_scene(BASE, Path::new("scene.toml")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.objects.len(), 2);
+    assert_eq!(
+        s.objects[0].shape,
+        Shape::Plane {
+            point: [0.0; 3],
+            normal: [0.0, 1.0, 0.0]
+        }
+    );
+    assert_eq!(
+        s.objects[1].material,
+        Material::Glass {
+            ior: 1.5,
+            color: [1.0; 3]
+        }
+    );
+    assert_eq!(
+        s.medium.as_ref().map(|m| &m.field),
+        Some(&FieldSpec::Luneburg { radius: None })
+    );
+}
+
+#[test]
+fn malformed_toml_has_line_and_column() {
+    let m = error_of("[render]", "[render");
+    assert!(m.starts_with("scene.toml:22:8: "), "{m}");
+    let m = error_of("width = 64", "width = = 64");
+    assert!(m.starts_with("scene.toml:23:"), "{m}");
+}
+
+#[test]
+fn unknown_keys_are_named_with_their_line() {
+    let m = error_of("fov_y_deg = 40.0", "fov_y_deg = 40.0\nzoom = 2.0");
+    assert!(
+        m.starts_with("scene.toml:5:1: camera.zoom: unknown field `zoom`"),
+        "{m}"
+    );
+    let m = error_of("width = 64", "widht = 64");
+    assert!(
+        m.starts_with("scene.toml:23:1: render.widht: unknown field `widht`"),
+        "{m}"
+    );
+    let m = error_of("[medium]", "[mediun]");
+    assert!(
+        m.starts_with("scene.toml:14:2: mediun: unknown field `mediun`"),
+        "{m}"
+    );
+}
+
+#[test]
+fn unknown_field_kind_is_named() {
+    let m = error_of("kind = \"luneburg\"", "kind = \"lunebrug\"");
+    assert!(m.starts_with("scene.toml:17:"), "{m}");
+    assert!(m.contains("medium.field"), "{m}");
+    assert!(m.contains("unknown variant `lunebrug`"), "{m}");
+}
+
+#[test]
+fn unknown_material_and_material_keys() {
+    let m = error_of("material = \"glass\"", "material = \"glas\"");
+    assert!(m.starts_with("scene.toml:12:"), "{m}");
+    assert!(m.contains("object[1].material: unknown material `glas`, expected one of diffuse, checker, mirror, metal, glass"), "{m}");
+    let m = error_of(
+        "{ checker = { scale = 0.5 } }",
+        "{ checker = { scael = 0.5 } }",
+    );
+    assert!(m.starts_with("scene.toml:8:"), "{m}");
+    assert!(m.contains("unknown field `scael`"), "{m}");
+}
+
+#[test]
+fn camera_errors() {
+    let m = error_of("look_at = [0.0, 0.5, 0.0]", "look_at = [0.0, 1.0, -4.0]");
+    assert_eq!(
+        m,
+        "scene.toml:3:1: camera.look_at: must differ from camera.position, both are [0.0, 1.0, -4.0]"
+    );
+    let m = error_of("fov_y_deg = 40.0", "fov_y_deg = 180.0");
+    assert_eq!(
+        m,
+        "scene.toml:4:1: camera.fov_y_deg: must be in (0, 180) degrees, got 180"
+    );
+    let m = error_of("fov_y_deg = 40.0", "fov_y_deg = 0.0");
+    assert_eq!(
+        m,
+        "scene.toml:4:1: camera.fov_y_deg: must be in (0, 180) degrees, got 0"
+    );
+    let m = error_of("fov_y_deg = 40.0", "up = [0.0, 0.0, 0.0]");
+    assert_eq!(m, "scene.toml:4:1: camera.up: must be a non-zero vector");
+    let m = error_of("position = [0.0, 1.0, -4.0]", "position = [0.0, nan, -4.0]");
+    assert_eq!(
+        m,
+        "scene.toml:2:1: camera.position: all components must be finite, got [0.0, NaN, -4.0]"
+    );
+}
+
+#[test]
+fn shape_errors() {
+    let m = error_of("radius = 0.5 }", "radius = -1.0 }");
+    assert_eq!(
+        m,
+        "scene.toml:11:48: object[1].shape.sphere.radius: must be > 0, got -1"
+    );
+    let m = error_of("normal = [0.0, 2.0, 0.0]", "normal = [0.0, 0.0, 0.0]");
+    assert_eq!(
+        m,
+        "scene.toml:7:46: object[0].shape.plane.normal: must be a non-zero vector"
+    );
+    let m = error_of(
+        "shape = { sphere = { center = [0.8, 0.5, 1.0], radius = 0.5 } }",
+        "shape = { box = { min = [0.0, 0.0, 0.0], max = [1.0, 0.0, 1.0] } }",
+    );
+    assert_eq!(
+        m,
+        "scene.toml:11:42: object[1].shape.box.max: must be > min in every component, got min [0.0, 0.0, 0.0], max [1.0, 0.0, 1.0]"
+    );
+}
+
+#[test]
+fn material_errors() {
+    let m = error_of(
+        "material = \"glass\"",
+        "material = { glass = { ior = 0.0 } }",
+    );
+    assert_eq!(
+        m,
+        "scene.toml:12:24: object[1].material.glass.ior: must be > 0, got 0"
+    );
+    let m = error_of(
+        "material = \"glass\"",
+        "material = { diffuse = { color = [0.5, -0.1, 0.5] } }",
+    );
+    assert_eq!(
+        m,
+        "scene.toml:12:26: object[1].material.diffuse.color: colour components must be finite and >= 0, got [0.5, -0.1, 0.5]"
+    );
+    let m = error_of(
+        "{ checker = { scale = 0.5 } }",
+        "{ checker = { scale = 0.0 } }",
+    );
+    assert_eq!(
+        m,
+        "scene.toml:8:26: object[0].material.checker.scale: must be > 0, got 0"
+    );
+}
+
+#[test]
+fn medium_errors() {
+    let m = error_of("radius = 0.6 }", "radius = -1 }");
+    assert_eq!(
+        m,
+        "scene.toml:15:49: medium.bounds.sphere.radius: must be > 0, got -1"
+    );
+    let m = error_of(
+        "bounds = { sphere = { center = [0.0, 0.5, 0.0], radius = 0.6 } }",
+        "bounds = { box = { min = [0.0, 0.0, 0.0], max = [-1.0, 1.0, 1.0] } }",
+    );
+    assert!(
+        m.starts_with("scene.toml:15:43: medium.bounds.box.max: must be > min in every component"),
+        "{m}"
+    );
+    let m = error_of("ambient_index = 1.0", "ambient_index = 0.0");
+    assert_eq!(
+        m,
+        "scene.toml:16:1: medium.ambient_index: must be > 0, got 0"
+    );
+    let m = error_of("ambient_index = 1.0", "ambient_index = inf");
+    assert_eq!(
+        m,
+        "scene.toml:16:1: medium.ambient_index: must be > 0, got inf"
+    );
+}
+
+#[test]
+fn field_parameter_errors() {
+    let cases = [
+        (
+            "{ kind = \"luneburg\", radius = -1.0 }",
+            "scene.toml:17:30: medium.field.radius: must be > 0, got -1",
+        ),
+        (
+            "{ kind = \"uniform\", n = 0.0 }",
+            "scene.toml:17:29: medium.field.n: must be > 0, got 0",
+        ),
+        (
+            "{ kind = \"grin-rod\", n0 = 1.5, a = -0.1 }",
+            "scene.toml:17:40: medium.field.a: must be > 0, got -0.1",
+        ),
+        (
+            "{ kind = \"eaton\", core = 1.5 }",
+            "scene.toml:17:27: medium.field.core: must be in (0, 1) (a fraction of the radius), got 1.5",
+        ),
+        (
+            "{ kind = \"plume\", plumes = [{ a = 1e-5, center = [0.0, 0.0, 0.0], s = 0.0 }] }",
+            "scene.toml:17:75: medium.field.plumes[0].s: must be > 0, got 0",
+        ),
+        (
+            "{ kind = \"plume\", plumes = [] }",
+            "scene.toml:17:27: medium.field.plumes: must list at least one plume",
+        ),
+        (
+            "{ kind = \"noise\", amplitude = 0.01, octaves = 17 }",
+            "scene.toml:17:45: medium.field.octaves: must be in 1..=16, got 17",
+        ),
+        (
+            "{ kind = \"noise\", amplitude = 0.01, octaves = 0 }",
+            "scene.toml:17:45: medium.field.octaves: must be in 1..=16, got 0",
+        ),
+        (
+            "{ kind = \"exponential-atmosphere\", e = -5e-5, scale_height = 0.0 }",
+            "scene.toml:17:55: medium.field.scale_height: must be > 0, got 0",
+        ),
+        (
+            "{ kind = \"expr\", n = \" \" }",
+            "scene.toml:17:26: medium.field.n: must not be empty",
+        ),
+        (
+            "{ kind = \"baked\", path = \"\" }",
+            "scene.toml:17:27: medium.field.path: must not be empty",
+        ),
+    ];
+    for (field, want) in cases {
+        let m = error_of("{ kind = \"luneburg\" }", field);
+        assert_eq!(m, want);
+    }
+}
+
+#[test]
+fn light_errors() {
+    let m = error_of(
+        "intensity = [40.0, 40.0, 40.0]",
+        "intensity = [40.0, -1.0, 40.0]",
+    );
+    assert_eq!(
+        m,
+        "scene.toml:20:40: light[0].point.intensity: colour components must be finite and >= 0, got [40.0, -1.0, 40.0]"
+    );
+    let m = error_of(
+        "point = { position = [2.0, 4.0, -2.0], intensity = [40.0, 40.0, 40.0] }",
+        "directional = { direction = [0.0, 0.0, 0.0], intensity = [1.0, 1.0, 1.0] }",
+    );
+    assert_eq!(
+        m,
+        "scene.toml:20:17: light[0].directional.direction: must be a non-zero vector"
+    );
+}
+
+#[test]
+fn render_errors() {
+    let cases = [
+        (
+            "width = 64",
+            "width = 0",
+            "scene.toml:23:1: render.width: must be in 1..=16384, got 0",
+        ),
+        (
+            "height = 36",
+            "height = 20000",
+            "scene.toml:24:1: render.height: must be in 1..=16384, got 20000",
+        ),
+        (
+            "height = 36",
+            "height = 36\nspp = 0",
+            "scene.toml:25:1: render.spp: must be >= 1, got 0",
+        ),
+        (
+            "height = 36",
+            "height = 36\nmax_steps = 0",
+            "scene.toml:25:1: render.max_steps: must be >= 1, got 0",
+        ),
+        (
+            "step = { heuristic = { min = 0.002, max = 0.05 } }",
+            "step = { fixed = 0.0 }",
+            "scene.toml:25:10: render.step.fixed: must be > 0, got 0",
+        ),
+        (
+            "min = 0.002, max = 0.05",
+            "min = 0.1, max = 0.05",
+            "scene.toml:25:24: render.step.heuristic.min: must be <= max (0.05), got 0.1",
+        ),
+        (
+            "step = { heuristic = { min = 0.002, max = 0.05 } }",
+            "step = { adaptive = { tolerance = -1e-5 } }",
+            "scene.toml:25:23: render.step.adaptive.tolerance: must be > 0, got -0.00001",
+        ),
+    ];
+    for (from, to, want) in cases {
+        assert_eq!(error_of(from, to), want);
+    }
+}
+
+#[test]
+fn wrong_types_and_negative_integers_are_parse_errors() {
+    let m = error_of("width = 64", "width = -64");
+    assert!(m.starts_with("scene.toml:23:9: render.width: "), "{m}");
+    let m = error_of("width = 64", "width = \"wide\"");
+    assert!(m.starts_with("scene.toml:23:9: render.width: "), "{m}");
+}
+
+#[test]
+fn io_error_names_the_file() {
+    let e = crate::load_scene(Path::new("/nonexistent/scene.toml")).expect_err("missing");
+    assert!(
+        e.to_string()
+            .starts_with("/nonexistent/scene.toml: cannot read scene file: "),
+        "{e}"
+    );
+}

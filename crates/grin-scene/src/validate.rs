@@ -1,0 +1,387 @@
+//! Semantic checks on a parsed [`Scene`]: values that are well-formed TOML but unusable
+//! (negative radii, n <= 0, empty render sizes...). Each problem is reported with the
+//! dotted key path of the offending value; the loader turns that into file:line:column.
+
+use crate::{
+    BoundsSpec, Camera, FieldSpec, Light, Material, MediumSpec, NoiseSpec, Object, RenderSettings,
+    Scene, Shape, Sky, StepSpec, VdbMap, VdbSpec,
+};
+
+/// Largest image side accepted (16K): bigger is almost certainly a typo, and the frame
+/// buffers of a 16384^2 image already take ~4 GB.
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+/// Noise octaves accepted: beyond 16 the octaves are finer than f64 noise lattices resolve.
+pub const MAX_NOISE_OCTAVES: u32 = 16;
+
+/// A validation failure: the key path and what is wrong with its value.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Problem {
+    pub key: String,
+    pub message: String,
+}
+
+type Check = Result<(), Problem>;
+
+fn fail(key: impl Into<String>, message: impl Into<String>) -> Check {
+    Err(Problem {
+        key: key.into(),
+        message: message.into(),
+    })
+}
+
+fn finite(key: &str, v: f64) -> Check {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        fail(key, format!("must be finite, got {v}"))
+    }
+}
+
+fn positive(key: &str, v: f64) -> Check {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        fail(key, format!("must be > 0, got {v}"))
+    }
+}
+
+fn non_negative(key: &str, v: f64) -> Check {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        fail(key, format!("must be >= 0, got {v}"))
+    }
+}
+
+fn finite3(key: &str, v: [f64; 3]) -> Check {
+    if v.iter().all(|c| c.is_finite()) {
+        Ok(())
+    } else {
+        fail(key, format!("all components must be finite, got {v:?}"))
+    }
+}
+
+fn nonzero3(key: &str, v: [f64; 3]) -> Check {
+    finite3(key, v)?;
+    if v.iter().any(|c| *c != 0.0) {
+        Ok(())
+    } else {
+        fail(key, "must be a non-zero vector")
+    }
+}
+
+fn colour(key: &str, v: [f64; 3]) -> Check {
+    if v.iter().all(|c| c.is_finite() && *c >= 0.0) {
+        Ok(())
+    } else {
+        fail(
+            key,
+            format!("colour components must be finite and >= 0, got {v:?}"),
+        )
+    }
+}
+
+fn min_max(key: &str, min: [f64; 3], max: [f64; 3]) -> Check {
+    finite3(&format!("{key}.min"), min)?;
+    finite3(&format!("{key}.max"), max)?;
+    if (0..3).all(|i| min[i] < max[i]) {
+        Ok(())
+    } else {
+        fail(
+            format!("{key}.max"),
+            format!("must be > min in every component, got min {min:?}, max {max:?}"),
+        )
+    }
+}
+
+fn non_empty(key: &str, s: &str) -> Check {
+    if s.trim().is_empty() {
+        fail(key, "must not be empty")
+    } else {
+        Ok(())
+    }
+}
+
+/// Check the whole scene; the first problem found.
+pub(crate) fn validate(scene: &Scene) -> Check {
+    camera(&scene.camera)?;
+    for (i, o) in scene.objects.iter().enumerate() {
+        object(&format!("object[{i}]"), o)?;
+    }
+    if let Some(m) = &scene.medium {
+        medium(m)?;
+    }
+    for (i, l) in scene.lights.iter().enumerate() {
+        light(&format!("light[{i}]"), l)?;
+    }
+    sky(&scene.sky)?;
+    render(&scene.render)
+}
+
+fn camera(c: &Camera) -> Check {
+    finite3("camera.position", c.position)?;
+    finite3("camera.look_at", c.look_at)?;
+    nonzero3("camera.up", c.up)?;
+    if c.position == c.look_at {
+        return fail(
+            "camera.look_at",
+            format!(
+                "must differ from camera.position, both are {:?}",
+                c.position
+            ),
+        );
+    }
+    let v: Vec<f64> = (0..3).map(|i| c.look_at[i] - c.position[i]).collect();
+    let cross = [
+        v[1] * c.up[2] - v[2] * c.up[1],
+        v[2] * c.up[0] - v[0] * c.up[2],
+        v[0] * c.up[1] - v[1] * c.up[0],
+    ];
+    let norm = |a: &[f64]| a.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if norm(&cross) <= 1e-9 * norm(&v) * norm(&c.up) {
+        return fail(
+            "camera.up",
+            format!("must not be parallel to the view direction, got {:?}", c.up),
+        );
+    }
+    if !(c.fov_y_deg.is_finite() && c.fov_y_deg > 0.0 && c.fov_y_deg < 180.0) {
+        return fail(
+            "camera.fov_y_deg",
+            format!("must be in (0, 180) degrees, got {}", c.fov_y_deg),
+        );
+    }
+    Ok(())
+}
+
+fn object(key: &str, o: &Object) -> Check {
+    match &o.shape {
+        Shape::Sphere { center, radius } => {
+            finite3(&format!("{key}.shape.sphere.center"), *center)?;
+            positive(&format!("{key}.shape.sphere.radius"), *radius)?;
+        }
+        Shape::Plane { point, normal } => {
+            finite3(&format!("{key}.shape.plane.point"), *point)?;
+            nonzero3(&format!("{key}.shape.plane.normal"), *normal)?;
+        }
+        Shape::Box { min, max } => min_max(&format!("{key}.shape.box"), *min, *max)?,
+    }
+    material(&format!("{key}.material"), &o.material)
+}
+
+fn material(key: &str, m: &Material) -> Check {
+    match m {
+        Material::Diffuse { color } => colour(&format!("{key}.diffuse.color"), *color),
+        Material::Checker {
+            color_a,
+            color_b,
+            scale,
+        } => {
+            colour(&format!("{key}.checker.color_a"), *color_a)?;
+            colour(&format!("{key}.checker.color_b"), *color_b)?;
+            positive(&format!("{key}.checker.scale"), *scale)
+        }
+        Material::Mirror { color } => colour(&format!("{key}.mirror.color"), *color),
+        Material::Metal { color } => colour(&format!("{key}.metal.color"), *color),
+        Material::Glass { ior, color } => {
+            positive(&format!("{key}.glass.ior"), *ior)?;
+            colour(&format!("{key}.glass.color"), *color)
+        }
+    }
+}
+
+fn medium(m: &MediumSpec) -> Check {
+    match m.bounds {
+        BoundsSpec::Sphere { center, radius } => {
+            finite3("medium.bounds.sphere.center", center)?;
+            positive("medium.bounds.sphere.radius", radius)?;
+        }
+        BoundsSpec::Box { min, max } => min_max("medium.bounds.box", min, max)?,
+    }
+    positive("medium.ambient_index", m.ambient_index)?;
+    field(&m.field)
+}
+
+fn field(f: &FieldSpec) -> Check {
+    const K: &str = "medium.field";
+    let k = |p: &str| format!("{K}.{p}");
+    match f {
+        FieldSpec::Uniform { n } => positive(&k("n"), *n),
+        FieldSpec::LinearN2 { n0, k: slope, .. } => {
+            positive(&k("n0"), *n0)?;
+            finite(&k("k"), *slope)
+        }
+        FieldSpec::GrinRod { n0, a, .. } => {
+            positive(&k("n0"), *n0)?;
+            positive(&k("a"), *a)
+        }
+        FieldSpec::Luneburg { radius } => radius.map_or(Ok(()), |r| positive(&k("radius"), r)),
+        FieldSpec::MaxwellFishEye { n0, a } => {
+            positive(&k("n0"), *n0)?;
+            positive(&k("a"), *a)
+        }
+        FieldSpec::Eaton { radius, core } => {
+            radius.map_or(Ok(()), |r| positive(&k("radius"), r))?;
+            if core.is_finite() && *core > 0.0 && *core < 1.0 {
+                Ok(())
+            } else {
+                fail(
+                    k("core"),
+                    format!("must be in (0, 1) (a fraction of the radius), got {core}"),
+                )
+            }
+        }
+        FieldSpec::ExponentialAtmosphere {
+            e,
+            scale_height,
+            base,
+            ..
+        } => {
+            finite(&k("e"), *e)?;
+            positive(&k("scale_height"), *scale_height)?;
+            finite(&k("base"), *base)
+        }
+        FieldSpec::Plume { plumes } => {
+            if plumes.is_empty() {
+                return fail(k("plumes"), "must list at least one plume");
+            }
+            for (i, p) in plumes.iter().enumerate() {
+                finite(&k(&format!("plumes[{i}].a")), p.a)?;
+                finite3(&k(&format!("plumes[{i}].center")), p.center)?;
+                positive(&k(&format!("plumes[{i}].s")), p.s)?;
+            }
+            Ok(())
+        }
+        FieldSpec::Expr { n, t } => {
+            non_empty(&k("n"), n)?;
+            finite(&k("t"), *t)
+        }
+        FieldSpec::Noise(spec) => noise(spec),
+        FieldSpec::Vdb(spec) => vdb(spec),
+        FieldSpec::Baked { path } => non_empty(&k("path"), path),
+    }
+}
+
+fn noise(s: &NoiseSpec) -> Check {
+    let k = |p: &str| format!("medium.field.{p}");
+    if !(1..=MAX_NOISE_OCTAVES).contains(&s.octaves) {
+        return fail(
+            k("octaves"),
+            format!("must be in 1..={MAX_NOISE_OCTAVES}, got {}", s.octaves),
+        );
+    }
+    positive(&k("frequency"), s.frequency)?;
+    finite(&k("amplitude"), s.amplitude)?;
+    positive(&k("lacunarity"), s.lacunarity)?;
+    positive(&k("persistence"), s.persistence)?;
+    if !(s.envelope.is_finite() && (0.0..=1.0).contains(&s.envelope)) {
+        return fail(
+            k("envelope"),
+            format!(
+                "must be in [0, 1] (a fraction of the half-size), got {}",
+                s.envelope
+            ),
+        );
+    }
+    finite3(&k("drift"), s.drift)?;
+    finite(&k("t"), s.t)
+}
+
+fn vdb(s: &VdbSpec) -> Check {
+    let k = |p: &str| format!("medium.field.{p}");
+    non_empty(&k("path"), &s.path)?;
+    non_empty(&k("grid"), &s.grid)?;
+    positive(&k("units"), s.units)?;
+    match s.map {
+        VdbMap::Index { .. } => Ok(()),
+        VdbMap::Linear { k: slope } => finite(&k("map.linear.k"), slope),
+        VdbMap::GladstoneDale {
+            ambient_temperature_k,
+            scale_k,
+            pressure_pa,
+            k_gd,
+            r_specific,
+        } => {
+            positive(
+                &k("map.gladstone-dale.ambient_temperature_k"),
+                ambient_temperature_k,
+            )?;
+            finite(&k("map.gladstone-dale.scale_k"), scale_k)?;
+            positive(&k("map.gladstone-dale.pressure_pa"), pressure_pa)?;
+            positive(&k("map.gladstone-dale.k_gd"), k_gd)?;
+            positive(&k("map.gladstone-dale.r_specific"), r_specific)
+        }
+    }
+}
+
+fn light(key: &str, l: &Light) -> Check {
+    match l {
+        Light::Point {
+            position,
+            intensity,
+        } => {
+            finite3(&format!("{key}.point.position"), *position)?;
+            colour(&format!("{key}.point.intensity"), *intensity)
+        }
+        Light::Directional {
+            direction,
+            intensity,
+        } => {
+            nonzero3(&format!("{key}.directional.direction"), *direction)?;
+            colour(&format!("{key}.directional.intensity"), *intensity)
+        }
+    }
+}
+
+fn sky(s: &Sky) -> Check {
+    match s {
+        Sky::Gradient {
+            horizon,
+            zenith,
+            ground,
+        } => {
+            colour("sky.gradient.horizon", *horizon)?;
+            colour("sky.gradient.zenith", *zenith)?;
+            colour("sky.gradient.ground", *ground)
+        }
+        Sky::Map { path, intensity } => {
+            non_empty("sky.map.path", path)?;
+            non_negative("sky.map.intensity", *intensity)
+        }
+    }
+}
+
+fn render(r: &RenderSettings) -> Check {
+    for (key, v) in [("render.width", r.width), ("render.height", r.height)] {
+        if !(1..=MAX_IMAGE_SIDE).contains(&v) {
+            return fail(key, format!("must be in 1..={MAX_IMAGE_SIDE}, got {v}"));
+        }
+    }
+    if r.spp < 1 {
+        return fail("render.spp", "must be >= 1, got 0");
+    }
+    if r.max_steps < 1 {
+        return fail("render.max_steps", "must be >= 1, got 0");
+    }
+    match r.step {
+        StepSpec::Fixed(s) => positive("render.step.fixed", s),
+        StepSpec::Heuristic {
+            min,
+            max,
+            amplitude,
+        } => {
+            positive("render.step.heuristic.min", min)?;
+            positive("render.step.heuristic.max", max)?;
+            if min > max {
+                return fail(
+                    "render.step.heuristic.min",
+                    format!("must be <= max ({max}), got {min}"),
+                );
+            }
+            amplitude.map_or(Ok(()), |a| positive("render.step.heuristic.amplitude", a))
+        }
+        StepSpec::Adaptive { tolerance, initial } => {
+            positive("render.step.adaptive.tolerance", tolerance)?;
+            initial.map_or(Ok(()), |s| positive("render.step.adaptive.initial", s))
+        }
+    }
+}
