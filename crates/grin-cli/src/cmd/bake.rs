@@ -1,9 +1,223 @@
-//! `grin bake`.
+//! `grin bake`: bake a scene's medium into a `.grinf` file, at a resolution chosen from an
+//! error budget (or given), cropped to the active region, under a memory cap.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use anyhow::Context;
+use grin_field::bake::{self, BakeOptions, BakeReport, GradientMode};
+use grin_field::baked::{Interp, Storage};
+use grin_scene::FieldSpec;
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin bake`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Scene file whose [medium] is baked.
+    pub scene: PathBuf,
+    /// Output .grinf file (written to a temporary file, then renamed).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Nodes along the longest axis of the baked region (default: the coarsest that meets --error).
+    #[arg(long)]
+    pub resolution: Option<usize>,
+    /// Error budget: max |n error| relative to the field's delta_n range, on random points.
+    #[arg(long, default_value_t = bake::DEFAULT_ERROR_BUDGET)]
+    pub error: f64,
+    /// Memory cap in bytes for the baked grid (suffixes k, M, G allowed: 512M).
+    #[arg(long, value_parser = parse_bytes, default_value = "1G")]
+    pub max_memory: u64,
+    /// Interpolation stored as the file's default (and used to measure the error).
+    #[arg(long, value_enum, default_value_t = InterpArg::Trilinear)]
+    pub interp: InterpArg,
+    /// Storage (default: i16 when its rounding fits the budget, else f32).
+    #[arg(long, value_enum)]
+    pub storage: Option<StorageArg>,
+    /// Bake the whole bounds instead of cropping to where n differs from ambient.
+    #[arg(long)]
+    pub no_crop: bool,
+    /// Print a machine-readable summary (JSON) on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`grin bake` is not implemented yet")
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum InterpArg {
+    Trilinear,
+    Tricubic,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StorageArg {
+    F32,
+    I16,
+}
+
+/// Parse a byte count with an optional k/M/G suffix (powers of 1024).
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (num, mult) = match t.chars().last() {
+        Some('k' | 'K') => (&t[..t.len() - 1], 1u64 << 10),
+        Some('m' | 'M') => (&t[..t.len() - 1], 1 << 20),
+        Some('g' | 'G') => (&t[..t.len() - 1], 1 << 30),
+        _ => (t, 1),
+    };
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a byte count (e.g. 512M)"))?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("`{s}` must be a positive byte count"));
+    }
+    Ok((v * mult as f64) as u64)
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let scene = grin_scene::load_scene(&args.scene)?;
+    let medium = scene.medium.as_ref().with_context(|| {
+        format!(
+            "{}: the scene has no [medium] to bake",
+            args.scene.display()
+        )
+    })?;
+    if let Some(dir) = args.output.parent()
+        && !dir.as_os_str().is_empty()
+        && !dir.is_dir()
+    {
+        anyhow::bail!("{}: output directory does not exist", dir.display());
+    }
+    let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
+    let field = grin_field::build_field(medium, scene_dir)
+        .with_context(|| format!("{}: [medium]", args.scene.display()))?;
+    let opts = BakeOptions {
+        resolution: args.resolution,
+        error_budget: args.error,
+        max_memory: args.max_memory,
+        interp: match args.interp {
+            InterpArg::Trilinear => Interp::Trilinear,
+            InterpArg::Tricubic => Interp::Tricubic,
+        },
+        storage: args.storage.map(|s| match s {
+            StorageArg::F32 => Storage::F32,
+            StorageArg::I16 => Storage::I16,
+        }),
+        crop: !args.no_crop,
+        gradient: gradient_mode(&medium.field),
+        ..Default::default()
+    };
+    let bar = ProgressBar::new(1);
+    if let Ok(style) = ProgressStyle::with_template("{msg:>24} [{bar:40}] {pos}/{len} {elapsed}") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    let stage = Mutex::new(String::new());
+    let progress = |name: &str, done: u64, total: u64| {
+        if let Ok(mut s) = stage.lock()
+            && *s != name
+        {
+            *s = name.to_string();
+            bar.set_message(name.to_string());
+            bar.set_length(total);
+        }
+        bar.set_position(done);
+    };
+    let result = bake::bake(field.as_ref(), &opts, &progress);
+    bar.finish_and_clear();
+    let (baked, report) =
+        result.with_context(|| format!("{}: bake failed", args.scene.display()))?;
+    grin_field::grinf::save(&baked, &args.output)?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&summary_json(&args.output, &field.describe(), &report))?
+        );
+    } else {
+        print_summary(&args.output, &field.describe(), &report);
+    }
+    Ok(())
+}
+
+/// VDB grids have no exact gradient: difference the source at sub-voxel spacing.
+fn gradient_mode(spec: &FieldSpec) -> GradientMode {
+    match spec {
+        FieldSpec::Vdb(_) => GradientMode::CentralDifference,
+        _ => GradientMode::Exact,
+    }
+}
+
+fn print_summary(out: &Path, source: &str, r: &BakeReport) {
+    let [nx, ny, nz] = r.dims;
+    println!("baked     {source}");
+    println!("to        {}", out.display());
+    println!(
+        "grid      {nx}x{ny}x{nz} ({} nodes on the longest axis, {} choice), {} {}",
+        r.resolution,
+        if r.trials.len() > 1 {
+            "automatic"
+        } else {
+            "fixed"
+        },
+        r.interp.name(),
+        r.storage.name()
+    );
+    println!(
+        "region    {:?} .. {:?}{}",
+        r.grid_min.to_array(),
+        r.grid_max.to_array(),
+        if r.cropped { " (cropped)" } else { "" }
+    );
+    println!("bytes     {}", r.bytes);
+    println!(
+        "error     n: max {:.3e} rms {:.3e} ({:.3e} of the delta_n range {:.3e}; budget {:.1e}{})",
+        r.errors.max_err_n,
+        r.errors.rms_err_n,
+        r.relative_error,
+        r.delta_n_range,
+        r.budget,
+        if r.meets_budget { ", met" } else { ", NOT met" }
+    );
+    println!(
+        "          grad n: max {:.3e} rms {:.3e} ({} random points)",
+        r.errors.max_err_grad, r.errors.rms_err_grad, r.errors.points
+    );
+    println!(
+        "macro     {:.1}% of cells homogeneous",
+        100.0 * r.homogeneous_cells
+    );
+    println!(
+        "time      {:.2} s ({} source evaluations)",
+        r.seconds, r.source_evals
+    );
+}
+
+fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
+    serde_json::json!({
+        "output": out.display().to_string(),
+        "source": source,
+        "resolution": r.resolution,
+        "dims": r.dims,
+        "grid_min": r.grid_min.to_array(),
+        "grid_max": r.grid_max.to_array(),
+        "cropped": r.cropped,
+        "storage": r.storage.name(),
+        "interp": r.interp.name(),
+        "bytes": r.bytes,
+        "max_err_n": r.errors.max_err_n,
+        "rms_err_n": r.errors.rms_err_n,
+        "max_err_grad": r.errors.max_err_grad,
+        "rms_err_grad": r.errors.rms_err_grad,
+        "error_points": r.errors.points,
+        "delta_n_range": r.delta_n_range,
+        "relative_error": r.relative_error,
+        "budget": r.budget,
+        "meets_budget": r.meets_budget,
+        "trials": r.trials.iter().map(|t| serde_json::json!({
+            "resolution": t.resolution,
+            "dims": t.dims,
+            "storage": t.storage.name(),
+            "relative_error": t.relative_error,
+        })).collect::<Vec<_>>(),
+        "seconds": r.seconds,
+        "source_evals": r.source_evals,
+        "homogeneous_cells": r.homogeneous_cells,
+    })
 }

@@ -1,6 +1,12 @@
-//! `grin info`: what is inside a `.vdb` or `.grinf` file.
+//! `grin info`: what is inside a `.vdb` or `.grinf` file. Dispatch is on the file's magic
+//! (then its extension) to one function per format.
 
-use std::path::PathBuf;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use grin_field::IndexField;
+use grin_field::grinf;
 
 /// Arguments of `grin info`.
 #[derive(Debug, clap::Args)]
@@ -12,16 +18,130 @@ pub struct Args {
     pub json: bool,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let is_vdb = args
-        .path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("vdb"));
-    if is_vdb {
-        return crate::cmd::info_vdb::run(&args.path, args.json);
+/// The formats `grin info` reads.
+enum Format {
+    Vdb,
+    Grinf,
+}
+
+/// OpenVDB files start with this magic number (little-endian 0x56444220 " BDV").
+const VDB_MAGIC: [u8; 4] = [0x20, 0x42, 0x44, 0x56];
+
+fn detect(path: &Path) -> anyhow::Result<Format> {
+    let mut head = [0u8; 8];
+    let mut f =
+        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let n = f
+        .read(&mut head)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    if n >= 8 && head == grinf::MAGIC {
+        return Ok(Format::Grinf);
     }
-    anyhow::bail!(
-        "{}: `grin info` of baked (.grinf) files is not implemented yet",
-        args.path.display()
-    )
+    if n >= 4 && head[..4] == VDB_MAGIC {
+        return Ok(Format::Vdb);
+    }
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("vdb") => Ok(Format::Vdb),
+        // A .grinf with a bad magic: let the reader report it.
+        Some("grinf") => Ok(Format::Grinf),
+        _ => anyhow::bail!("{}: not a .vdb or .grinf file", path.display()),
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match detect(&args.path)? {
+        Format::Vdb => crate::cmd::info_vdb::run(&args.path, args.json),
+        Format::Grinf => info_grinf(&args.path, args.json),
+    }
+}
+
+fn info_grinf(path: &Path, json: bool) -> anyhow::Result<()> {
+    let h = grinf::read_header(path)?;
+    let field = grinf::load(path)?;
+    let g = &h.geometry;
+    let (lo, hi) = g.world_box();
+    let (n_min, n_max) = field.n_range();
+    let macro_grid = field.macro_grid();
+    if json {
+        let v = serde_json::json!({
+            "path": path.display().to_string(),
+            "format": "grinf",
+            "version": h.version,
+            "dims": g.dims,
+            "origin": g.origin.to_array(),
+            "spacing": g.spacing.to_array(),
+            "world_min": lo.to_array(),
+            "world_max": hi.to_array(),
+            "storage": h.storage.name(),
+            "interp": h.interp.name(),
+            "outside": format!("{:?}", h.outside).to_lowercase(),
+            "ambient_index": h.ambient,
+            "scale": h.scale,
+            "bounds": format!("{:?}", h.bounds),
+            "source": h.provenance.source,
+            "max_err_n": h.provenance.max_err_n,
+            "rms_err_n": h.provenance.rms_err_n,
+            "max_err_grad": h.provenance.max_err_grad,
+            "rms_err_grad": h.provenance.rms_err_grad,
+            "n_min": n_min,
+            "n_max": n_max,
+            "max_grad_n": field.max_grad_n(),
+            "macro_cells": macro_grid.dims,
+            "homogeneous_cells": macro_grid.homogeneous_fraction(),
+            "file_bytes": h.file_bytes,
+            "data_bytes": field.data_bytes(),
+            "crc32": format!("{:08x}", h.crc32),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    let [nx, ny, nz] = g.dims;
+    println!(
+        "{}: grin baked field, format version {}",
+        path.display(),
+        h.version
+    );
+    println!("  source        {}", h.provenance.source);
+    println!(
+        "  grid          {nx}x{ny}x{nz}, {} storage, {} sampling, {:?} outside",
+        h.storage.name(),
+        h.interp.name(),
+        h.outside
+    );
+    println!(
+        "  world_from_grid  origin {:?} + spacing {:?} * (i, j, k)",
+        g.origin.to_array(),
+        g.spacing.to_array()
+    );
+    println!("  world box     {:?} .. {:?}", lo.to_array(), hi.to_array());
+    println!("  bounds        {:?}", h.bounds);
+    println!("  ambient n     {}", h.ambient);
+    println!("  scale         {:?}", h.scale);
+    println!(
+        "  n range       {n_min} .. {n_max}, max |grad n| {:.4e}",
+        field.max_grad_n()
+    );
+    println!(
+        "  bake error    n: max {:.3e} rms {:.3e}; grad n: max {:.3e} rms {:.3e}",
+        h.provenance.max_err_n,
+        h.provenance.rms_err_n,
+        h.provenance.max_err_grad,
+        h.provenance.rms_err_grad
+    );
+    println!(
+        "  macro cells   {:?} of {} voxels, {:.1}% homogeneous",
+        macro_grid.dims,
+        macro_grid.cell,
+        100.0 * macro_grid.homogeneous_fraction()
+    );
+    println!(
+        "  size          {} bytes ({} of voxels), crc32 {:08x}",
+        h.file_bytes,
+        field.data_bytes(),
+        h.crc32
+    );
+    Ok(())
 }

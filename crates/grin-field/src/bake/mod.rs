@@ -241,8 +241,17 @@ pub fn bake(
             "bake {}x{}x{}",
             geometry.dims[0], geometry.dims[1], geometry.dims[2]
         );
-        let raw = sample_grid(source, &geometry, opts.gradient, &evals, &stage, progress)?;
-        let range = raw.iter().fold(0.0f64, |m, v| m.max(f64::from(v[0]).abs()));
+        let shell = grid_margin(opts.interp) as f64 * geometry.spacing.max_element();
+        let raw = sample_grid(
+            source,
+            &geometry,
+            opts.gradient,
+            shell,
+            &evals,
+            &stage,
+            progress,
+        )?;
+        let range = delta_n_range_inside(&raw, &geometry, bounds);
         let storage = opts
             .storage
             .unwrap_or_else(|| choose_storage(range, opts.error_budget));
@@ -448,6 +457,7 @@ fn sample_grid(
     source: &dyn IndexField,
     geometry: &GridGeometry,
     mode: GradientMode,
+    shell: f64,
     evals: &AtomicU64,
     stage: &str,
     progress: Progress<'_>,
@@ -465,7 +475,7 @@ fn sample_grid(
             for j in 0..ny {
                 for i in 0..nx {
                     let p = geometry.node_world(i, j, k);
-                    slab[i + nx * j] = sample_node(source, bounds, ambient, p, mode, h_cd)?;
+                    slab[i + nx * j] = sample_node(source, bounds, ambient, p, mode, h_cd, shell)?;
                 }
             }
             let per_node = match mode {
@@ -488,6 +498,7 @@ fn sample_node(
     p: DVec3,
     mode: GradientMode,
     h_cd: f64,
+    shell: f64,
 ) -> Result<[f32; 4], BakeError> {
     let eval = |q: DVec3| -> (f64, DVec3) {
         let s = source.sample(q);
@@ -500,8 +511,17 @@ fn sample_node(
         };
         (s.n, grad)
     };
-    let (mut n, mut grad) = eval(p);
+    // Beyond a shell of the margin's width outside the medium, nothing samples the field
+    // but the interpolation stencils: hold the value of the shell's surface there instead
+    // of extrapolating the formula far out (Luneburg's n^2 = 2 - r^2 goes negative).
     let sd = bounds.signed_distance(p);
+    let p = if sd > shell {
+        p - bounds.normal(p) * (sd - shell)
+    } else {
+        p
+    };
+    let sd = sd.min(shell);
+    let (mut n, mut grad) = eval(p);
     if !(n.is_finite() && grad.is_finite()) && sd > 0.0 {
         // A margin node where the source has no extension: use the nearest surface point.
         (n, grad) = eval(p - bounds.normal(p) * sd);
@@ -521,6 +541,18 @@ fn sample_node(
         grad.y as f32,
         grad.z as f32,
     ])
+}
+
+/// max |delta_n| over the nodes inside the medium (the scale the budget is relative to).
+fn delta_n_range_inside(raw: &[[f32; 4]], geometry: &GridGeometry, bounds: Bounds) -> f64 {
+    let [nx, ny, _] = geometry.dims;
+    raw.par_iter()
+        .enumerate()
+        .filter(|(idx, _)| {
+            bounds.contains(geometry.node_world(idx % nx, (idx / nx) % ny, idx / (nx * ny)))
+        })
+        .map(|(_, v)| f64::from(v[0]).abs())
+        .reduce(|| 0.0, f64::max)
 }
 
 /// SplitMix64: a tiny deterministic generator for the error points.
