@@ -35,6 +35,9 @@ pub struct StepController {
     amplitude: f64,
     /// Current error-controlled step (world length).
     ds_adapt: f64,
+    /// Factor on the next fixed or heuristic step (the renderer's per-pixel jitter of a
+    /// passage's first step, then 1).
+    jitter: f64,
 }
 
 /// An accepted step with the t-length it covered.
@@ -67,7 +70,20 @@ impl StepController {
             len_scale,
             amplitude,
             ds_adapt,
+            jitter: 1.0,
         }
+    }
+
+    /// Scale the first fixed or heuristic step by `jitter` in (0, 1] (turns the banding
+    /// of synchronised steps into noise; adaptive steps are not jittered).
+    pub fn with_jitter(mut self, jitter: f64) -> Self {
+        self.jitter = jitter;
+        self
+    }
+
+    /// The jitter factor for this step; later steps get 1.
+    fn take_jitter(&mut self) -> f64 {
+        std::mem::replace(&mut self.jitter, 1.0)
     }
 
     /// The paper's heuristic: lerp(min, max, clamp(1 - |dir . grad n| / amplitude, 0, 1)).
@@ -92,7 +108,7 @@ impl StepController {
         let d0 = s0.n_grad_n();
         match self.spec {
             StepSpec::Fixed(ds) => {
-                let h = R::from_f64(ds / n0);
+                let h = R::from_f64(ds * self.take_jitter() / n0);
                 let step = integrate::step(self.kind, field, s, d0, h);
                 Taken {
                     evals: step.evals,
@@ -103,7 +119,7 @@ impl StepController {
             StepSpec::Heuristic { min, max, .. } => {
                 let dir = s.t.to_dvec3().normalize_or_zero();
                 let ds = Self::heuristic_ds(min, max, self.amplitude, dir, s0.grad_n.to_dvec3());
-                let h = R::from_f64(ds / n0);
+                let h = R::from_f64(ds * self.take_jitter() / n0);
                 let step = integrate::step(self.kind, field, s, d0, h);
                 Taken {
                     evals: step.evals,

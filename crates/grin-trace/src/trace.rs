@@ -183,6 +183,20 @@ pub fn trace_ray_observed<R: Real>(
     dir: DVec3,
     observer: &mut dyn FnMut(&Segment) -> Control,
 ) -> RayResult {
+    trace_ray_jittered::<R>(field, settings, origin, dir, 1.0, observer)
+}
+
+/// [`trace_ray_observed`] with the first fixed or heuristic step scaled by
+/// `first_step_scale` in (0, 1]: the renderer's per-pixel jitter (GPU twin: the
+/// `jitter` of `step_controller_new` in shaders/shared/step.wgsl).
+pub fn trace_ray_jittered<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    origin: DVec3,
+    dir: DVec3,
+    first_step_scale: f64,
+    observer: &mut dyn FnMut(&Segment) -> Control,
+) -> RayResult {
     let mut res = RayResult {
         status: RayStatus::Error,
         position: origin,
@@ -247,7 +261,7 @@ pub fn trace_ray_observed<R: Real>(
         r,
         t: R::V3::from_dvec3(d_in) * s0.n,
     };
-    let mut ctrl = StepController::new(settings.step, settings.integrator, field);
+    let mut ctrl = StepController::new(settings.step, settings.integrator, field).with_jitter(first_step_scale);
     let len_scale = bounds.radius();
     let exit_tol = EXIT_TOL_REL * len_scale;
 

@@ -1,4 +1,4 @@
-//! The renderer's passage through the medium: `trace_ray_observed` (the tracer's
+//! The renderer's passage through the medium: `trace_ray_jittered` (the tracer's
 //! integrators, step policies, exit search and Snell/Fresnel at the surface) with an
 //! observer that tests each step's straight chord against the scene objects (the paper's
 //! step 4) and stops the ray on the first one. Keep in sync with shaders' `march_medium`.
@@ -8,7 +8,7 @@ use glam::DVec3;
 use super::SceneMedium;
 use super::primitives::{Hit, Primitive, intersect_scene};
 use crate::boundary::Segment;
-use crate::trace::{Control, RayStatus, trace_ray_observed};
+use crate::trace::{Control, RayStatus, trace_ray_jittered};
 
 /// Length by which a ray is pushed off a surface it starts on (world units).
 pub const SURFACE_EPS: f64 = 1e-6;
@@ -64,12 +64,13 @@ pub fn chord_hit(objects: &[Primitive], seg: &Segment) -> Option<(Hit, DVec3)> {
 impl SceneMedium {
     /// Trace from `origin` (outside: the tracer finds the entry and refracts; inside:
     /// it starts marching) along unit `dir` until the ray leaves the medium, meets an
-    /// object, or stops.
+    /// object, or stops. `jitter` in (0, 1] scales the first step (1: none).
     pub fn march_medium(
         &self,
         objects: &[Primitive],
         origin: DVec3,
         dir: DVec3,
+        jitter: f64,
         stats: &mut MarchStats,
     ) -> MarchEnd {
         let mut met: Option<(Hit, DVec3, f64, f64)> = None;
@@ -80,8 +81,14 @@ impl SceneMedium {
             }
             None => Control::Continue,
         };
-        let res =
-            trace_ray_observed::<f64>(self.field.as_ref(), &self.trace, origin, dir, &mut observer);
+        let res = trace_ray_jittered::<f64>(
+            self.field.as_ref(),
+            &self.trace,
+            origin,
+            dir,
+            jitter,
+            &mut observer,
+        );
         stats.steps += res.steps;
         stats.evals += res.evals;
         stats.opl += res.opl;

@@ -28,6 +28,10 @@ use primitives::Primitive;
 use rng::Rng;
 use sky::SkyModel;
 
+/// Shortest jittered first step, as a fraction of the nominal step: keeps a jittered
+/// step from being vanishingly small (GPU twin: MIN_JITTER_FRACTION in step.wgsl).
+pub const MIN_JITTER_FRACTION: f32 = 1e-3;
+
 /// Why a scene cannot be rendered or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
@@ -219,8 +223,14 @@ impl RenderScene {
         for sample in 0..self.settings.spp {
             let mut rng = Rng::for_pixel(index, sample, seed);
             let (sx, sy) = self.subpixel(&mut rng);
+            // Drawn after the sub-pixel position, so the stream is unchanged when it is off.
+            let jitter = if self.settings.jitter {
+                rng.next_f32().max(MIN_JITTER_FRACTION)
+            } else {
+                1.0
+            };
             let d = self.camera.primary_ray(px, py, sx, sy);
-            let path = self.trace_path(d, &mut rng);
+            let path = self.trace_path(d, f64::from(jitter), &mut rng);
             rgb += path.rgb;
             steps += u64::from(path.aov.steps);
             evals += path.aov.evals;

@@ -95,8 +95,9 @@ impl RenderScene {
     }
 
     /// One pixel sample: follow the camera ray `d` from the camera through the medium
-    /// and the objects, up to max_depth bounces.
-    pub fn trace_path(&self, d: DVec3, rng: &mut Rng) -> PathSample {
+    /// and the objects, up to max_depth bounces. `jitter` in (0, 1] scales the first step
+    /// of the camera ray's passage through the medium (1: none).
+    pub fn trace_path(&self, d: DVec3, jitter: f64, rng: &mut Rng) -> PathSample {
         let mut origin = self.camera.origin;
         let mut dir = d;
         let mut throughput = DVec3::ONE;
@@ -135,7 +136,13 @@ impl RenderScene {
                         .intersect(origin, dir)
                         .map_or(0.0, |(s_in, s_out)| (s_out - s_in.max(0.0)).max(0.0));
                     let entry_dir = dir;
-                    let end = m.march_medium(&self.objects, origin, dir, &mut stats);
+                    let end = m.march_medium(
+                        &self.objects,
+                        origin,
+                        dir,
+                        if primary { jitter } else { 1.0 },
+                        &mut stats,
+                    );
                     aov.steps += stats.steps;
                     aov.evals += stats.evals;
                     inside = false;
@@ -344,7 +351,7 @@ impl RenderScene {
             return Some(DVec3::ZERO);
         };
         let mut stats = MarchStats::default();
-        match m.march_medium(&self.objects, p, l, &mut stats) {
+        match m.march_medium(&self.objects, p, l, 1.0, &mut stats) {
             MarchEnd::Exited {
                 point,
                 dir,
