@@ -62,7 +62,9 @@ pub fn build_field(
         // Kinds built by other modules: each arm is one call into its module.
         FieldSpec::Noise(spec) => Arc::new(crate::noise::NoiseField::new(spec, bounds, ambient)?),
         FieldSpec::Vdb(_) => return Err(unavailable("vdb", scene_dir)),
-        FieldSpec::Baked { path } => Arc::new(crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)?),
+        FieldSpec::Baked { path } => Arc::new(crate::grinf::load_for_medium(
+            path, scene_dir, bounds, ambient,
+        )?),
     };
     check_positive(field.as_ref(), &field.describe())?;
     Ok(field)
@@ -154,5 +156,41 @@ mod tests {
                 .contains("inside the medium; n must be positive"),
             "{e}"
         );
+    }
+
+    /// Every example scene parses, validates and builds. Kinds whose builder is not wired
+    /// into [`build_field`] yet (noise, vdb, baked) are skipped, and only those.
+    #[test]
+    fn every_example_scene_builds() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes");
+        let mut built = 0;
+        let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        for entry in entries {
+            let path = entry.expect("dir entry").path();
+            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+                continue;
+            }
+            let scene = grin_scene::load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+            let Some(medium) = scene.medium else { continue };
+            match build_field(&medium, &dir) {
+                Ok(f) => {
+                    let (lo, hi) = f.n_range();
+                    assert!(
+                        lo > 0.0 && lo <= hi,
+                        "{}: n_range ({lo}, {hi})",
+                        path.display()
+                    );
+                    built += 1;
+                }
+                Err(FieldError::Other(m))
+                    if m.ends_with("is not available yet")
+                        && matches!(
+                            medium.field,
+                            FieldSpec::Noise(_) | FieldSpec::Vdb(_) | FieldSpec::Baked { .. }
+                        ) => {}
+                Err(e) => panic!("{}: {e}", path.display()),
+            }
+        }
+        assert!(built >= 4, "only {built} example scenes built");
     }
 }
