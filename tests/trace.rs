@@ -1,9 +1,245 @@
-//! End-to-end tests of `grin` (trace).
+//! End-to-end tests of `grin trace`: ray table in, ray table out, through the real
+//! scene loader and field profiles.
 
-#![allow(dead_code)]
-
-use std::process::Command;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 fn grin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_grin"))
+}
+
+const HEADER: &str = "ox,oy,oz,dx,dy,dz,status,px,py,pz,qx,qy,qz,opl,length,steps,evals";
+
+/// A Luneburg lens of radius 1.5 centred at (0.5, 0, 0).
+const LUNEBURG_SCENE: &str = r#"
+[camera]
+position = [0.0, 0.0, -6.0]
+look_at = [0.0, 0.0, 0.0]
+
+[medium]
+bounds = { sphere = { center = [0.5, 0.0, 0.0], radius = 1.5 } }
+field = { kind = "luneburg" }
+
+[render]
+integrator = "sharma"
+step = { fixed = 0.004 }
+"#;
+
+struct Dir {
+    dir: tempfile::TempDir,
+}
+
+impl Dir {
+    fn new() -> Self {
+        Dir {
+            dir: tempfile::tempdir().expect("temp dir"),
+        }
+    }
+    fn write(&self, name: &str, text: &str) -> PathBuf {
+        let p = self.dir.path().join(name);
+        std::fs::write(&p, text).expect("write test file");
+        p
+    }
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+}
+
+fn run(args: &[&Path], extra: &[&str]) -> Output {
+    let mut cmd = grin();
+    cmd.arg("trace")
+        .arg(args[0])
+        .arg("--rays")
+        .arg(args[1])
+        .arg("-o")
+        .arg(args[2]);
+    cmd.args(extra);
+    cmd.output().expect("run grin")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Parse an output CSV into (status, numbers) per row after checking the header.
+fn read_output(path: &Path) -> Vec<(String, Vec<f64>)> {
+    let text = std::fs::read_to_string(path).expect("output written");
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(HEADER));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), 17, "row `{l}`");
+            let nums = f
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != 6)
+                .map(|(_, v)| v.parse::<f64>().expect("number"))
+                .collect();
+            (f[6].to_owned(), nums)
+        })
+        .collect()
+}
+
+#[test]
+fn luneburg_table_focuses_on_the_antipode() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    // A parallel beam along +x (any length d), a miss, and rays starting inside.
+    let mut rays = String::from("ox,oy,oz,dx,dy,dz\n");
+    let beam: Vec<(f64, f64)> = vec![(0.0, 0.0), (0.5, 0.2), (-0.9, 0.7), (1.2, -0.6), (0.0, 1.4)];
+    for (y, z) in &beam {
+        rays.push_str(&format!("-3,{y},{z},2,0,0\n"));
+    }
+    rays.push_str("-3,5,0,1,0,0\n");
+    rays.push_str("0.5,0.1,0.2,0,0,1\n");
+    let rays = d.write("rays.csv", &rays);
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &rays, &out], &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("traced 7 rays"), "{}", stderr(&o));
+    let rows = read_output(&out);
+    assert_eq!(rows.len(), 7);
+    // Focus of a beam along +x: the far surface point c + R x = (2, 0, 0).
+    for (status, v) in &rows[..5] {
+        assert_eq!(status, "exited");
+        let err = ((v[6] - 2.0).powi(2) + v[7].powi(2) + v[8].powi(2)).sqrt();
+        assert!(err < 1e-7, "focus error {err:e} in row {v:?}");
+        assert!(v[15] > 100.0, "steps {}", v[15]);
+    }
+    // The miss keeps its origin and reports the unit direction.
+    assert_eq!(rows[5].0, "missed");
+    assert_eq!(&rows[5].1[6..12], &[-3.0, 5.0, 0.0, 1.0, 0.0, 0.0]);
+    // A ray starting inside leaves through the surface.
+    assert_eq!(rows[6].0, "exited");
+    let p = &rows[6].1[6..9];
+    let r = ((p[0] - 0.5).powi(2) + p[1].powi(2) + p[2].powi(2)).sqrt();
+    assert!((r - 1.5).abs() < 1e-9, "exit radius {r}");
+}
+
+#[test]
+fn bad_rows_become_error_rows_and_json_summary() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let rays = d.write(
+        "rays.csv",
+        "ox,oy,oz,dx,dy,dz\n-3,0,0,0,0,0\n-3,0,0,NaN,0,0\n-3,0.1,0,1,0,0\n",
+    );
+    let out = d.path("out.csv");
+    let o = run(
+        &[&scene, &rays, &out],
+        &["--json", "--integrator", "rk4", "--step", "adaptive=1e-9"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = read_output(&out);
+    let statuses: Vec<&str> = rows.iter().map(|r| r.0.as_str()).collect();
+    assert_eq!(statuses, ["error", "error", "exited"]);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("json summary on stdout");
+    assert_eq!(summary["rays"], 3);
+    assert_eq!(summary["error"], 2);
+    assert_eq!(summary["exited"], 1);
+    assert_eq!(summary["integrator"], "rk4");
+    assert_eq!(summary["precision"], "f64");
+}
+
+#[test]
+fn json_format_and_f32_agree_with_f64() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let rays = d.write(
+        "rays.csv",
+        "ox,oy,oz,dx,dy,dz\n-3,0.3,0.4,1,0,0\n-3,-0.6,0.1,1,0,0\n",
+    );
+    let out64 = d.path("out.json");
+    let out32 = d.path("out32.json");
+    let o = run(&[&scene, &rays, &out64], &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&[&scene, &rays, &out32], &["--f32", "--format", "json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let a: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out64).expect("json")).expect("valid JSON");
+    let b: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out32).expect("json")).expect("valid JSON");
+    let (a, b) = (a.as_array().expect("array"), b.as_array().expect("array"));
+    assert_eq!((a.len(), b.len()), (2, 2));
+    for (x, y) in a.iter().zip(b) {
+        assert_eq!(x["status"], "exited");
+        for k in ["px", "py", "pz", "qx", "qy", "qz", "opl"] {
+            let (u, v) = (x[k].as_f64().expect("num"), y[k].as_f64().expect("num"));
+            assert!((u - v).abs() < 1e-4, "{k}: f64 {u} vs f32 {v}");
+        }
+    }
+}
+
+#[test]
+fn malformed_scene_fails_naming_file_and_line() {
+    let d = Dir::new();
+    let scene = d.write("bad.toml", "[camera]\nposition = [0.0, 0.0, -6.0]\nlook_at = [0.0, 0.0, 0.0]\n\n[medium]\nbounds = 7\n");
+    let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &rays, &out], &[]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("bad.toml:6"), "stderr: {e}");
+    assert_eq!(e.trim().lines().count(), 1, "one-line reason: {e}");
+    assert!(!out.exists(), "no output on failure");
+}
+
+#[test]
+fn missing_or_malformed_ray_tables_fail_without_output() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &d.path("nope.csv"), &out], &[]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("nope.csv"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    let cases = [
+        ("noheader.csv", "0,0,-3,0,0,1\n", "noheader.csv:1: header"),
+        (
+            "cols.csv",
+            "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n0,0,-3,0,1\n",
+            "cols.csv:3: expected 6 columns",
+        ),
+        (
+            "text.csv",
+            "ox,oy,oz,dx,dy,dz\n0,0,-3,0,zero,1\n",
+            "text.csv:2: column `dy`",
+        ),
+        ("empty.csv", "", "empty ray table"),
+    ];
+    for (name, text, msg) in cases {
+        let rays = d.write(name, text);
+        let o = run(&[&scene, &rays, &out], &[]);
+        assert!(!o.status.success(), "{name}");
+        assert!(stderr(&o).contains(msg), "{name}: {}", stderr(&o));
+        assert!(!out.exists(), "{name}: output created");
+    }
+    // A bad --step never gets to write either.
+    let rays = d.write("ok.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
+    let o = run(&[&scene, &rays, &out], &["--step", "fixed=-1"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("not a positive number"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn scene_without_medium_is_an_error() {
+    let d = Dir::new();
+    let scene = d.write(
+        "empty.toml",
+        "[camera]\nposition = [0.0, 0.0, -6.0]\nlook_at = [0.0, 0.0, 0.0]\n",
+    );
+    let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &rays, &out], &[]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no [medium]"), "{}", stderr(&o));
+    assert!(!out.exists());
 }

@@ -21,12 +21,8 @@ pub const OUTPUT_COLUMNS: [&str; 11] = [
 /// Why a ray table could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum TableError {
-    #[error("{path}: cannot read ray table: {source}")]
-    Read {
-        path: PathBuf,
-        #[source]
-        source: io::Error,
-    },
+    #[error("{path}: cannot read ray table: {err}")]
+    Read { path: PathBuf, err: io::Error },
     #[error("{path}: empty ray table: expected the header `ox,oy,oz,dx,dy,dz`")]
     Empty { path: PathBuf },
     #[error("{path}:{line}: header must be `ox,oy,oz,dx,dy,dz`, found `{found}`")]
@@ -48,12 +44,8 @@ pub enum TableError {
         column: &'static str,
         value: String,
     },
-    #[error("{path}: cannot write ray table: {source}")]
-    Write {
-        path: PathBuf,
-        #[source]
-        source: io::Error,
-    },
+    #[error("{path}: cannot write ray table: {err}")]
+    Write { path: PathBuf, err: io::Error },
 }
 
 /// One input ray and the line it came from (1-based).
@@ -74,9 +66,9 @@ pub enum TableFormat {
 
 /// Read a ray table file.
 pub fn read_rays(path: &Path) -> Result<Vec<RayRow>, TableError> {
-    let text = std::fs::read_to_string(path).map_err(|source| TableError::Read {
+    let text = std::fs::read_to_string(path).map_err(|err| TableError::Read {
         path: path.to_owned(),
-        source,
+        err,
     })?;
     parse_rays(&text, path)
 }
@@ -216,6 +208,16 @@ fn row_values(row: &RayRow) -> [f64; 6] {
     ]
 }
 
+/// A number in Rust's shortest round-trip form, with an exponent where that is shorter
+/// (`1e-11`, not `0.00000000001`) and no `.0` on integers.
+fn fmt_num(v: f64) -> String {
+    let s = format!("{v:?}");
+    match s.strip_suffix(".0") {
+        Some(int) => int.to_owned(),
+        None => s,
+    }
+}
+
 /// Write a traced table. Numbers are printed in Rust's shortest round-trip form.
 pub fn write_table(
     w: &mut dyn Write,
@@ -233,11 +235,11 @@ pub fn write_table(
             )?;
             for (row, r) in rows.iter().zip(results) {
                 for v in row_values(row) {
-                    write!(w, "{v},")?;
+                    write!(w, "{},", fmt_num(v))?;
                 }
                 write!(w, "{}", r.status.name())?;
                 for v in result_values(r) {
-                    write!(w, ",{v}")?;
+                    write!(w, ",{}", fmt_num(v))?;
                 }
                 writeln!(w, ",{},{}", r.steps, r.evals)?;
             }
@@ -277,9 +279,9 @@ pub fn write_table_file(
     rows: &[RayRow],
     results: &[RayResult],
 ) -> Result<(), TableError> {
-    let err = |source| TableError::Write {
+    let err = |err| TableError::Write {
         path: path.to_owned(),
-        source,
+        err,
     };
     let name = path.file_name().ok_or_else(|| {
         err(io::Error::new(

@@ -1,9 +1,235 @@
-//! `grin trace`.
+//! `grin trace`: ray table in, ray table out. Reads `ox,oy,oz,dx,dy,dz` rows, traces each
+//! ray through the scene's medium with the CPU reference (f64, or f32 like the GPU) and
+//! writes the input columns plus `status,px,py,pz,qx,qy,qz,opl,length,steps,evals`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
+use grin_trace::TraceSettings;
+use grin_trace::table::{self, TableFormat, TableSummary};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Tables at least this long get a progress bar.
+const PROGRESS_MIN_RAYS: usize = 10_000;
+
+/// Output format of the ray table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    Csv,
+    Json,
+}
+
+/// How the exit point is found (overrides the scene's `exit`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Exit {
+    Hermite,
+    Bisection,
+}
 
 /// Arguments of `grin trace`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The scene file (TOML) whose [medium] the rays cross.
+    pub scene: PathBuf,
+    /// Input ray table (CSV with header `ox,oy,oz,dx,dy,dz`).
+    #[arg(long)]
+    pub rays: PathBuf,
+    /// Output ray table.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Integrator, overriding the scene's: euler | symplectic-euler | verlet | sharma | rk4 | adaptive.
+    #[arg(long, value_parser = parse_integrator)]
+    pub integrator: Option<IntegratorKind>,
+    /// Step policy, overriding the scene's: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] | adaptive=TOL.
+    #[arg(long, value_parser = parse_step)]
+    pub step: Option<StepSpec>,
+    /// Per-ray step cap, overriding the scene's max_steps.
+    #[arg(long)]
+    pub max_steps: Option<u32>,
+    /// Exit-point method, overriding the scene's.
+    #[arg(long, value_enum)]
+    pub exit: Option<Exit>,
+    /// Integrate in f32 (what the GPU does) instead of f64.
+    #[arg(long)]
+    pub f32: bool,
+    /// Output format (default: json if the output name ends in .json, else csv).
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+    /// Print a machine-readable summary (JSON) on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`grin trace` is not implemented yet")
+fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
+    IntegratorKind::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = IntegratorKind::ALL.iter().map(|k| k.name()).collect();
+        format!(
+            "unknown integrator `{s}`; expected one of {}",
+            names.join(", ")
+        )
+    })
+}
+
+fn parse_step(s: &str) -> Result<StepSpec, String> {
+    let usage = "expected fixed=DS, heuristic=MIN,MAX[,AMPLITUDE] or adaptive=TOL";
+    let (kind, values) = s.split_once('=').ok_or_else(|| format!("`{s}`: {usage}"))?;
+    let nums = values
+        .split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite() && *x > 0.0)
+                .ok_or_else(|| format!("`{s}`: `{v}` is not a positive number"))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    match (kind.trim(), nums.as_slice()) {
+        ("fixed", [ds]) => Ok(StepSpec::Fixed(*ds)),
+        ("heuristic", [min, max]) | ("heuristic", [min, max, _]) if min <= max => {
+            Ok(StepSpec::Heuristic {
+                min: *min,
+                max: *max,
+                amplitude: nums.get(2).copied(),
+            })
+        }
+        ("heuristic", [_, _]) | ("heuristic", [_, _, _]) => {
+            Err(format!("`{s}`: heuristic needs MIN <= MAX"))
+        }
+        ("adaptive", [tol]) => Ok(StepSpec::Adaptive {
+            tolerance: *tol,
+            initial: None,
+        }),
+        _ => Err(format!("`{s}`: {usage}")),
+    }
+}
+
+/// The summary printed with `--json`.
+#[derive(Debug, serde::Serialize)]
+struct Summary<'a> {
+    output: &'a Path,
+    field: String,
+    integrator: &'static str,
+    step: String,
+    precision: &'static str,
+    rays: usize,
+    exited: usize,
+    missed: usize,
+    absorbed: usize,
+    max_steps: usize,
+    error: usize,
+    mean_steps: f64,
+    mean_evals: f64,
+    seconds: f64,
+    rays_per_second: f64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let scene = grin_scene::load_scene(&args.scene)?;
+    let Some(medium) = scene.medium.as_ref() else {
+        bail!(
+            "{}: the scene has no [medium] to trace rays through",
+            args.scene.display()
+        );
+    };
+    let scene_dir = args.scene.parent().unwrap_or_else(|| Path::new("."));
+    let field = grin_field::build_field(medium, scene_dir)
+        .with_context(|| format!("{}: [medium]", args.scene.display()))?;
+
+    let mut settings = TraceSettings::from_render(&scene.render);
+    if let Some(k) = args.integrator {
+        settings.integrator = k;
+    }
+    if let Some(s) = args.step {
+        settings.step = s;
+    }
+    if let Some(m) = args.max_steps {
+        settings.max_steps = m;
+    }
+    if let Some(e) = args.exit {
+        settings.exit = match e {
+            Exit::Hermite => ExitMethod::Hermite,
+            Exit::Bisection => ExitMethod::Bisection,
+        };
+    }
+    settings
+        .validate()
+        .with_context(|| format!("{}: [render]", args.scene.display()))?;
+
+    let rows = table::read_rays(&args.rays)?;
+    let format = match args.format {
+        Some(Format::Json) => TableFormat::Json,
+        Some(Format::Csv) => TableFormat::Csv,
+        None if args
+            .output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json")) =>
+        {
+            TableFormat::Json
+        }
+        None => TableFormat::Csv,
+    };
+
+    let bar = if rows.len() >= PROGRESS_MIN_RAYS {
+        ProgressBar::with_draw_target(Some(rows.len() as u64), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("tracing {bar:40} {pos}/{len} rays ({per_sec}, eta {eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let start = Instant::now();
+    let tick = || bar.inc(1);
+    let results = if args.f32 {
+        table::trace_rows::<f32>(field.as_ref(), &settings, &rows, &tick)
+    } else {
+        table::trace_rows::<f64>(field.as_ref(), &settings, &rows, &tick)
+    };
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    table::write_table_file(&args.output, format, &rows, &results)?;
+
+    let s = TableSummary::of(&results);
+    let precision = if args.f32 { "f32" } else { "f64" };
+    eprintln!(
+        "traced {} rays ({}, {}, {precision}) in {seconds:.3} s: {} exited, {} missed, {} max_steps, {} absorbed, {} error; mean {:.1} steps, {:.1} evals per ray -> {}",
+        s.rays,
+        field.describe(),
+        settings.integrator.name(),
+        s.exited,
+        s.missed,
+        s.max_steps,
+        s.absorbed,
+        s.error,
+        s.mean_steps,
+        s.mean_evals,
+        args.output.display()
+    );
+    if args.json {
+        let summary = Summary {
+            output: &args.output,
+            field: field.describe(),
+            integrator: settings.integrator.name(),
+            step: format!("{:?}", settings.step),
+            precision,
+            rays: s.rays,
+            exited: s.exited,
+            missed: s.missed,
+            absorbed: s.absorbed,
+            max_steps: s.max_steps,
+            error: s.error,
+            mean_steps: s.mean_steps,
+            mean_evals: s.mean_evals,
+            seconds,
+            rays_per_second: if seconds > 0.0 {
+                s.rays as f64 / seconds
+            } else {
+                0.0
+            },
+        };
+        println!("{}", serde_json::to_string(&summary)?);
+    }
+    Ok(())
 }
