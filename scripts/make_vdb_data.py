@@ -5,7 +5,8 @@ Run with the system interpreter (pyopenvdb is built for it):
 
     /usr/bin/python3 scripts/make_vdb_data.py            # writes data/vdb/
 
-Deterministic: no randomness, so the committed files can be regenerated exactly.
+Deterministic: no randomness, so regenerating gives the same grids and values (the bytes
+differ only by the random UUID OpenVDB writes into each file header).
 Every grid whose values a test compares also gets a sidecar: `<file>.<grid>.f32`
 (the values python asked OpenVDB to store, little-endian float32, x fastest, over the
 grid's dense box) and one `<file>.json` describing boxes, transforms and expectations.
@@ -43,7 +44,8 @@ def float_grid(name, values_xyz, ijk0, voxel_size, origin, half=False, cls="fog 
 
 def sidecar(path, grid_name, values_xyz):
     """Dump values (indexed [i, j, k]) as float32, x fastest."""
-    arr = np.ascontiguousarray(values_xyz.astype("<f4").transpose(2, 1, 0))
+    axes_zyx = (2, 1, 0) if values_xyz.ndim == 3 else (2, 1, 0, 3)
+    arr = np.ascontiguousarray(values_xyz.astype("<f4").transpose(axes_zyx))
     arr.tofile(f"{path}.{grid_name}.f32")
 
 
@@ -117,7 +119,7 @@ def houdini_cache():
     v.vectorType = "contravariant relative"
     vdb.write(path, grids=[t, v], metadata={"creator": "Houdini (grin example)"})
     sidecar(path, "temperature", temperature)
-    sidecar(path, "vel", vel.reshape(dims[0], dims[1], dims[2] * 3))
+    sidecar(path, "vel", vel)
     records = [grid_record("temperature", temperature, ijk0, h, origin, False)]
     rec = grid_record("vel", vel, ijk0, h, origin, False)
     rec["components"] = 3
@@ -185,7 +187,12 @@ def bad_inputs():
     vals[5, 1, 0] = -np.inf
     vals[7, 7, 7] = np.nan
     path = os.path.join(TEST, "nonfinite.vdb")
-    vdb.write(path, grids=[float_grid("temperature", vals, (0, 0, 0), (0.1,) * 3, (0, 0, 0))])
+    g = float_grid("temperature", vals, (0, 0, 0), (0.1,) * 3, (0, 0, 0))
+    # copyFromArray treats NaN as background (inactive): set the NaNs explicitly.
+    acc = g.getAccessor()
+    for ijk in ((1, 2, 3), (7, 7, 7)):
+        acc.setValueOn(ijk, float("nan"))
+    vdb.write(path, grids=[g])
     out["nonfinite"] = {"grid": "temperature", "non_finite": 4, "finite_value": 0.5}
     # A grid without active voxels.
     g = vdb.FloatGrid()

@@ -11,6 +11,7 @@ const DEFAULT_INCLUDE_DIRS: &[&str] = &["/usr/include", "/usr/local/include"];
 fn main() {
     println!("cargo:rerun-if-changed=shim/grin_vdb.cpp");
     println!("cargo:rerun-if-changed=shim/grin_vdb.h");
+    println!("cargo:rerun-if-changed=shim/grin_vdb_check.cpp");
     println!("cargo:rerun-if-env-changed=OPENVDB_INCLUDE_DIR");
     println!("cargo:rerun-if-env-changed=OPENVDB_LIB_DIR");
 
@@ -55,6 +56,8 @@ fn main() {
         build.include(d);
     }
     build.compile("grin_vdb_shim");
+    let lib_dir = std::env::var("OPENVDB_LIB_DIR").ok();
+    build_checker(&build, lib_dir.as_deref());
 
     if let Ok(dir) = std::env::var("OPENVDB_LIB_DIR") {
         println!("cargo:rustc-link-search=native={dir}");
@@ -63,4 +66,36 @@ fn main() {
     println!("cargo:rustc-link-lib=dylib=tbb");
     println!("cargo:rustc-link-lib=dylib=Imath-3_1");
     println!("cargo:rustc-link-lib=dylib=stdc++");
+}
+
+/// Link shim/grin_vdb_check.cpp against the shim into `$OUT_DIR/grin-vdb-check`, the child
+/// process vdb-sys uses to try a file before reading it in-process (see `VdbFile::open`).
+/// Its path reaches the crate as `GRIN_VDB_CHECK`.
+fn build_checker(build: &cc::Build, lib_dir: Option<&str>) {
+    let out_dir = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
+    let exe = Path::new(&out_dir).join("grin-vdb-check");
+    let compiler = build.get_compiler();
+    let mut cmd = compiler.to_command();
+    cmd.arg("-std=c++17")
+        .arg("-O1")
+        .arg("-Ishim")
+        .arg("shim/grin_vdb_check.cpp")
+        .arg("-o")
+        .arg(&exe)
+        .arg(format!("-L{out_dir}"))
+        .arg("-lgrin_vdb_shim");
+    if let Some(dir) = lib_dir {
+        cmd.arg(format!("-L{dir}"));
+    }
+    cmd.args(["-lopenvdb", "-ltbb", "-lImath-3_1", "-lstdc++"]);
+    let status = cmd.status();
+    match status {
+        Ok(s) if s.success() => {
+            println!("cargo:rustc-env=GRIN_VDB_CHECK={}", exe.display());
+        }
+        other => panic!(
+            "vdb-sys: linking the OpenVDB checker failed ({other:?}); install \
+             `{APT_PACKAGES}` (or run scripts/setup.sh)"
+        ),
+    }
 }

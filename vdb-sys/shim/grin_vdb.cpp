@@ -6,11 +6,14 @@
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #include <openvdb/tools/Dense.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <ios>
 #include <limits>
 #include <memory>
 #include <new>
@@ -52,6 +55,9 @@ int guarded(char* err, size_t err_len, F&& body) {
         return GRIN_VDB_ERR_IO;
     } catch (const openvdb::Exception& e) {
         set_err(err, err_len, e.what());
+        return GRIN_VDB_ERR_IO;
+    } catch (const std::ios_base::failure&) {
+        set_err(err, err_len, "the file is truncated or corrupt (unexpected end of data)");
         return GRIN_VDB_ERR_IO;
     } catch (const std::bad_alloc&) {
         set_err(err, err_len, "out of memory while reading the file");
@@ -266,12 +272,15 @@ int grin_vdb_open(const char* path, GrinVdbFile** out, char* err, size_t err_len
     return guarded(err, err_len, [&]() {
         init_once();
         auto file = std::make_unique<GrinVdbFile>();
-        openvdb::io::File f(path);
-        f.open(/*delayLoad=*/false);
-        openvdb::MetaMap::Ptr meta = f.getMetadata();
+        // io::Stream over an istream that throws on short reads: io::File ignores stream
+        // errors, so a truncated file would silently read as fewer (or zero) grids.
+        std::ifstream ifs(path, std::ios::in | std::ios::binary);
+        if (!ifs) throw openvdb::IoError("could not open the file for reading");
+        ifs.exceptions(std::ios::failbit | std::ios::badbit);
+        openvdb::io::Stream stream(ifs, /*delayLoad=*/false);
+        openvdb::MetaMap::Ptr meta = stream.getMetadata();
         if (meta) file->file_meta = collect_meta(*meta);
-        openvdb::GridPtrVecPtr grids = f.getGrids();
-        f.close();
+        openvdb::GridPtrVecPtr grids = stream.getGrids();
         if (grids) {
             for (auto& g : *grids) {
                 if (!g) continue;

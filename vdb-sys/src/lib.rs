@@ -23,6 +23,51 @@ const ERR_LEN: usize = 1024;
 /// Bytes per voxel of a dense scalar read (f32).
 pub const BYTES_PER_SCALAR_VOXEL: u64 = 4;
 
+/// The checker executable build.rs links beside the shim (shim/grin_vdb_check.cpp).
+const CHECKER: &str = env!("GRIN_VDB_CHECK");
+/// The checker's dense reads are capped here (bigger grids are only opened, not copied).
+const CHECK_DENSE_CAP_BYTES: u64 = 256 << 20;
+
+/// Try the file in a child process first: OpenVDB can corrupt its heap and abort on some
+/// malformed files (found by tests/fuzz.rs), which no exception handler can catch. In a
+/// child that is an exit status. If the checker is not present (the binary was moved away
+/// from its build tree) the file is read in-process only.
+fn check_in_child(path: &Path) -> Result<(), VdbError> {
+    let exe = Path::new(CHECKER);
+    if !exe.is_file() {
+        return Ok(());
+    }
+    let output = std::process::Command::new(exe)
+        .arg(path)
+        .arg(CHECK_DENSE_CAP_BYTES.to_string())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .output();
+    let Ok(output) = output else {
+        return Ok(());
+    };
+    if output.status.success() {
+        return Ok(());
+    }
+    let stderr = String::from_utf8_lossy(&output.stderr).trim().to_string();
+    let message = match output.status.code() {
+        Some(1) if !stderr.is_empty() => stderr,
+        Some(code) => format!("the OpenVDB reader failed (exit status {code})"),
+        None => {
+            use std::os::unix::process::ExitStatusExt;
+            format!(
+                "the file is corrupt: OpenVDB crashed while reading it (signal {})",
+                output.status.signal().unwrap_or(0)
+            )
+        }
+    };
+    Err(VdbError::Open {
+        path: path.display().to_string(),
+        message,
+    })
+}
+
 /// Why a VDB file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum VdbError {
@@ -323,6 +368,7 @@ impl VdbFile {
             return Err(VdbError::Missing { path: shown });
         }
         let c = c_path(path)?;
+        check_in_child(path)?;
         let mut err = [0 as c_char; ERR_LEN];
         let mut raw: *mut ffi::GrinVdbFile = std::ptr::null_mut();
         // SAFETY: valid C string, out-pointer and error buffer of the stated length.

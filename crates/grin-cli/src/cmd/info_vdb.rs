@@ -2,13 +2,12 @@
 
 use std::path::Path;
 
-use anyhow::Context;
 use serde_json::{Value, json};
 use vdb_sys::{GridInfo, Meta, MetaValue, VdbFile};
 
 /// Print the grids of `path` (text, or JSON on stdout with `json`).
 pub fn run(path: &Path, json: bool) -> anyhow::Result<()> {
-    let file = VdbFile::open(path).with_context(|| "cannot read the VDB file".to_string())?;
+    let file = VdbFile::open(path)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&to_json(&file))?);
         return Ok(());
