@@ -750,3 +750,35 @@ fn macro_cells_fly_straight_through_homogeneous_media() {
         (flown.opl - stepped.opl).abs() <= 1e-12 && (flown.length - stepped.length).abs() <= 1e-12
     );
 }
+
+/// Hermite exit (root of the dense output, one re-step, projection) against the paper's
+/// bisection on the step length: focus error and field evaluations over the Luneburg beam
+/// at coarse to fine steps. Hermite must be as accurate (within 2x, or both at roundoff)
+/// for a fraction of the evaluations spent finding the exit.
+#[test]
+fn hermite_exit_is_as_accurate_and_cheaper_than_bisection() {
+    for per_quarter in [16.0, 64.0, 256.0] {
+        let ds = (PI / 2.0) / per_quarter;
+        let mut measured = Vec::new();
+        for exit in [ExitMethod::Hermite, ExitMethod::Bisection] {
+            let s = settings(IntegratorKind::Sharma, StepSpec::Fixed(ds), exit);
+            let field = luneburg();
+            let (mut worst, mut evals) = (0.0f64, 0u64);
+            for o in beam() {
+                let res = trace_ray::<f64>(&field, &s, o, DVec3::Z);
+                worst = worst.max((res.position - DVec3::Z).length());
+                evals += res.evals;
+            }
+            eprintln!(
+                "steps/quarter {per_quarter}: {exit:?} focus error {worst:.2e}, evals {evals}"
+            );
+            measured.push((worst, evals));
+        }
+        let ((e_h, n_h), (e_b, n_b)) = (measured[0], measured[1]);
+        assert!(
+            e_h <= 2.0 * e_b || e_h <= 1e-12,
+            "hermite {e_h:e} vs bisection {e_b:e}"
+        );
+        assert!(n_h < n_b, "hermite {n_h} evals vs bisection {n_b}");
+    }
+}
