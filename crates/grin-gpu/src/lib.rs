@@ -1,1 +1,32 @@
 //! GPU rendering with wgpu: device, textures, the WGSL RK marcher, readback.
+//!
+//! The entry point is [`GpuRenderer`]: build a [`grin_trace::render::RenderScene`] (every
+//! scene check happens there, before any GPU work), a [`GpuContext`], and call
+//!
+//! ```ignore
+//! let ctx = GpuContext::new_headless()?;
+//! let gpu = GpuRenderer::new(&ctx, &render_scene, baked.as_ref())?; // Option<&BakedField>
+//! let frame = gpu.render(&|rows| bar.inc(rows.into()), &cancel)?;   // grin_trace::image::Frame
+//! ```
+//!
+//! The frame has exactly the CPU renderer's layout ([`grin_trace::image::PixelOut`]), so
+//! `grin render --backend gpu` writes it with the same EXR/PNG code. Media are marched
+//! through a baked grid (a 3D texture): pass the scene's [`BakedField`] if it has one,
+//! or `None` and the analytic field is baked here (see [`field::bake_for_gpu`]).
+//!
+//! Every WGSL kernel in `shaders/` has a CPU twin of the same name in
+//! `grin_trace::render` (`trace_path`, `march_medium`, `exit_medium`, `cross_boundary`,
+//! `sky_radiance`, `intersect_scene`, ...); `tests/` compares their images.
+//!
+//! [`BakedField`]: grin_field::baked::BakedField
+
+pub mod device;
+pub mod error;
+pub mod field;
+pub mod gpu_data;
+pub mod render;
+pub mod shaders;
+
+pub use device::{GpuContext, describe_adapter};
+pub use error::GpuError;
+pub use render::GpuRenderer;

@@ -1,0 +1,163 @@
+//! Headless wgpu device setup: adapter choice by `WGPU_BACKEND` / `WGPU_ADAPTER_NAME`,
+//! device limits, and error capture (lost device, uncaptured errors).
+
+use std::sync::{Arc, Mutex};
+
+use crate::GpuError;
+
+/// An adapter, its device and queue, plus the first uncaptured error or device loss.
+#[derive(Debug)]
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    /// Set by wgpu's callbacks when the device is lost or an error escapes a scope.
+    fault: Arc<Mutex<Option<String>>>,
+}
+
+/// One line naming an adapter: `llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)`.
+pub fn describe_adapter(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
+}
+
+impl GpuContext {
+    /// A headless device. `WGPU_BACKEND` (e.g. `vulkan`) restricts the backends,
+    /// `WGPU_ADAPTER_NAME` picks the first adapter whose name contains it
+    /// (case-insensitive); otherwise wgpu's default adapter (high performance preferred).
+    pub fn new_headless() -> Result<Self, GpuError> {
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends;
+        let instance = wgpu::Instance::new(desc);
+        let adapters = pollster::block_on(instance.enumerate_adapters(backends));
+        let seen = if adapters.is_empty() {
+            "none".to_owned()
+        } else {
+            adapters
+                .iter()
+                .map(|a| describe_adapter(&a.get_info()))
+                .collect::<Vec<_>>()
+                .join("; ")
+        };
+        let wanted = std::env::var("WGPU_ADAPTER_NAME")
+            .ok()
+            .filter(|s| !s.is_empty());
+        let adapter = match &wanted {
+            Some(name) => {
+                let lower = name.to_lowercase();
+                adapters
+                    .into_iter()
+                    .find(|a| a.get_info().name.to_lowercase().contains(&lower))
+            }
+            None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            }))
+            .ok(),
+        };
+        let Some(adapter) = adapter else {
+            let mut filter = String::new();
+            if let Ok(b) = std::env::var("WGPU_BACKEND") {
+                filter.push_str(&format!(" for WGPU_BACKEND={b}"));
+            }
+            if let Some(n) = &wanted {
+                filter.push_str(&format!(" matching WGPU_ADAPTER_NAME={n}"));
+            }
+            return Err(GpuError::NoAdapter { filter, seen });
+        };
+        let info = adapter.get_info();
+        // Ask for the adapter's own limits: big 3D textures and storage buffers are the
+        // point of this crate, and we check every size against them before creating.
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("grin"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits,
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| GpuError::Device {
+            adapter: describe_adapter(&info),
+            message: e.to_string(),
+        })?;
+        let fault = Arc::new(Mutex::new(None::<String>));
+        let f = fault.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut slot) = f.lock() {
+                slot.get_or_insert_with(|| e.to_string());
+            }
+        }));
+        let f = fault.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            if let Ok(mut slot) = f.lock() {
+                slot.get_or_insert_with(|| format!("device lost ({reason:?}): {message}"));
+            }
+        });
+        Ok(GpuContext {
+            adapter,
+            device,
+            queue,
+            info,
+            fault,
+        })
+    }
+
+    /// `name (backend, device type)` of the adapter in use.
+    pub fn adapter_name(&self) -> String {
+        describe_adapter(&self.info)
+    }
+
+    pub fn limits(&self) -> wgpu::Limits {
+        self.device.limits()
+    }
+
+    /// The first device loss or uncaptured error since the device was created, if any.
+    pub fn check_fault(&self) -> Result<(), GpuError> {
+        let slot = self
+            .fault
+            .lock()
+            .map_err(|_| GpuError::DeviceLost("error slot poisoned".into()))?;
+        match slot.as_ref() {
+            Some(m) if m.contains("device lost") => Err(GpuError::DeviceLost(m.clone())),
+            Some(m) => Err(GpuError::Wgpu {
+                during: "rendering".into(),
+                message: m.clone(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Run `f` inside out-of-memory and validation error scopes; a captured error
+    /// becomes a [`GpuError`] that names `during`.
+    pub fn scoped<T>(&self, during: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let v = pollster::block_on(validation.pop());
+        let o = pollster::block_on(oom.pop());
+        if let Some(e) = o {
+            return Err(GpuError::OutOfMemory {
+                during: during.into(),
+                message: e.to_string(),
+            });
+        }
+        if let Some(e) = v {
+            return Err(GpuError::Wgpu {
+                during: during.into(),
+                message: e.to_string(),
+            });
+        }
+        self.check_fault()?;
+        Ok(out)
+    }
+
+    /// Wait for all submitted work.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::DeviceLost(e.to_string()))?;
+        self.check_fault()
+    }
+}

@@ -1,0 +1,213 @@
+//! Baked fields on the GPU: the (delta_n, grad n) grid as an rgba32float 3D texture, the
+//! macro-cell grid as an r32float 3D texture, and their placement in `FrameParams`.
+//!
+//! Format choice (measured, see docs/benchmarks.md): rgba32float read with textureLoad
+//! and interpolated in the shader. rgba16float cannot hold n itself and, even for
+//! delta_n, air's ~1e-5 is a half-float subnormal (10-bit mantissa lost); float32
+//! filtering needs the optional FLOAT32_FILTERABLE feature, and filter hardware may keep
+//! only 8 fractional bits of the weights. Manual trilinear costs 8 loads per sample but
+//! gives the CPU's weights exactly, so GPU and CPU march the same field. i16-quantized
+//! baked files are decoded to f32 on upload.
+
+use grin_field::IndexField;
+use grin_field::bake::{BakeOptions, bake};
+use grin_field::baked::{BakedField, Interp, Outside};
+
+use crate::gpu_data::{FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
+use crate::{GpuContext, GpuError};
+
+/// Bytes per texel of the field texture (rgba32float).
+pub const FIELD_TEXEL_BYTES: u64 = 16;
+
+/// Grid resolution (nodes along the longest axis) used to bake an analytic field for the
+/// GPU when the caller has no baked field: 128 keeps a unit sphere within ~1e-4 of the
+/// analytic index for the paper's profiles (bake helper's DEFAULT_RESOLUTION).
+pub const DEFAULT_GPU_BAKE_RESOLUTION: usize = grin_field::bake::DEFAULT_RESOLUTION;
+
+/// The field's textures on the device.
+#[derive(Debug)]
+pub struct FieldTextures {
+    pub field: wgpu::Texture,
+    pub macro_cells: wgpu::Texture,
+    /// Bytes uploaded (field + macro grid).
+    pub bytes: u64,
+    /// Node counts.
+    pub dims: [u32; 3],
+}
+
+/// Bake `field` on a grid for the GPU (trilinear, f32 voxels, fixed resolution).
+pub fn bake_for_gpu(field: &dyn IndexField, resolution: usize) -> Result<BakedField, GpuError> {
+    let opts = BakeOptions {
+        resolution: Some(resolution),
+        interp: Interp::Trilinear,
+        storage: Some(grin_field::baked::Storage::F32),
+        ..BakeOptions::default()
+    };
+    let (baked, _report) =
+        bake(field, &opts, &|_, _, _| {}).map_err(|e| GpuError::Bake(e.to_string()))?;
+    Ok(baked)
+}
+
+fn check_dims(ctx: &GpuContext, what: &str, dims: [u32; 3]) -> Result<(), GpuError> {
+    let limit = ctx.limits().max_texture_dimension_3d;
+    if dims.iter().any(|&d| d > limit) {
+        return Err(GpuError::TooLarge {
+            what: format!("{what} {}x{}x{}", dims[0], dims[1], dims[2]),
+            needed: format!(
+                "{} texels per axis",
+                dims.iter().max().copied().unwrap_or(0)
+            ),
+            limit: format!("{limit} (max_texture_dimension_3d)"),
+            adapter: ctx.adapter_name(),
+        });
+    }
+    Ok(())
+}
+
+fn texture_3d(
+    ctx: &GpuContext,
+    label: &str,
+    dims: [u32; 3],
+    format: wgpu::TextureFormat,
+    texel_bytes: u32,
+    data: &[u8],
+) -> Result<wgpu::Texture, GpuError> {
+    check_dims(ctx, label, dims)?;
+    let size = wgpu::Extent3d {
+        width: dims[0],
+        height: dims[1],
+        depth_or_array_layers: dims[2],
+    };
+    ctx.scoped(&format!("uploading the {label} texture"), || {
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            data,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(dims[0] * texel_bytes),
+                rows_per_image: Some(dims[1]),
+            },
+            size,
+        );
+        texture
+    })
+}
+
+fn dims_u32(d: [usize; 3], what: &str) -> Result<[u32; 3], GpuError> {
+    let mut out = [0u32; 3];
+    for (o, &n) in out.iter_mut().zip(&d) {
+        *o = u32::try_from(n).map_err(|_| GpuError::TooLarge {
+            what: what.into(),
+            needed: format!("{n} texels"),
+            limit: format!("{}", u32::MAX),
+            adapter: String::new(),
+        })?;
+    }
+    Ok(out)
+}
+
+/// Upload `baked` and fill the field part of `params`.
+pub fn upload_field(
+    ctx: &GpuContext,
+    baked: &BakedField,
+    params: &mut FrameParams,
+) -> Result<FieldTextures, GpuError> {
+    let geometry = baked.geometry();
+    let dims = dims_u32(geometry.dims, "baked grid")?;
+    check_dims(ctx, "baked grid", dims)?;
+    let texels: Vec<[f32; 4]> = match (baked.interp(), baked.spline_coefficients()) {
+        (Interp::Tricubic, Some(c)) => c.to_vec(),
+        _ => baked.voxels().to_f32(),
+    };
+    let bytes = texels.len() as u64 * FIELD_TEXEL_BYTES;
+    let max_buffer = ctx.limits().max_buffer_size;
+    if bytes > max_buffer {
+        return Err(GpuError::TooLarge {
+            what: format!("baked grid {}x{}x{}", dims[0], dims[1], dims[2]),
+            needed: format!("{bytes} bytes"),
+            limit: format!("{max_buffer} bytes (max_buffer_size)"),
+            adapter: ctx.adapter_name(),
+        });
+    }
+    let field = texture_3d(
+        ctx,
+        "baked field",
+        dims,
+        wgpu::TextureFormat::Rgba32Float,
+        FIELD_TEXEL_BYTES as u32,
+        bytemuck::cast_slice(&texels),
+    )?;
+    let grid = baked.macro_grid();
+    let mdims = dims_u32(grid.dims, "macro-cell grid")?;
+    let macro_cells = texture_3d(
+        ctx,
+        "macro cells",
+        mdims,
+        wgpu::TextureFormat::R32Float,
+        4,
+        bytemuck::cast_slice(&grid.max_grad),
+    )?;
+    let o = geometry.origin.as_vec3();
+    let inv = geometry.spacing.recip().as_vec3();
+    params.grid_origin = [o.x, o.y, o.z, grid.threshold as f32];
+    params.grid_inv_spacing = [inv.x, inv.y, inv.z, 0.0];
+    params.grid_dims[0..3].copy_from_slice(&dims);
+    params.macro_dims = [mdims[0], mdims[1], mdims[2], grid.cell as u32];
+    if baked.outside() == Outside::Ambient {
+        params.march[3] |= FLAG_OUTSIDE_AMBIENT;
+    }
+    if baked.interp() == Interp::Tricubic {
+        params.march[3] |= FLAG_TRICUBIC;
+    }
+    Ok(FieldTextures {
+        field,
+        macro_cells,
+        bytes: bytes + grid.max_grad.len() as u64 * 4,
+        dims,
+    })
+}
+
+/// Placeholder textures for a scene without a medium (never sampled).
+pub fn empty_field(ctx: &GpuContext, params: &mut FrameParams) -> Result<FieldTextures, GpuError> {
+    let zeros = [[0.0f32; 4]; 8];
+    let field = texture_3d(
+        ctx,
+        "empty field",
+        [2, 2, 2],
+        wgpu::TextureFormat::Rgba32Float,
+        16,
+        bytemuck::cast_slice(&zeros),
+    )?;
+    let macro_cells = texture_3d(
+        ctx,
+        "empty macro cells",
+        [1, 1, 1],
+        wgpu::TextureFormat::R32Float,
+        4,
+        &[0; 4],
+    )?;
+    params.grid_inv_spacing = [1.0, 1.0, 1.0, 0.0];
+    params.grid_dims[0..3].copy_from_slice(&[2, 2, 2]);
+    params.macro_dims = [1, 1, 1, 8];
+    Ok(FieldTextures {
+        field,
+        macro_cells,
+        bytes: 0,
+        dims: [2, 2, 2],
+    })
+}

@@ -1,0 +1,7 @@
+//! The WGSL kernels, assembled from shaders/ (and validated with naga) by build.rs.
+
+/// The render kernel (`render_main`): shaders/render.wgsl with its shared imports.
+pub const RENDER_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/render.wgsl"));
+
+/// The field-sampling microbenchmark (`bench_main`): shaders/texture_bench.wgsl.
+pub const TEXTURE_BENCH_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/texture_bench.wgsl"));

@@ -1,0 +1,129 @@
+//! The GPU test harness: adapter acquisition that is loud when it fails, CPU reference
+//! renders on the same baked field, and image comparison that writes `*-actual.png`,
+//! `*-expected.png` and `*-difference.png` when it fails.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use grin_field::IndexField;
+use grin_field::baked::BakedField;
+use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
+use grin_scene::Scene;
+use grin_trace::image::{Frame, diff_frames};
+use grin_trace::render::{RenderScene, render_cpu};
+
+/// The device, or `None` when no adapter exists and `GRIN_ALLOW_NO_GPU=1` is set (after
+/// printing a prominent SKIPPED line). Without that variable a missing adapter fails
+/// the test: GPU tests must never pass silently.
+pub fn context(test: &str) -> Option<GpuContext> {
+    match GpuContext::new_headless() {
+        Ok(ctx) => Some(ctx),
+        Err(e) => {
+            if std::env::var("GRIN_ALLOW_NO_GPU").as_deref() == Ok("1") {
+                eprintln!(
+                    "\n**********************************************************************"
+                );
+                eprintln!("*** SKIPPED {test}: no GPU adapter ({e})");
+                eprintln!("*** (GRIN_ALLOW_NO_GPU=1 is set; unset it to make this a failure)");
+                eprintln!(
+                    "**********************************************************************\n"
+                );
+                None
+            } else {
+                panic!(
+                    "{test}: no GPU adapter: {e}\n(install mesa-vulkan-drivers for lavapipe, or set GRIN_ALLOW_NO_GPU=1 to skip loudly)"
+                );
+            }
+        }
+    }
+}
+
+/// Where failing comparisons write their images.
+pub fn output_dir() -> PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/gpu-test-output");
+    std::fs::create_dir_all(&dir).expect("create target/gpu-test-output");
+    dir
+}
+
+/// A scene's medium field, built the way `grin render` builds it.
+pub fn build_field(scene: &Scene, scene_dir: &Path) -> Option<Arc<dyn IndexField>> {
+    let medium = scene.medium.as_ref()?;
+    Some(grin_field::build_field(medium, scene_dir).expect("scene field builds"))
+}
+
+/// The scene's field baked for the GPU at `resolution`, as a field the CPU can march too.
+pub fn baked(scene: &Scene, scene_dir: &Path, resolution: usize) -> Option<Arc<BakedField>> {
+    let field = build_field(scene, scene_dir)?;
+    let t = std::time::Instant::now();
+    let baked = bake_for_gpu(field.as_ref(), resolution).expect("bake for GPU");
+    eprintln!("bake {resolution}: {:.2} s", t.elapsed().as_secs_f64());
+    Some(Arc::new(baked))
+}
+
+/// CPU and GPU frames of `scene` marching the same baked field.
+pub fn render_both(
+    ctx: &GpuContext,
+    scene: &Scene,
+    scene_dir: &Path,
+    baked: Option<Arc<BakedField>>,
+) -> (Frame, Frame) {
+    let field = baked.clone().map(|b| b as Arc<dyn IndexField>);
+    let rs = RenderScene::new(scene, scene_dir, field).expect("render scene");
+    let t = std::time::Instant::now();
+    let cpu = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("CPU render");
+    let t_cpu = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let renderer = GpuRenderer::new(ctx, &rs, baked.as_deref()).expect("GPU renderer");
+    let t_setup = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let gpu = renderer
+        .render(&|_| {}, &AtomicBool::new(false))
+        .expect("GPU render");
+    eprintln!(
+        "CPU render {t_cpu:.2} s; GPU setup {t_setup:.2} s, render {:.2} s",
+        t.elapsed().as_secs_f64()
+    );
+    (cpu, gpu)
+}
+
+/// Assert the beauty passes agree: mean and 99th-percentile per-pixel difference (the
+/// largest channel difference of each pixel, linear radiance) within the tolerances.
+/// On failure writes `<name>-actual.png` (GPU), `<name>-expected.png` (CPU) and
+/// `<name>-difference.png` (x10) to target/gpu-test-output/.
+pub fn assert_images_agree(
+    name: &str,
+    expected: &Frame,
+    actual: &Frame,
+    mean_tol: f64,
+    p99_tol: f64,
+) {
+    let (stats, mut diff) = diff_frames(expected, actual).expect("same size");
+    eprintln!(
+        "{name}: GPU vs CPU per-pixel difference mean {:.2e} p99 {:.2e} max {:.2e} (tolerances {mean_tol:e}, {p99_tol:e})",
+        stats.mean, stats.p99, stats.max
+    );
+    if stats.mean <= mean_tol && stats.p99 <= p99_tol {
+        return;
+    }
+    let dir = output_dir();
+    for p in &mut diff.pixels {
+        p.rgb = p.rgb.map(|x| x * 10.0);
+    }
+    actual
+        .write_png(&dir.join(format!("{name}-actual.png")))
+        .expect("write actual");
+    expected
+        .write_png(&dir.join(format!("{name}-expected.png")))
+        .expect("write expected");
+    diff.write_png(&dir.join(format!("{name}-difference.png")))
+        .expect("write difference");
+    panic!(
+        "{name}: GPU and CPU images differ: mean {:.3e} (tol {mean_tol:e}), p99 {:.3e} (tol {p99_tol:e}); images in {}",
+        stats.mean,
+        stats.p99,
+        dir.display()
+    );
+}

@@ -1,0 +1,61 @@
+// #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/medium.wgsl shared/shade.wgsl
+//
+// The render kernel: one invocation per pixel of a band of rows, all samples of the
+// pixel, the mean radiance and the AOVs into `out_pixels`.
+// CPU twin: grin_trace::render::RenderScene::render_pixel.
+
+@compute @workgroup_size(8, 8, 1)
+fn render_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let width = params.image.x;
+    let px = gid.x;
+    let row = gid.y;
+    if px >= width || row >= params.rows.y {
+        return;
+    }
+    let py = params.rows.x + row;
+    let index = py * width + px;
+    let spp = params.image.z;
+    var rgb = vec3<f32>(0.0);
+    var steps = 0.0;
+    var evals = 0.0;
+    var first = PrimaryAov(0.0, vec3<f32>(0.0), 0.0, 0u, 0u, STATUS_MISSED);
+    for (var sample = 0u; sample < spp; sample++) {
+        var rng = rng_for_pixel(index, sample, params.image.w);
+        var sx = 0.5;
+        var sy = 0.5;
+        if spp != 1u {
+            sx = rng_next_f32(&rng);
+            sy = rng_next_f32(&rng);
+        }
+        // Per-pixel jitter of the camera ray's first step in the medium (settable;
+        // drawn after the sub-pixel position so the stream is the CPU's when it is off).
+        var jitter = 1.0;
+        if field_flag(FLAG_JITTER) {
+            jitter = max(rng_next_f32(&rng), MIN_JITTER_FRACTION);
+        }
+        let d = primary_ray(px, py, sx, sy);
+        let path = trace_path(d, jitter, &rng);
+        rgb += path.rgb;
+        steps += f32(path.aov.steps);
+        evals += f32(path.aov.evals);
+        if sample == 0u {
+            first = path.aov;
+        }
+    }
+    let inv = 1.0 / f32(spp);
+    rgb *= inv;
+    var out: PixelOut;
+    out.r = rgb.x;
+    out.g = rgb.y;
+    out.b = rgb.z;
+    out.deflection_deg = first.deflection_deg;
+    out.exit_x = first.exit_dir.x;
+    out.exit_y = first.exit_dir.y;
+    out.exit_z = first.exit_dir.z;
+    out.opd = first.opd;
+    out.steps = steps * inv;
+    out.evals = evals * inv;
+    out.status = f32(first.status);
+    out.pad = 0.0;
+    out_pixels[row * width + px] = out;
+}

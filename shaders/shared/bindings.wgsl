@@ -1,0 +1,13 @@
+// The render kernel's resources. Bound by crates/grin-gpu/src/render.rs.
+
+@group(0) @binding(0) var<uniform> params: FrameParams;
+@group(0) @binding(1) var<storage, read> objects: array<GpuObject>;
+@group(0) @binding(2) var<storage, read> lights: array<GpuLight>;
+// (delta_n, dn/dx, dn/dy, dn/dz) per grid node (or their B-spline coefficients),
+// rgba32float, read with textureLoad (manual trilinear: see field.wgsl).
+@group(0) @binding(3) var field_tex: texture_3d<f32>;
+// max |grad n| per macro cell, r32float.
+@group(0) @binding(4) var macro_tex: texture_3d<f32>;
+// Equirectangular environment map, rgba32float (1x1 when the sky is a gradient).
+@group(0) @binding(5) var env_tex: texture_2d<f32>;
+@group(0) @binding(6) var<storage, read_write> out_pixels: array<PixelOut>;

@@ -1,0 +1,199 @@
+// The baked field on the GPU: n and grad n from the 3D texture, and the macro-cell walk.
+// CPU twin: grin_field::baked::BakedField::{sample, homogeneous_span} and
+// grin_field::baked::MacroGrid::span.
+//
+// Texels hold (delta_n, dn/dx, dn/dy, dn/dz) in f32 at the grid nodes (rgba32float).
+// Interpolation is done here with textureLoad, not by the sampler: float32 filtering
+// needs the optional FLOAT32_FILTERABLE feature, and hardware filter weights may have
+// only 8 fractional bits; manual trilinear matches the CPU's weights exactly.
+
+struct FieldSample {
+    n: f32,
+    grad_n: vec3<f32>,
+    delta_n: f32,
+}
+
+fn field_flag(bit: u32) -> bool {
+    return (FLAGS & bit) != 0u;
+}
+
+fn ambient_index() -> f32 {
+    return params.bounds_box_max.w;
+}
+
+fn grid_from_world_point(p: vec3<f32>) -> vec3<f32> {
+    return (p - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
+}
+
+fn grid_max() -> vec3<f32> {
+    return vec3<f32>(params.grid_dims.xyz - vec3<u32>(1u));
+}
+
+fn beyond_grid(g: vec3<f32>) -> bool {
+    return any(g < vec3<f32>(0.0)) || any(g > grid_max());
+}
+
+fn voxel(i: i32, j: i32, k: i32) -> vec4<f32> {
+    return textureLoad(field_tex, vec3<i32>(i, j, k), 0);
+}
+
+fn trilinear(g: vec3<f32>) -> vec4<f32> {
+    let d = vec3<i32>(params.grid_dims.xyz);
+    let base = min(vec3<i32>(floor(g)), d - vec3<i32>(2));
+    let t = g - vec3<f32>(base);
+    let c000 = voxel(base.x, base.y, base.z);
+    let c100 = voxel(base.x + 1, base.y, base.z);
+    let c010 = voxel(base.x, base.y + 1, base.z);
+    let c110 = voxel(base.x + 1, base.y + 1, base.z);
+    let c001 = voxel(base.x, base.y, base.z + 1);
+    let c101 = voxel(base.x + 1, base.y, base.z + 1);
+    let c011 = voxel(base.x, base.y + 1, base.z + 1);
+    let c111 = voxel(base.x + 1, base.y + 1, base.z + 1);
+    let x00 = mix(c000, c100, t.x);
+    let x10 = mix(c010, c110, t.x);
+    let x01 = mix(c001, c101, t.x);
+    let x11 = mix(c011, c111, t.x);
+    return mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+}
+
+// Uniform cubic B-spline weights at fraction t (bspline::weights).
+fn bspline_weights(t: f32) -> vec4<f32> {
+    let s = 1.0 - t;
+    let t2 = t * t;
+    let t3 = t2 * t;
+    return vec4<f32>(s * s * s / 6.0, (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0, (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0, t3 / 6.0);
+}
+
+// Mirror boundary for spline taps (bspline::mirror).
+fn mirror_index(i: i32, n: i32) -> i32 {
+    if n == 1 {
+        return 0;
+    }
+    let period = 2 * (n - 1);
+    var m = i % period;
+    if m < 0 {
+        m += period;
+    }
+    return select(m, period - m, m >= n);
+}
+
+fn tricubic(g: vec3<f32>) -> vec4<f32> {
+    let d = vec3<i32>(params.grid_dims.xyz);
+    let fl = floor(g);
+    let wx = bspline_weights(g.x - fl.x);
+    let wy = bspline_weights(g.y - fl.y);
+    let wz = bspline_weights(g.z - fl.z);
+    let b = vec3<i32>(fl) - vec3<i32>(1);
+    var out = vec4<f32>(0.0);
+    for (var c = 0; c < 4; c++) {
+        let k = mirror_index(b.z + c, d.z);
+        for (var r = 0; r < 4; r++) {
+            let j = mirror_index(b.y + r, d.y);
+            let wjk = wz[c] * wy[r];
+            for (var a = 0; a < 4; a++) {
+                out += voxel(mirror_index(b.x + a, d.x), j, k) * (wjk * wx[a]);
+            }
+        }
+    }
+    return out;
+}
+
+fn sample_field(p: vec3<f32>) -> FieldSample {
+    let g = grid_from_world_point(p);
+    if field_flag(FLAG_OUTSIDE_AMBIENT) && beyond_grid(g) {
+        return FieldSample(ambient_index(), vec3<f32>(0.0), 0.0);
+    }
+    let gc = clamp(g, vec3<f32>(0.0), grid_max());
+    var v: vec4<f32>;
+    if field_flag(FLAG_TRICUBIC) {
+        v = tricubic(gc);
+    } else {
+        v = trilinear(gc);
+    }
+    return FieldSample(ambient_index() + v.x, v.yzw, v.x);
+}
+
+// ---- Macro cells (the paper's "infinite step") ----
+
+fn macro_homogeneous(c: vec3<i32>) -> bool {
+    return textureLoad(macro_tex, c, 0).x <= params.grid_origin.w;
+}
+
+// From grid point g along grid direction dg: world length to the end of the run of
+// homogeneous cells starting at g's cell; negative if that cell varies (MacroGrid::span).
+fn macro_span(g: vec3<f32>, dg: vec3<f32>) -> f32 {
+    let cell = f32(params.macro_dims.w);
+    let mdims = vec3<i32>(params.macro_dims.xyz);
+    let gmax = grid_max();
+    let gc = clamp(g, vec3<f32>(0.0), gmax) / cell;
+    var c = min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), mdims - vec3<i32>(1));
+    if !macro_homogeneous(c) {
+        return -1.0;
+    }
+    var s_next = vec3<f32>(INF);
+    var s_delta = vec3<f32>(INF);
+    var stp = vec3<i32>(0);
+    for (var a = 0; a < 3; a++) {
+        if dg[a] > 0.0 {
+            stp[a] = 1;
+            s_next[a] = (max(min(f32(c[a] + 1) * cell, gmax[a]), g[a]) - g[a]) / dg[a];
+            s_delta[a] = cell / dg[a];
+        } else if dg[a] < 0.0 {
+            stp[a] = -1;
+            s_next[a] = max(g[a] - f32(c[a]) * cell, 0.0) / -dg[a];
+            s_delta[a] = cell / -dg[a];
+        }
+    }
+    let max_cells = mdims.x + mdims.y + mdims.z;
+    for (var i = 0; i < max_cells; i++) {
+        var a = 2;
+        if s_next.x <= s_next.y && s_next.x <= s_next.z {
+            a = 0;
+        } else if s_next.y <= s_next.z {
+            a = 1;
+        }
+        let s = s_next[a];
+        if s >= INF {
+            return -1.0;
+        }
+        let next = c[a] + stp[a];
+        if next < 0 {
+            return s;
+        }
+        if next >= mdims[a] {
+            return min(s, max(gmax[a] - g[a], 0.0) / dg[a]);
+        }
+        c[a] = next;
+        if !macro_homogeneous(c) {
+            return s;
+        }
+        s_next[a] += s_delta[a];
+    }
+    return -1.0;
+}
+
+// BakedField::homogeneous_span: positive world length of a straight flight, or -1.
+fn homogeneous_span(p: vec3<f32>, dir: vec3<f32>) -> f32 {
+    let g = grid_from_world_point(p);
+    let dg = dir * params.grid_inv_spacing.xyz;
+    var span = -1.0;
+    if beyond_grid(g) {
+        if !field_flag(FLAG_OUTSIDE_AMBIENT) {
+            return -1.0;
+        }
+        let lo = params.grid_origin.xyz;
+        let hi = lo + grid_max() / params.grid_inv_spacing.xyz;
+        let to_grid = box_interval(lo, hi, p, dir);
+        let to_exit = bounds_intersect(p, dir);
+        if to_grid.found && to_exit.found {
+            span = min(max(to_grid.s_in, 0.0), max(to_exit.s_out, 0.0));
+        } else if to_grid.found {
+            span = max(to_grid.s_in, 0.0);
+        } else if to_exit.found {
+            span = max(to_exit.s_out, 0.0);
+        }
+    } else {
+        span = macro_span(g, dg);
+    }
+    return select(-1.0, span, span > 0.0);
+}

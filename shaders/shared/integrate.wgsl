@@ -1,0 +1,171 @@
+// One step of the ray equation in t-parameter form, dr/dt = T, dT/dt = D(r) = n grad n.
+// Each step takes D at the step start (sampled by the caller, not counted again).
+// CPU twin: grin_trace::integrate (euler_step, symplectic_euler_step, verlet_step,
+// sharma_step, rk4_step, dopri_step, step).
+
+struct RayState {
+    r: vec3<f32>,
+    t: vec3<f32>,
+}
+
+struct Step {
+    state: RayState,
+    // Field evaluations made by the step (the start sample is the caller's).
+    evals: u32,
+    // The field at state.r when the step evaluated it anyway (verlet, dopri: FSAL).
+    has_end: bool,
+    end: FieldSample,
+    // Embedded local error estimate (e_r, e_T) of the adaptive pair.
+    err_r: vec3<f32>,
+    err_t: vec3<f32>,
+}
+
+fn no_sample() -> FieldSample {
+    return FieldSample(0.0, vec3<f32>(0.0), 0.0);
+}
+
+fn plain_step(r: vec3<f32>, t: vec3<f32>, evals: u32) -> Step {
+    return Step(RayState(r, t), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0));
+}
+
+// D = n grad n at p: one field evaluation.
+fn sample_d(p: vec3<f32>) -> vec3<f32> {
+    let f = sample_field(p);
+    return f.grad_n * f.n;
+}
+
+fn euler_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    return plain_step(s.r + s.t * h, s.t + d0 * h, 0u);
+}
+
+fn symplectic_euler_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    let t1 = s.t + d0 * h;
+    return plain_step(s.r + t1 * h, t1, 0u);
+}
+
+fn verlet_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    let half = h * 0.5;
+    let t_half = s.t + d0 * half;
+    let r1 = s.r + t_half * h;
+    let end = sample_field(r1);
+    let t1 = t_half + end.grad_n * end.n * half;
+    return Step(RayState(r1, t1), 1u, true, end, vec3<f32>(0.0), vec3<f32>(0.0));
+}
+
+// Sharma, Kumar & Ghatak 1982 (the paper's Listing 2): A = h D(r),
+// B = h D(r + h/2 T + h/8 A), C = h D(r + h T + h/2 B).
+fn sharma_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    let a = d0 * h;
+    let b = sample_d(s.r + s.t * (h * 0.5) + a * (h * 0.125)) * h;
+    let c = sample_d(s.r + s.t * h + b * (h * 0.5)) * h;
+    let sixth = 1.0 / 6.0;
+    let r1 = s.r + (s.t + (a + b * 2.0) * sixth) * h;
+    let t1 = s.t + (a + b * 4.0 + c) * sixth;
+    return plain_step(r1, t1, 2u);
+}
+
+// Classical RK4 on (r, T).
+fn rk4_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    let half = h * 0.5;
+    let t1 = s.t;
+    let d1 = d0;
+    let t2 = s.t + d1 * half;
+    let d2 = sample_d(s.r + t1 * half);
+    let t3 = s.t + d2 * half;
+    let d3 = sample_d(s.r + t2 * half);
+    let t4 = s.t + d3 * h;
+    let d4 = sample_d(s.r + t3 * h);
+    let sixth = h * (1.0 / 6.0);
+    let r_new = s.r + (t1 + t2 * 2.0 + t3 * 2.0 + t4) * sixth;
+    let t_new = s.t + (d1 + d2 * 2.0 + d3 * 2.0 + d4) * sixth;
+    return plain_step(r_new, t_new, 3u);
+}
+
+// Dormand & Prince (1980) tableau rows a_ij (i = 2..7, 6 entries each; row 7 = the
+// 5th-order weights) and the error weights b - b*.
+const DOPRI_A = array<f32, 36>(
+    1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0,
+    44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0,
+    19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0,
+    9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0,
+    35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0,
+);
+const DOPRI_E = array<f32, 7>(
+    71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0,
+);
+
+// One Dormand-Prince 5(4) step with FSAL: 6 evaluations, the last at the new point.
+fn dopri_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    var a = DOPRI_A;
+    var e = DOPRI_E;
+    var ts: array<vec3<f32>, 7>;
+    var ds: array<vec3<f32>, 7>;
+    ts[0] = s.t;
+    ds[0] = d0;
+    var r_end = s.r;
+    var end = no_sample();
+    for (var i = 1; i < 7; i++) {
+        let row = (i - 1) * 6;
+        var dr = s.t * a[row];
+        var dt = d0 * a[row];
+        for (var j = 1; j < i; j++) {
+            dr += ts[j] * a[row + j];
+            dt += ds[j] * a[row + j];
+        }
+        let ri = s.r + dr * h;
+        ts[i] = s.t + dt * h;
+        end = sample_field(ri);
+        ds[i] = end.grad_n * end.n;
+        r_end = ri;
+    }
+    var er = ts[0] * e[0];
+    var et = ds[0] * e[0];
+    for (var j = 1; j < 7; j++) {
+        er += ts[j] * e[j];
+        et += ds[j] * e[j];
+    }
+    return Step(RayState(r_end, ts[6]), 6u, true, end, er * h, et * h);
+}
+
+// Order of accuracy of the integrator's position (integrate::order).
+fn integrator_order(kind: u32) -> u32 {
+    switch kind {
+        case INTEGRATOR_EULER, INTEGRATOR_SYMPLECTIC_EULER: {
+            return 1u;
+        }
+        case INTEGRATOR_VERLET: {
+            return 2u;
+        }
+        case INTEGRATOR_ADAPTIVE: {
+            return 5u;
+        }
+        default: {
+            return 4u;
+        }
+    }
+}
+
+// One step of the configured integrator (integrate::step).
+fn integrate_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
+    switch INTEGRATOR {
+        case INTEGRATOR_EULER: {
+            return euler_step(s, d0, h);
+        }
+        case INTEGRATOR_SYMPLECTIC_EULER: {
+            return symplectic_euler_step(s, d0, h);
+        }
+        case INTEGRATOR_VERLET: {
+            return verlet_step(s, d0, h);
+        }
+        case INTEGRATOR_RK4: {
+            return rk4_step(s, d0, h);
+        }
+        case INTEGRATOR_ADAPTIVE: {
+            return dopri_step(s, d0, h);
+        }
+        default: {
+            return sharma_step(s, d0, h);
+        }
+    }
+}

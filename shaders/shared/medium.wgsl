@@ -1,0 +1,376 @@
+// The passage through the medium: enter (refracting at the surface), step with the
+// integrator and step policy (or fly straight through homogeneous macro cells), test
+// each step's chord against the scene objects (the paper's step 4), find where the ray
+// leaves (bisection or Hermite dense output), refract out with the Fresnel weight (total
+// internal reflection sends it back in), and account for the optical path.
+// CPU twins: grin_trace::trace::{trace_ray_observed, exit_medium, leave, accumulate},
+// grin_trace::boundary::{refract, project_to_surface, Segment::first_crossing},
+// grin_trace::render::medium::SceneMedium::march_medium.
+
+// Offset of a ray from a surface it starts on. The CPU uses 1e-6 in f64; in f32 at
+// scene scale ~10 an ulp is ~1e-6, so the GPU needs a larger push to stay off surfaces.
+const SURFACE_EPS: f32 = 1e-4;
+// boundary::MAX_BISECTIONS, HERMITE_SCAN; trace::MIN_SPAN_REL.
+const MAX_BISECTIONS: u32 = 64u;
+const HERMITE_SCAN: u32 = 8u;
+const MIN_SPAN_REL: f32 = 1e-9;
+// boundary::EXIT_TOL_REL (unreachable in f32: the bisection stops when the step
+// fraction runs out of bits, then projects onto the surface, as the CPU's f32 path does).
+const EXIT_TOL_REL: f32 = 1e-12;
+const F32_EPSILON: f32 = 1.1920929e-7;
+
+const END_EXITED: u32 = 0u;
+const END_OBJECT: u32 = 1u;
+const END_MISSED: u32 = 2u;
+const END_STOPPED: u32 = 3u;
+
+const STATUS_MISSED: u32 = 0u;
+const STATUS_EXITED: u32 = 1u;
+const STATUS_ABSORBED: u32 = 2u;
+const STATUS_MAX_STEPS: u32 = 3u;
+const STATUS_ERROR: u32 = 4u;
+
+struct MarchStats {
+    steps: u32,
+    evals: u32,
+    opl: f32,
+    length: f32,
+}
+
+struct MarchEnd {
+    kind: u32,
+    // For END_STOPPED: STATUS_MAX_STEPS or STATUS_ERROR.
+    status: u32,
+    point: vec3<f32>,
+    dir: vec3<f32>,
+    transmittance: f32,
+    hit: Hit,
+}
+
+fn no_hit() -> Hit {
+    return Hit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), false, 0u);
+}
+
+fn march_end(kind: u32, status: u32, point: vec3<f32>, dir: vec3<f32>, transmittance: f32) -> MarchEnd {
+    return MarchEnd(kind, status, point, dir, transmittance, no_hit());
+}
+
+// Snell's law at a surface with unit normal (either orientation), from n1 into n2.
+struct Interface {
+    transmitted: bool,
+    dir: vec3<f32>,
+    reflectance: f32,
+}
+
+fn fresnel(n1: f32, n2: f32, cos_i: f32, cos_t: f32) -> f32 {
+    let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
+    let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+fn refract(d: vec3<f32>, normal: vec3<f32>, n1: f32, n2: f32) -> Interface {
+    let nrm = select(normal, -normal, dot(d, normal) > 0.0);
+    let cos_i = clamp(-dot(d, nrm), 0.0, 1.0);
+    let eta = n1 / n2;
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+    if sin2_t >= 1.0 {
+        return Interface(false, reflect_dir(d, nrm), 1.0);
+    }
+    let cos_t = sqrt(1.0 - sin2_t);
+    let dir = normalize(d * eta + nrm * (eta * cos_i - cos_t));
+    return Interface(true, dir, fresnel(n1, n2, cos_i, cos_t));
+}
+
+fn project_to_surface(p: vec3<f32>) -> vec3<f32> {
+    if bounds_is_box() {
+        let bmin = params.bounds_box_min.xyz;
+        let bmax = params.bounds_box_max.xyz;
+        let normal = bounds_normal(p);
+        var q = clamp(p, bmin, bmax);
+        for (var axis = 0; axis < 3; axis++) {
+            if normal[axis] > 0.0 {
+                q[axis] = bmax[axis];
+            } else if normal[axis] < 0.0 {
+                q[axis] = bmin[axis];
+            }
+        }
+        return q;
+    }
+    let c = params.bounds_sphere.xyz;
+    let d = p - c;
+    let len = length(d);
+    if len > 0.0 {
+        return c + d * (params.bounds_sphere.w / len);
+    }
+    return p;
+}
+
+// Cubic Hermite dense output of one step over t in [0, h].
+struct Segment {
+    r0: vec3<f32>,
+    t0: vec3<f32>,
+    r1: vec3<f32>,
+    t1: vec3<f32>,
+    h: f32,
+}
+
+fn segment_point(seg: Segment, tau: f32) -> vec3<f32> {
+    if seg.h == 0.0 {
+        return seg.r0;
+    }
+    let u = tau / seg.h;
+    let u2 = u * u;
+    let u3 = u2 * u;
+    let h00 = 2.0 * u3 - 3.0 * u2 + 1.0;
+    let h10 = u3 - 2.0 * u2 + u;
+    let h01 = -2.0 * u3 + 3.0 * u2;
+    let h11 = u3 - u2;
+    return seg.r0 * h00 + seg.t0 * (h10 * seg.h) + seg.r1 * h01 + seg.t1 * (h11 * seg.h);
+}
+
+// Smallest tau in [0, h] where the dense output crosses out of the bounds.
+fn first_crossing(seg: Segment) -> f32 {
+    var lo = 0.0;
+    var hi = seg.h;
+    for (var k = 1u; k <= HERMITE_SCAN; k++) {
+        let tau = seg.h * f32(k) / f32(HERMITE_SCAN);
+        if bounds_signed_distance(segment_point(seg, tau)) > 0.0 {
+            hi = tau;
+            break;
+        }
+        lo = tau;
+    }
+    for (var i = 0u; i < MAX_BISECTIONS; i++) {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if bounds_signed_distance(segment_point(seg, mid)) > 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    return 0.5 * (lo + hi);
+}
+
+struct ExitOut {
+    state: RayState,
+    h: f32,
+    evals: u32,
+}
+
+// The step from s ended outside the bounds: the state on the surface, the t-length
+// reaching it, the evaluations spent.
+fn exit_medium(s: RayState, s0: FieldSample, taken: Taken, tol: f32) -> ExitOut {
+    let d0 = s0.grad_n * s0.n;
+    if field_flag(FLAG_EXIT_HERMITE) {
+        let seg = Segment(s.r, s.t, taken.step.state.r, taken.step.state.t, taken.h);
+        let tau = first_crossing(seg);
+        let st = integrate_step(s, d0, tau);
+        var state = st.state;
+        state.r = project_to_surface(state.r);
+        return ExitOut(state, tau, st.evals);
+    }
+    var lo = 0.0;
+    var hi = taken.h;
+    var evals = 0u;
+    var best_state = s;
+    var best_h = 0.0;
+    for (var i = 0u; i < MAX_BISECTIONS; i++) {
+        let mid = 0.5 * (lo + hi);
+        let st = integrate_step(s, d0, mid);
+        evals += st.evals;
+        let dist = bounds_signed_distance(st.state.r);
+        if dist <= 0.0 {
+            best_state = st.state;
+            best_h = mid;
+        }
+        if abs(dist) <= tol {
+            return ExitOut(st.state, mid, evals);
+        }
+        if dist > 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+        if hi - lo <= mid * F32_EPSILON {
+            break;
+        }
+    }
+    best_state.r = project_to_surface(best_state.r);
+    return ExitOut(best_state, best_h, evals);
+}
+
+// Add one step's length and optical path (Hermite rule in t) and return its segment.
+fn accumulate(stats: ptr<function, MarchStats>, a: RayState, sa: FieldSample, b: RayState, sb: FieldSample, h: f32) -> Segment {
+    let n0 = sa.n;
+    let n1 = sb.n;
+    let dn0 = dot(sa.grad_n, a.t);
+    let dn1 = dot(sb.grad_n, b.t);
+    let h2 = h * h / 12.0;
+    (*stats).length += 0.5 * h * (n0 + n1) + h2 * (dn0 - dn1);
+    (*stats).opl += 0.5 * h * (n0 * n0 + n1 * n1) + h2 * 2.0 * (n0 * dn0 - n1 * dn1);
+    return Segment(a.r, a.t, b.r, b.t, h);
+}
+
+// The first object met by a segment's chord (render::medium::chord_hit).
+fn chord_hit(seg: Segment) -> Hit {
+    let chord = seg.r1 - seg.r0;
+    let len = length(chord);
+    if len == 0.0 {
+        return no_hit();
+    }
+    return intersect_scene(seg.r0, chord / len, 0.0, len);
+}
+
+fn finite3(v: vec3<f32>) -> bool {
+    return all(v - v == vec3<f32>(0.0));
+}
+
+fn sample_ok(f: FieldSample) -> bool {
+    return f.n > 0.0 && f.n < INF;
+}
+
+// An object met inside the medium: keep only the chord up to the hit
+// (SceneMedium::march_medium's `cut`).
+fn absorbed(stats: ptr<function, MarchStats>, seg: Segment, hit: Hit, transmittance: f32) -> MarchEnd {
+    let chord = seg.r1 - seg.r0;
+    let len = length(chord);
+    let cut = max(len - hit.t, 0.0);
+    let n = sample_field(hit.point).n;
+    (*stats).length -= cut;
+    (*stats).opl -= n * cut;
+    return MarchEnd(END_OBJECT, STATUS_ABSORBED, hit.point, chord / len, transmittance, hit);
+}
+
+// Trace from `origin` (outside: find the entry and refract; inside: start marching)
+// along unit `dir` until the ray leaves the medium, meets an object, or stops.
+// `jitter` in (0, 1] scales the first integration step (1: none).
+fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<function, MarchStats>) -> MarchEnd {
+    let len2 = dot(dir, dir);
+    if !finite3(origin) || !finite3(dir) || len2 == 0.0 {
+        return march_end(END_STOPPED, STATUS_ERROR, origin, normalize_or_zero(dir), 1.0);
+    }
+    let d = dir / sqrt(len2);
+    let n_amb = ambient_index();
+    var transmittance = 1.0;
+    var start = origin;
+    var d_in = d;
+    if bounds_signed_distance(origin) >= 0.0 {
+        let b = bounds_intersect(origin, d);
+        if !b.found || b.s_out < 0.0 || b.s_out <= b.s_in {
+            return march_end(END_MISSED, STATUS_MISSED, origin, d, 1.0);
+        }
+        let p = origin + d * max(b.s_in, 0.0);
+        let f = sample_field(p);
+        (*stats).evals += 1u;
+        if !sample_ok(f) {
+            return march_end(END_STOPPED, STATUS_ERROR, p, d, transmittance);
+        }
+        let i = refract(d, bounds_normal(p), n_amb, f.n);
+        if !i.transmitted {
+            return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance);
+        }
+        transmittance *= 1.0 - i.reflectance;
+        start = p;
+        d_in = i.dir;
+    }
+
+    var s0 = sample_field(start);
+    (*stats).evals += 1u;
+    var state = RayState(start, d_in * s0.n);
+    var ctrl = step_controller_new(jitter);
+    let len_scale = ctrl.len_scale;
+    let exit_tol = EXIT_TOL_REL * len_scale;
+    let max_steps = params.march.z;
+    // Each pass takes a step or a flight (counted), or reflects totally inside after
+    // one: 2 * max_steps + 2 passes bound the loop whatever happens.
+    for (var guard = 0u; guard < 2u * max_steps + 2u; guard++) {
+        let position = state.r;
+        let direction = normalize_or_zero(state.t);
+        if !finite3(position) || !finite3(state.t) || !sample_ok(s0) {
+            return march_end(END_STOPPED, STATUS_ERROR, position, direction, transmittance);
+        }
+        if (*stats).steps >= max_steps {
+            return march_end(END_STOPPED, STATUS_MAX_STEPS, position, direction, transmittance);
+        }
+
+        // Straight flight through a homogeneous macro cell.
+        if field_flag(FLAG_MACRO_CELLS) {
+            let span = homogeneous_span(position, direction);
+            if span > MIN_SPAN_REL * len_scale {
+                let b = bounds_intersect(position, direction);
+                var to_exit = 0.0;
+                if b.found {
+                    to_exit = max(b.s_out, 0.0);
+                }
+                let fly = min(span, to_exit);
+                let exits = span >= to_exit;
+                var p1 = position + direction * fly;
+                if exits {
+                    p1 = project_to_surface(p1);
+                }
+                let n = s0.n;
+                (*stats).length += fly;
+                (*stats).opl += n * fly;
+                (*stats).steps += 1u;
+                let seg = Segment(position, direction * n, p1, direction * n, fly / n);
+                let hit = chord_hit(seg);
+                if hit.found {
+                    return absorbed(stats, seg, hit, transmittance);
+                }
+                state.r = p1;
+                s0 = sample_field(p1);
+                (*stats).evals += 1u;
+                if exits {
+                    let i = refract(normalize_or_zero(state.t), bounds_normal(p1), s0.n, n_amb);
+                    if i.transmitted {
+                        return march_end(END_EXITED, STATUS_EXITED, p1, i.dir, transmittance * (1.0 - i.reflectance));
+                    }
+                    let nrm = bounds_normal(p1);
+                    state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
+                }
+                continue;
+            }
+        }
+
+        let taken = take_step(&ctrl, state, s0);
+        (*stats).evals += taken.evals;
+        var next = taken.step.state;
+        var h = taken.h;
+        let outside = bounds_signed_distance(next.r) > 0.0;
+        if outside && finite3(next.r) {
+            let ex = exit_medium(state, s0, taken, exit_tol);
+            (*stats).evals += ex.evals;
+            next = ex.state;
+            h = ex.h;
+        }
+        var s1: FieldSample;
+        if taken.step.has_end && !outside {
+            s1 = taken.step.end;
+        } else {
+            (*stats).evals += 1u;
+            s1 = sample_field(next.r);
+        }
+        let seg = accumulate(stats, state, s0, next, s1, h);
+        (*stats).steps += 1u;
+        let hit = chord_hit(seg);
+        if hit.found {
+            return absorbed(stats, seg, hit, transmittance);
+        }
+        state = next;
+        s0 = s1;
+        if outside {
+            // leave(): refract out, or reflect T totally back inside.
+            let p = state.r;
+            let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
+            if i.transmitted {
+                return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance * (1.0 - i.reflectance));
+            }
+            let nrm = bounds_normal(p);
+            state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
+        }
+    }
+    return march_end(END_STOPPED, STATUS_MAX_STEPS, state.r, normalize_or_zero(state.t), transmittance);
+}

@@ -1,0 +1,298 @@
+// The path loop of one pixel sample: an explicit loop with a throughput, medium
+// crossings, material events, direct light with shadow rays, and the primary ray's AOVs.
+// CPU twin: grin_trace::render::shade (trace_path, scatter, shade_diffuse,
+// shadow_transmittance) and grin_trace::render::RenderScene::render_pixel.
+
+// Fraction of the sky's radiance along the normal added to diffuse surfaces
+// (AMBIENT_SKY_WEIGHT).
+const AMBIENT_SKY_WEIGHT: f32 = 0.2;
+// Loop iterations per unit of max_depth (EVENTS_PER_DEPTH).
+const EVENTS_PER_DEPTH: u32 = 3u;
+
+const EVENT_SKY: u32 = 0u;
+const EVENT_SURFACE: u32 = 1u;
+const EVENT_MEDIUM: u32 = 2u;
+
+struct PrimaryAov {
+    deflection_deg: f32,
+    exit_dir: vec3<f32>,
+    opd: f32,
+    steps: u32,
+    evals: u32,
+    status: u32,
+}
+
+struct PathSample {
+    rgb: vec3<f32>,
+    aov: PrimaryAov,
+}
+
+struct Event {
+    kind: u32,
+    hit: Hit,
+    dir: vec3<f32>,
+}
+
+fn has_medium() -> bool {
+    return field_flag(FLAG_HAS_MEDIUM);
+}
+
+// Index of the space at p: the medium's n inside the bounds, else ambient.
+fn index_at(p: vec3<f32>) -> f32 {
+    if has_medium() {
+        if bounds_contains(p) {
+            return sample_field(p).n;
+        }
+        return ambient_index();
+    }
+    return 1.0;
+}
+
+// Nearest event along a straight ray from o outside the medium.
+fn next_event_outside(o: vec3<f32>, d: vec3<f32>) -> Event {
+    let hit = intersect_scene(o, d, SURFACE_EPS, INF);
+    if has_medium() {
+        let b = bounds_intersect(o, d);
+        if b.found && b.s_in > SURFACE_EPS && (!hit.found || b.s_in < hit.t) {
+            return Event(EVENT_MEDIUM, hit, d);
+        }
+    }
+    if hit.found {
+        return Event(EVENT_SURFACE, hit, d);
+    }
+    return Event(EVENT_SKY, hit, d);
+}
+
+// Angle between two directions in degrees (atan2 form: accurate for tiny angles in f32).
+fn angle_between_deg(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return atan2(length(cross(a, b)), dot(a, b)) * (180.0 / PI);
+}
+
+// One pixel sample: the camera ray `d` through the medium and the objects, up to
+// max_depth bounces. `jitter` scales the first step of the camera ray's passage.
+fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample {
+    var origin = params.cam_origin.xyz;
+    var dir = d;
+    var throughput = vec3<f32>(1.0);
+    var radiance = vec3<f32>(0.0);
+    var aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED);
+    var primary = true;
+    var inside = has_medium() && bounds_signed_distance(origin) < 0.0;
+    var bounces = 0u;
+    let max_events = EVENTS_PER_DEPTH * (params.rows.z + 1u);
+    for (var ev_i = 0u; ev_i < max_events; ev_i++) {
+        var event: Event;
+        if inside {
+            event = Event(EVENT_MEDIUM, no_hit(), dir);
+        } else {
+            event = next_event_outside(origin, dir);
+        }
+        if event.kind == EVENT_SKY {
+            radiance += throughput * sky_radiance(event.dir);
+            break;
+        }
+        var hit = event.hit;
+        var hit_dir = event.dir;
+        if event.kind == EVENT_MEDIUM {
+            var stats = MarchStats(0u, 0u, 0.0, 0.0);
+            let b = bounds_intersect(origin, dir);
+            var straight = 0.0;
+            if b.found {
+                straight = max(b.s_out - max(b.s_in, 0.0), 0.0);
+            }
+            let entry_dir = dir;
+            let end = march_medium(origin, dir, select(1.0, jitter, primary), &stats);
+            aov.steps += stats.steps;
+            aov.evals += stats.evals;
+            inside = false;
+            var status = end.status;
+            var has_hit = false;
+            switch end.kind {
+                case END_EXITED: {
+                    throughput *= end.transmittance;
+                    origin = end.point;
+                    dir = end.dir;
+                }
+                case END_OBJECT: {
+                    throughput *= end.transmittance;
+                    dir = end.dir;
+                    has_hit = true;
+                    hit = end.hit;
+                    hit_dir = end.dir;
+                }
+                case END_MISSED: {
+                    // Grazing the bounds: continue as a straight ray past them.
+                    origin += dir * SURFACE_EPS;
+                }
+                default: {
+                    dir = end.dir;
+                }
+            }
+            if primary && status != STATUS_MISSED {
+                aov.status = status;
+                aov.exit_dir = dir;
+                aov.deflection_deg = angle_between_deg(entry_dir, dir);
+                if status == STATUS_EXITED {
+                    aov.opd = stats.opl - ambient_index() * straight;
+                } else {
+                    aov.opd = 0.0;
+                }
+            }
+            if !has_hit {
+                if status == STATUS_EXITED || status == STATUS_MISSED {
+                    continue;
+                }
+                // max_steps or error: the path ends here, black.
+                break;
+            }
+        }
+        // A surface.
+        primary = false;
+        if bounces >= params.rows.z {
+            break;
+        }
+        bounces += 1u;
+        let obj = objects[hit.object];
+        let cos_i = -dot(hit_dir, hit.normal);
+        var next = vec3<f32>(0.0);
+        var weight = vec3<f32>(1.0);
+        switch obj.kinds.y {
+            case MATERIAL_DIFFUSE: {
+                radiance += throughput * shade_diffuse(hit, obj.color_a.xyz);
+            }
+            case MATERIAL_CHECKER: {
+                var albedo = obj.color_b.xyz;
+                if checker_is_a(hit.point, obj.color_a.w) {
+                    albedo = obj.color_a.xyz;
+                }
+                radiance += throughput * shade_diffuse(hit, albedo);
+            }
+            case MATERIAL_MIRROR: {
+                next = reflect_dir(hit_dir, hit.normal);
+                weight = obj.color_a.xyz;
+            }
+            case MATERIAL_METAL: {
+                next = reflect_dir(hit_dir, hit.normal);
+                weight = fresnel_schlick(cos_i, obj.color_a.xyz);
+            }
+            default: {
+                // Glass: Fresnel chooses reflection or refraction at random.
+                let ior = obj.color_a.w;
+                let side = select(-1.0, 1.0, hit.front_face);
+                let n_outside = index_at(hit.point + hit.normal * (SURFACE_EPS * side));
+                var n1 = ior;
+                var n2 = n_outside;
+                if hit.front_face {
+                    n1 = n_outside;
+                    n2 = ior;
+                }
+                let f = fresnel_dielectric(cos_i, n1, n2);
+                let u = rng_next_f32(rng);
+                let t = refract_dir(hit_dir, hit.normal, n1, n2);
+                if t.w > 0.5 && u >= f {
+                    next = t.xyz;
+                    weight = obj.color_a.xyz;
+                } else {
+                    next = reflect_dir(hit_dir, hit.normal);
+                }
+            }
+        }
+        if obj.kinds.y == MATERIAL_DIFFUSE || obj.kinds.y == MATERIAL_CHECKER {
+            // Diffuse surfaces end the path (direct light only).
+            break;
+        }
+        throughput *= weight;
+        let side = select(-1.0, 1.0, dot(next, hit.normal) >= 0.0);
+        origin = hit.point + hit.normal * (side * SURFACE_EPS);
+        dir = next;
+        inside = has_medium() && bounds_signed_distance(origin) < 0.0;
+    }
+    return PathSample(radiance, aov);
+}
+
+fn shade_diffuse(hit: Hit, albedo: vec3<f32>) -> vec3<f32> {
+    var irradiance = sky_radiance(hit.normal) * (AMBIENT_SKY_WEIGHT * PI);
+    let p = hit.point + hit.normal * SURFACE_EPS;
+    let count = params.grid_dims.w;
+    for (var i = 0u; i < count; i++) {
+        let light = lights[i];
+        var to_light: vec3<f32>;
+        var dist: f32;
+        var intensity: vec3<f32>;
+        if light.position.w < 0.5 {
+            let v = light.position.xyz - p;
+            dist = length(v);
+            to_light = v / dist;
+            intensity = light.intensity.xyz / (dist * dist);
+        } else {
+            to_light = -normalize(light.position.xyz);
+            dist = INF;
+            intensity = light.intensity.xyz;
+        }
+        let cos = dot(hit.normal, to_light);
+        if cos <= 0.0 {
+            continue;
+        }
+        let visibility = shadow_transmittance(p, to_light, dist);
+        irradiance += intensity * visibility * cos;
+    }
+    return albedo * irradiance / PI;
+}
+
+// Transmittance of a straight segment through the objects; w = 0 if blocked.
+fn straight_transmittance(o: vec3<f32>, d: vec3<f32>, dist: f32) -> vec4<f32> {
+    var t = vec3<f32>(1.0);
+    let count = params.rows.w;
+    for (var i = 0u; i < count; i++) {
+        let obj = objects[i];
+        if intersect_object(obj, o, d, SURFACE_EPS, dist).found {
+            if obj.kinds.y == MATERIAL_GLASS {
+                let r0 = fresnel_dielectric(1.0, 1.0, obj.color_a.w);
+                t *= obj.color_a.xyz * (1.0 - r0) * (1.0 - r0);
+            } else {
+                return vec4<f32>(0.0);
+            }
+        }
+    }
+    return vec4<f32>(t, 1.0);
+}
+
+// The shadow ray traced through the medium (bend_shadow_rays): straight to the bounds,
+// through the medium (an object inside blocks it), straight again along the bent exit
+// direction for the remaining distance. w = 0 when it does not meet the medium.
+fn bent_shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec4<f32> {
+    var to_entry = 0.0;
+    if bounds_signed_distance(p) >= 0.0 {
+        let b = bounds_intersect(p, l);
+        if !(b.found && b.s_in > 0.0 && b.s_in < dist) {
+            return vec4<f32>(0.0);
+        }
+        to_entry = b.s_in;
+    }
+    let before = straight_transmittance(p, l, to_entry);
+    if before.w < 0.5 {
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    }
+    var stats = MarchStats(0u, 0u, 0.0, 0.0);
+    let end = march_medium(p, l, 1.0, &stats);
+    if end.kind == END_EXITED {
+        let remaining = max(dist - to_entry - stats.length, 0.0);
+        let after = straight_transmittance(end.point, end.dir, remaining);
+        return vec4<f32>(before.xyz * after.xyz * after.w * end.transmittance, 1.0);
+    }
+    if end.kind == END_MISSED {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+}
+
+fn shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec3<f32> {
+    if field_flag(FLAG_BEND_SHADOWS) && has_medium() {
+        let t = bent_shadow_transmittance(p, l, dist);
+        if t.w > 0.5 {
+            return t.xyz;
+        }
+    }
+    let s = straight_transmittance(p, l, dist);
+    return s.xyz * s.w;
+}

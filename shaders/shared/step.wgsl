@@ -1,0 +1,156 @@
+// Step policies: fixed, the paper's gradient heuristic, and error control (the adaptive
+// pair's embedded estimate, or step doubling with Richardson's estimate). Lengths are
+// world lengths ds; h = ds / n at the step start. Plus the GPU's per-pixel jitter of the
+// first step (turns banding into noise; off in GPU-vs-CPU comparisons).
+// CPU twin: grin_trace::step::StepController.
+
+// ADAPTIVE_MAX_DS_REL, ADAPTIVE_MIN_DS_REL, ADAPTIVE_INITIAL_DS_REL (of the bounds' radius).
+const ADAPTIVE_MAX_DS_REL: f32 = 0.25;
+const ADAPTIVE_MIN_DS_REL: f32 = 1e-12;
+const ADAPTIVE_INITIAL_DS_REL: f32 = 0.01;
+// Controller safety factor and growth limits (Hairer, Norsett & Wanner II.4).
+const SAFETY: f32 = 0.9;
+const MAX_GROWTH: f32 = 5.0;
+const MIN_SHRINK: f32 = 0.2;
+const MAX_REJECTIONS: u32 = 60u;
+// Shortest jittered first step, as a fraction of the nominal step.
+const MIN_JITTER_FRACTION: f32 = 1e-3;
+
+struct StepController {
+    len_scale: f32,
+    ds_adapt: f32,
+    // Factor for the next fixed/heuristic step (the jitter of the first step, then 1).
+    jitter: f32,
+}
+
+struct Taken {
+    step: Step,
+    h: f32,
+    evals: u32,
+}
+
+fn bounds_radius() -> f32 {
+    if bounds_is_box() {
+        return min_element((params.bounds_box_max.xyz - params.bounds_box_min.xyz) * 0.5);
+    }
+    return params.bounds_sphere.w;
+}
+
+fn step_controller_new(jitter: f32) -> StepController {
+    let len_scale = bounds_radius();
+    var ds = ADAPTIVE_INITIAL_DS_REL * len_scale;
+    // params.step.y > 0 carries the scene's adaptive `initial`.
+    if STEP_POLICY == STEP_ADAPTIVE && params.step.y > 0.0 {
+        ds = params.step.y;
+    }
+    return StepController(len_scale, ds, jitter);
+}
+
+// lerp(min, max, clamp(1 - |dir . grad n| / amplitude, 0, 1)).
+fn heuristic_ds(ds_min: f32, ds_max: f32, amplitude: f32, dir: vec3<f32>, grad_n: vec3<f32>) -> f32 {
+    var w = 1.0;
+    if amplitude > 0.0 {
+        w = clamp(1.0 - abs(dot(dir, grad_n)) / amplitude, 0.0, 1.0);
+    }
+    return ds_min + (ds_max - ds_min) * w;
+}
+
+fn error_norm(ctrl: StepController, er: vec3<f32>, et: vec3<f32>, n: f32) -> f32 {
+    let pos = length(er);
+    let dir = length(et) / max(abs(n), 1.17549435e-38) * ctrl.len_scale;
+    return max(pos, dir);
+}
+
+// Step doubling: one step of h and two of h/2; Richardson's error of the half steps.
+fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32) -> Taken {
+    let half = h * 0.5;
+    let big = integrate_step(s, d0, h);
+    let first = integrate_step(s, d0, half);
+    var mid = first.end;
+    var mid_evals = 0u;
+    if !first.has_end {
+        mid = sample_field(first.state.r);
+        mid_evals = 1u;
+    }
+    var second = integrate_step(first.state, mid.grad_n * mid.n, half);
+    let scale = 1.0 / (f32(1u << p) - 1.0);
+    let er = (second.state.r - big.state.r) * scale;
+    let et = (second.state.t - big.state.t) * scale;
+    let err = error_norm(ctrl, er, et, mid.n);
+    second.evals = big.evals + first.evals + mid_evals + second.evals;
+    // The error rides in err_r.x of the returned Taken's step (read by take_adaptive).
+    second.err_r = vec3<f32>(err, 0.0, 0.0);
+    return Taken(second, h, 0u);
+}
+
+fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample, tol: f32) -> Taken {
+    let n0 = s0.n;
+    let d0 = s0.grad_n * s0.n;
+    let kind = INTEGRATOR;
+    let exponent = 1.0 / f32(integrator_order(kind));
+    let ds_min = ADAPTIVE_MIN_DS_REL * (*ctrl).len_scale;
+    let ds_max = ADAPTIVE_MAX_DS_REL * (*ctrl).len_scale;
+    var evals = 0u;
+    var rejections = 0u;
+    loop {
+        let ds = clamp((*ctrl).ds_adapt, ds_min, ds_max);
+        let h = ds / n0;
+        var step: Step;
+        var err: f32;
+        if kind == INTEGRATOR_ADAPTIVE {
+            step = dopri_step(s, d0, h);
+            err = error_norm(*ctrl, step.err_r, step.err_t, n0);
+        } else {
+            let d = doubled_step(*ctrl, s, d0, h, integrator_order(kind));
+            step = d.step;
+            err = step.err_r.x;
+        }
+        evals += step.evals;
+        let accept = err <= tol || ds <= ds_min || rejections >= MAX_REJECTIONS;
+        var factor = MIN_SHRINK;
+        if err > 0.0 && err < INF {
+            factor = clamp(SAFETY * pow(tol / err, exponent), MIN_SHRINK, MAX_GROWTH);
+        } else if err == 0.0 {
+            factor = MAX_GROWTH;
+        }
+        (*ctrl).ds_adapt = clamp(ds * factor, ds_min, ds_max);
+        if accept {
+            return Taken(step, h, evals);
+        }
+        rejections += 1u;
+    }
+    // Unreachable: the loop accepts after MAX_REJECTIONS.
+    return Taken(plain_step(s.r, s.t, 0u), 0.0, evals);
+}
+
+// Take one step from s (field sample s0 there), its length chosen by the policy.
+fn take_step(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample) -> Taken {
+    let n0 = s0.n;
+    let d0 = s0.grad_n * s0.n;
+    var ds: f32;
+    switch STEP_POLICY {
+        case STEP_HEURISTIC: {
+            let dir = normalize_or_zero(s.t);
+            ds = heuristic_ds(params.step.x, params.step.y, params.step.z, dir, s0.grad_n);
+        }
+        case STEP_ADAPTIVE: {
+            return take_adaptive(ctrl, s, s0, params.step.x);
+        }
+        default: {
+            ds = params.step.x;
+        }
+    }
+    ds *= (*ctrl).jitter;
+    (*ctrl).jitter = 1.0;
+    let h = ds / n0;
+    let step = integrate_step(s, d0, h);
+    return Taken(step, h, step.evals);
+}
+
+fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
+    let l = length(v);
+    if l > 0.0 && l < INF {
+        return v / l;
+    }
+    return vec3<f32>(0.0);
+}
