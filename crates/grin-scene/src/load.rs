@@ -19,11 +19,21 @@ pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
 /// Parse and validate scene text; `path` is used in error messages.
 pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
     let mut scene: Scene = toml::from_str(text).map_err(|e| {
-        let offset = e.span().map_or(0, |s| s.start);
-        let (line, column) = line_column(text, offset);
-        let key = Document::parse(text)
+        let doc = Document::parse(text);
+        let mut offset = e.span().map_or(0, |s| s.start);
+        let mut key = doc
             .key_at(offset)
             .unwrap_or_else(|| "(document)".to_owned());
+        // serde reports unknown keys of buffered tables (internally tagged field kinds)
+        // at the enclosing table: point at the unknown key itself when it is there.
+        if let Some(name) = unknown_field(e.message()) {
+            let child = format!("{key}.{name}");
+            if let Some(span) = doc.exact_span_of(&child) {
+                offset = span.start;
+                key = child;
+            }
+        }
+        let (line, column) = line_column(text, offset);
         SceneError::Parse {
             path: path.to_owned(),
             line,
@@ -57,6 +67,12 @@ fn normalize(scene: &mut Scene) {
             }
         }
     }
+}
+
+/// The key named by serde's "unknown field `name`, expected ..." message.
+fn unknown_field(message: &str) -> Option<&str> {
+    let rest = message.strip_prefix("unknown field `")?;
+    rest.split('`').next()
 }
 
 /// Errors are one line on stderr.

@@ -53,11 +53,25 @@ impl<'i> Document<'i> {
     /// for a table entry, the element for an array index. `None` if not even the first
     /// segment is present.
     pub(crate) fn span_of(&self, path: &str) -> Option<Range<usize>> {
+        self.resolve(path).map(|(span, _)| span)
+    }
+
+    /// Byte span of exactly `path` (its key, or element), if all of it is present.
+    pub(crate) fn exact_span_of(&self, path: &str) -> Option<Range<usize>> {
+        self.resolve(path)
+            .and_then(|(span, complete)| complete.then_some(span))
+    }
+
+    /// The span of the deepest present part of `path` and whether that is all of it.
+    fn resolve(&self, path: &str) -> Option<(Range<usize>, bool)> {
         let root = self.root.as_ref()?;
+        let segments = parse_path(path);
+        let wanted = segments.len();
+        let mut found = 0;
         let mut table: Option<&DeTable<'i>> = Some(root.get_ref());
         let mut value: Option<&DeValue<'i>> = None;
         let mut best = None;
-        for seg in parse_path(path) {
+        for seg in segments {
             let next = match (&seg, table, value) {
                 (Segment::Key(k), Some(t), _) => t
                     .iter()
@@ -68,10 +82,11 @@ impl<'i> Document<'i> {
             };
             let Some((span, v)) = next else { break };
             best = Some(span);
+            found += 1;
             value = Some(v.get_ref());
             table = v.get_ref().as_table();
         }
-        best
+        best.map(|span| (span, found == wanted))
     }
 
     /// The dotted path of the deepest key whose key or value span contains byte `offset`.

@@ -393,3 +393,38 @@ fn io_error_names_the_file() {
         "{e}"
     );
 }
+#[test]
+fn unknown_keys_inside_field_kinds_point_at_the_key() {
+    let m = error_of("kind = \"luneburg\"", "kind = \"luneburg\", radiuss = 1.0");
+    assert_eq!(
+        m,
+        "scene.toml:17:30: medium.field.radiuss: unknown field `radiuss`, expected `radius`"
+    );
+    let m = error_of(
+        "kind = \"luneburg\"",
+        "kind = \"noise\", amplitude = 0.1, octavs = 3",
+    );
+    assert!(
+        m.starts_with(
+            "scene.toml:17:44: medium.field.octavs: unknown field `octavs`, expected one of"
+        ),
+        "{m}"
+    );
+    let m = error_of(
+        "kind = \"luneburg\"",
+        "kind = \"plume\", plumes = [{ a = 1.0, center = [0.0, 0.0, 0.0] }]",
+    );
+    assert_eq!(m, "scene.toml:17:9: medium.field: missing field `s`");
+    let m = error_of("field = { kind = \"luneburg\" }", "");
+    assert_eq!(m, "scene.toml:14:1: medium: missing field `field`");
+    let m = error_of(
+        "step = { heuristic = { min = 0.002, max = 0.05 } }",
+        "integrator = \"rk5\"",
+    );
+    assert!(
+        m.starts_with(
+            "scene.toml:25:14: render.integrator: unknown variant `rk5`, expected one of"
+        ),
+        "{m}"
+    );
+}
