@@ -78,9 +78,12 @@ def blender_cache():
     # A plume rising from a burner at y = 0: widening with height, cooling as it rises.
     height = np.clip(y, 0.0, None)
     width = 0.12 + 0.25 * height
-    envelope = np.exp(-r2 / (width * width)) * (y > -0.05)
+    # The burner's top at y = 0, smoothed over ~2 voxels: a hard cut would be a jump in
+    # n that no interpolation (nor bake) resolves.
+    base = 0.5 * (1.0 + np.tanh(y / 0.08))
+    envelope = np.exp(-r2 / (width * width)) * base
     temperature = 2.0 * envelope * np.exp(-height / 1.2)
-    flame = np.clip(1.0 - height / 0.35, 0.0, 1.0) * np.exp(-r2 / 0.01) * (y > -0.05)
+    flame = np.clip(1.0 - height / 0.35, 0.0, 1.0) * np.exp(-r2 / 0.01) * base
     density = 0.8 * envelope * (1.0 - np.exp(-height / 0.2))
     # Zero exactly where tiny so the grids are sparse (background 0, inactive).
     grids = []

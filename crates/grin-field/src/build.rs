@@ -61,18 +61,18 @@ pub fn build_field(
 
         // Kinds built by other modules: each arm is one call into its module.
         FieldSpec::Noise(spec) => Arc::new(crate::noise::NoiseField::new(spec, bounds, ambient)?),
-        FieldSpec::Vdb(_) => return Err(unavailable("vdb", scene_dir)),
+        FieldSpec::Vdb(spec) => Arc::new(crate::vdb::VdbField::from_medium(
+            medium,
+            spec,
+            scene_dir,
+            crate::vdb::DEFAULT_MAX_DENSE_BYTES,
+        )?),
         FieldSpec::Baked { path } => Arc::new(crate::grinf::load_for_medium(
             path, scene_dir, bounds, ambient,
         )?),
     };
     check_positive(field.as_ref(), &field.describe())?;
     Ok(field)
-}
-
-/// The error for a field kind whose builder is not wired in yet.
-fn unavailable(kind: &str, _scene_dir: &Path) -> FieldError {
-    FieldError::Other(format!("field kind `{kind}` is not available yet"))
 }
 
 #[cfg(test)]
