@@ -134,7 +134,7 @@ impl RenderScene {
             };
             match o.shape {
                 Shape::Sphere { center, radius } => {
-                    if !finite3(center) || !(radius > 0.0 && radius.is_finite()) {
+                    if !(finite3(center) && radius > 0.0 && radius.is_finite()) {
                         return Err(bad("sphere needs a finite center and a positive radius"));
                     }
                 }

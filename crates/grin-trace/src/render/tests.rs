@@ -315,3 +315,88 @@ fn cancel_stops_the_render() {
     let e = render_cpu(&rs, &|_| {}, &AtomicBool::new(true)).expect_err("cancelled");
     assert!(matches!(e, super::RenderError::Cancelled));
 }
+
+#[test]
+fn bent_shadow_ray_through_a_ball_lens_carries_its_fresnel_transmittance() {
+    // A ground point straight below a constant-n ball, the light straight above it: the
+    // shadow ray crosses both surfaces at normal incidence and is not deviated, so bending
+    // it multiplies the direct light by (1 - R)^2, R = ((n - 1)/(n + 1))^2.
+    let text = r#"
+[camera]
+position = [2.0, 0.5, 0.0]
+look_at = [0.0, 0.0, 0.0]
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
+material = { diffuse = { color = [1.0, 1.0, 1.0] } }
+[[light]]
+point = { position = [0.0, 3.0, 0.0], intensity = [9.0, 9.0, 9.0] }
+[sky]
+gradient = { horizon = [0.0, 0.0, 0.0], zenith = [0.0, 0.0, 0.0], ground = [0.0, 0.0, 0.0] }
+[medium]
+bounds = { sphere = { center = [0.0, 1.5, 0.0], radius = 0.5 } }
+field = { kind = "uniform", n = 1.5 }
+[render]
+width = 3
+height = 3
+"#;
+    let n = 1.5;
+    let field: Arc<dyn IndexField> = Arc::new(ConstantField {
+        bounds: Bounds::Sphere {
+            center: DVec3::new(0.0, 1.5, 0.0),
+            radius: 0.5,
+        },
+        n,
+        ambient: 1.0,
+    });
+    let mut s = scene(text);
+    let straight = render(&s, Some(field.clone())).pixels[4].rgb[0];
+    s.render.bend_shadow_rays = true;
+    let bent = render(&s, Some(field)).pixels[4].rgb[0];
+    // Straight shadow rays ignore the medium (the paper): I / d^2 / pi.
+    assert!(
+        (straight - 1.0 / std::f32::consts::PI).abs() < 1e-6,
+        "{straight}"
+    );
+    let r = ((n - 1.0) / (n + 1.0)).powi(2);
+    let expected = (1.0 - r) * (1.0 - r);
+    assert!(
+        (f64::from(bent / straight) - expected).abs() < 1e-6,
+        "ratio {} vs {expected}",
+        bent / straight
+    );
+}
+
+#[test]
+fn jitter_moves_steps_but_not_the_refracted_rays() {
+    let mut s = scene(PAPER_LIKE);
+    s.render.spp = 1;
+    s.render.step = StepSpec::Fixed(0.05);
+    let bounds = Bounds::Sphere {
+        center: DVec3::new(0.0, 0.5, 0.0),
+        radius: 0.6,
+    };
+    let field: Arc<dyn IndexField> = Arc::new(ConstantField {
+        bounds,
+        n: 1.2,
+        ambient: 1.0,
+    });
+    s.render.jitter = false;
+    let plain = render(&s, Some(field.clone()));
+    s.render.jitter = true;
+    let jittered = render(&s, Some(field));
+    let mut moved = 0;
+    for (a, b) in plain.pixels.iter().zip(&jittered.pixels) {
+        assert_eq!(a.status, b.status);
+        let da = DVec3::from(a.exit_dir.map(f64::from));
+        let db = DVec3::from(b.exit_dir.map(f64::from));
+        assert!(
+            (da - db).length() < 1e-6,
+            "constant n: jitter must not change the path"
+        );
+        if a.steps != b.steps {
+            moved += 1;
+        }
+    }
+    // A shorter first step shifts the step grid: some rays need one step more.
+    assert!(moved > 10, "{moved} pixels changed their step count");
+}
