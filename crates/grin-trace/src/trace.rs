@@ -269,11 +269,8 @@ pub fn trace_ray_jittered<R: Real>(
         r = state.r;
         res.position = r.to_dvec3();
         res.direction = Vec3Like::to_dvec3(state.t).normalize_or_zero();
-        if !is_finite_v::<R>(r)
-            || !is_finite_v::<R>(state.t)
-            || !(s0.n > R::zero())
-            || !s0.n.is_finite()
-        {
+        let n_ok = s0.n.is_finite() && s0.n > R::zero();
+        if !is_finite_v::<R>(r) || !is_finite_v::<R>(state.t) || !n_ok {
             res.status = RayStatus::Error;
             return res;
         }
