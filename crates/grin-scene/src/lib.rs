@@ -11,6 +11,6 @@ mod types;
 mod validate;
 
 pub use error::SceneError;
-pub use load::{load_scene, parse_scene};
+pub use load::{load_scene, locate_key, parse_scene};
 pub use types::*;
 pub use validate::{MAX_IMAGE_SIDE, MAX_NOISE_OCTAVES};

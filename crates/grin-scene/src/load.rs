@@ -79,3 +79,12 @@ fn unknown_field(message: &str) -> Option<&str> {
 fn one_line(message: &str) -> String {
     message.trim().replace('\n', "; ")
 }
+
+/// 1-based (line, column) of a dotted key path (`medium.field.n`, `object[2].shape`) in
+/// scene text, for errors found after loading (e.g. by field builders) that should point
+/// into the file. `None` if no part of the path is in the text.
+pub fn locate_key(text: &str, key: &str) -> Option<(usize, usize)> {
+    Document::parse(text)
+        .span_of(key)
+        .map(|span| line_column(text, span.start))
+}

@@ -428,3 +428,10 @@ fn unknown_keys_inside_field_kinds_point_at_the_key() {
         "{m}"
     );
 }
+
+#[test]
+fn locate_key_finds_field_parameters() {
+    assert_eq!(crate::locate_key(BASE, "medium.field.kind"), Some((17, 11)));
+    assert_eq!(crate::locate_key(BASE, "light[0].point"), Some((20, 1)));
+    assert_eq!(crate::locate_key(BASE, "nothing.here"), None);
+}
