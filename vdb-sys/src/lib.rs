@@ -367,6 +367,12 @@ impl VdbFile {
         if !path.exists() {
             return Err(VdbError::Missing { path: shown });
         }
+        if std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() == 0) {
+            return Err(VdbError::Open {
+                path: shown,
+                message: "the file is empty".into(),
+            });
+        }
         let c = c_path(path)?;
         check_in_child(path)?;
         let mut err = [0 as c_char; ERR_LEN];
