@@ -74,10 +74,24 @@ impl ExponentialAtmosphere {
         1.0 + self.e * (-h / self.scale_height).exp()
     }
 
+    /// Height above the base where a ray with horizontal invariant `beta` = |T - (T . axis)
+    /// axis| turns (n(h) = beta), if the profile reaches that index (see [`turning_height`]).
+    pub fn turning_height(&self, beta: f64) -> Option<f64> {
+        turning_height(self.e, self.scale_height, beta)
+    }
+
     /// Unit "up" axis.
     pub fn axis(&self) -> DVec3 {
         self.axis_v
     }
+}
+
+/// Height h where n(h) = 1 + e exp(-h / H) equals `beta`: h = -H ln((beta - 1) / e).
+/// A ray whose horizontal invariant is beta turns there (its vertical T component
+/// vanishes); `None` when (beta - 1) / e <= 0, i.e. no height has that index.
+pub fn turning_height(e: f64, scale_height: f64, beta: f64) -> Option<f64> {
+    let ratio = (beta - 1.0) / e;
+    (ratio > 0.0 && ratio.is_finite()).then(|| -scale_height * ratio.ln())
 }
 
 impl IndexField for ExponentialAtmosphere {
@@ -151,6 +165,25 @@ mod tests {
         assert!((f.n(DVec3::ZERO) - (1.0 - 5e-5)).abs() < 1e-15);
         assert!(f.sample(DVec3::new(0.0, 0.2, 0.0)).grad_n.y > 0.0);
         assert!(f.n(DVec3::new(0.0, 0.9, 0.0)) > f.n(DVec3::new(0.0, 0.1, 0.0)));
+    }
+
+    #[test]
+    fn turning_height_is_where_n_equals_the_horizontal_invariant() {
+        let b = Bounds::Box {
+            min: DVec3::new(-1.0, 0.0, -1.0),
+            max: DVec3::new(1.0, 1.0, 1.0),
+        };
+        let f = ExponentialAtmosphere::new(b, 1.0, -2.5e-3, 0.15, 0.0, Axis::Y).expect("valid");
+        // A ray at height 0.3 heading 0.1 degrees down: beta = n(0.3) cos(0.1 deg).
+        let beta = f.n_at_height(0.3) * 0.1f64.to_radians().cos();
+        let h = f.turning_height(beta).expect("turns above the ground");
+        assert!(h > 0.0 && h < 0.3, "h = {h}");
+        assert!((f.n_at_height(h) - beta).abs() < 1e-15);
+        // Steeper than the layer can bend: the turning height is below the ground.
+        let beta = f.n_at_height(0.3) * 5f64.to_radians().cos();
+        assert!(f.turning_height(beta).is_some_and(|h| h < 0.0));
+        // n < 1 everywhere when e < 0: no height has index 1.001.
+        assert_eq!(f.turning_height(1.001), None);
     }
 
     #[test]
