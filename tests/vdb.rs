@@ -122,7 +122,7 @@ fn info_refuses_bad_files_clearly() {
     let missing = dir.path().join("missing.vdb");
     fails_cleanly(
         &run(&["info", missing.to_str().expect("utf8")]),
-        "no such file",
+        "No such file",
         None,
     );
 }
