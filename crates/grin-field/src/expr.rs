@@ -10,7 +10,7 @@ use crate::bounds::Bounds;
 use crate::check::{CHECK_RESOLUTION, sample_stats};
 use crate::field::{FieldError, FieldSample, IndexField};
 
-/// The variables a formula may use, in the order of [`Vars`].
+/// The variables a formula may use: world coordinates x, y, z and time t (seconds).
 pub const VARIABLES: [&str; 4] = ["x", "y", "z", "t"];
 
 /// Relative margin added to the sampled n range and max |grad n| (they are estimates
