@@ -36,8 +36,17 @@ fn fresnel_schlick(cos_i: f32, f0: vec3<f32>) -> vec3<f32> {
     return f0 + (vec3<f32>(1.0) - f0) * m;
 }
 
-fn checker_is_a(p: vec3<f32>, scale: f32) -> bool {
-    let ix = i32(floor(p.x / scale));
-    let iz = i32(floor(p.z / scale));
-    return ((ix + iz) & 1) == 0;
+// Checkerboard with squares of side `scale` in the two world axes across the surface's
+// dominant normal axis (x/z on a floor, x/y on a wall facing z, y/z facing x).
+fn checker_is_a(p: vec3<f32>, normal: vec3<f32>, scale: f32) -> bool {
+    let a = abs(normal);
+    var uv = vec2<f32>(p.y, p.z);
+    if a.y >= a.x && a.y >= a.z {
+        uv = vec2<f32>(p.x, p.z);
+    } else if a.z >= a.x {
+        uv = vec2<f32>(p.x, p.y);
+    }
+    let iu = i32(floor(uv.x / scale));
+    let iv = i32(floor(uv.y / scale));
+    return ((iu + iv) & 1) == 0;
 }

@@ -162,7 +162,7 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
             }
             case MATERIAL_CHECKER: {
                 var albedo = obj.color_b.xyz;
-                if checker_is_a(hit.point, obj.color_a.w) {
+                if checker_is_a(hit.point, hit.normal, obj.color_a.w) {
                     albedo = obj.color_a.xyz;
                 }
                 radiance += throughput * shade_diffuse(hit, albedo);
