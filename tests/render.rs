@@ -342,10 +342,16 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
     // The GPU marches a baked f32 copy of the analytic lens: the images agree except
     // for a few pixels along the lens rim and checker edges (tests/gpu.rs holds the
     // strict comparisons with the same baked field on both sides).
+    // Measured: mean 2.6e-3, p99 1.1e-4, max 0.85 (a rim pixel).
     assert!(
-        stats.mean < 0.02,
+        stats.mean < 0.01,
         "mean per-pixel difference {}",
         stats.mean
+    );
+    assert!(
+        stats.p99 < 0.01,
+        "99th percentile per-pixel difference {}",
+        stats.p99
     );
     let same_status = cpu
         .pixels
