@@ -421,3 +421,101 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
         "exit position differs by {max_dp}"
     );
 }
+
+#[test]
+fn export_writes_delta_n_and_grad_n_that_read_back_exactly() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let baked = dir.path().join("fire.grinf");
+    let out = run(&[
+        "bake",
+        data("fire-haze.toml").to_str().expect("utf8"),
+        "-o",
+        baked.to_str().expect("utf8"),
+        "--resolution",
+        "20",
+        "--error",
+        "0.5",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let vdb_path = dir.path().join("fire.vdb");
+    let out = run(&[
+        "export",
+        baked.to_str().expect("utf8"),
+        "-o",
+        vdb_path.to_str().expect("utf8"),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(summary["grids"][0], "delta_n");
+
+    let field = grin_field::grinf::load(&baked).expect("load baked");
+    let geo = *field.geometry();
+    let file = vdb_sys::VdbFile::open(&vdb_path).expect("open export");
+    let bbox = vdb_sys::IndexBox {
+        min: [0, 0, 0],
+        max: geo.dims.map(|d| d as i32 - 1),
+    };
+    let dn = file.read_scalar("delta_n", bbox, 1 << 28).expect("delta_n");
+    let gn = file.read_vec3("grad_n", bbox, 1 << 28).expect("grad_n");
+    let info = file.grid("delta_n").expect("grid");
+    let ambient = info
+        .metadata
+        .iter()
+        .find(|m| m.key == "n_ambient")
+        .expect("n_ambient metadata");
+    assert_eq!(
+        ambient.value,
+        vdb_sys::MetaValue::Number(field.ambient_index())
+    );
+    let mut nonzero = 0;
+    for k in 0..geo.dims[2] {
+        for j in 0..geo.dims[1] {
+            for i in 0..geo.dims[0] {
+                let v = field.voxels().get(geo.index(i, j, k));
+                let ijk = [i as i32, j as i32, k as i32];
+                assert_eq!(dn.get(ijk), Some(v[0]), "delta_n at {ijk:?}");
+                assert_eq!(gn.get(ijk), Some([v[1], v[2], v[3]]), "grad_n at {ijk:?}");
+                nonzero += usize::from(v[0] != 0.0);
+                // Voxel centres sit where the baked nodes are.
+                let w = info
+                    .transform
+                    .index_to_world([i as f64, j as f64, k as f64]);
+                let node = geo.node_world(i, j, k);
+                assert!((DVec3::from_array(w) - node).length() < 1e-12);
+            }
+        }
+    }
+    assert!(
+        nonzero > 100,
+        "the plume must be in the export ({nonzero} voxels)"
+    );
+
+    // Bad input: no output file.
+    let missing = dir.path().join("missing.grinf");
+    let bad_out = dir.path().join("bad.vdb");
+    let out = run(&[
+        "export",
+        missing.to_str().expect("utf8"),
+        "-o",
+        bad_out.to_str().expect("utf8"),
+    ]);
+    fails_cleanly(&out, "missing.grinf", None);
+    assert!(!bad_out.exists());
+    let no_dir = dir.path().join("no/such/dir/out.vdb");
+    let out = run(&[
+        "export",
+        baked.to_str().expect("utf8"),
+        "-o",
+        no_dir.to_str().expect("utf8"),
+    ]);
+    fails_cleanly(&out, "cannot write", None);
+}
