@@ -105,7 +105,7 @@ fn luneburg_table_focuses_on_the_antipode() {
         assert_eq!(status, "exited");
         let err = ((v[6] - 2.0).powi(2) + v[7].powi(2) + v[8].powi(2)).sqrt();
         assert!(err < 1e-7, "focus error {err:e} in row {v:?}");
-        assert!(v[15] > 100.0, "steps {}", v[15]);
+        assert!(v[14] > 100.0, "steps {}", v[14]);
     }
     // The miss keeps its origin and reports the unit direction.
     assert_eq!(rows[5].0, "missed");
@@ -242,4 +242,28 @@ fn scene_without_medium_is_an_error() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("no [medium]"), "{}", stderr(&o));
     assert!(!out.exists());
+}
+
+#[test]
+fn step_cap_reports_max_steps() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n-3,0.2,0,1,0,0\n");
+    let out = d.path("out.csv");
+    let o = run(
+        &[&scene, &rays, &out],
+        &["--max-steps", "10", "--exit", "bisection"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = read_output(&out);
+    assert_eq!(rows[0].0, "max_steps");
+    assert_eq!(rows[0].1[14], 10.0, "steps column");
+    // Stopped inside the lens, 10 steps of 0.004 past the entry point.
+    let p = &rows[0].1[6..9];
+    let r = ((p[0] - 0.5).powi(2) + p[1].powi(2) + p[2].powi(2)).sqrt();
+    assert!(r < 1.5, "stopped at radius {r}");
+    // Each step is ds = 0.004 long at its start; n grows inwards, so a little longer.
+    let (opl, length) = (rows[0].1[12], rows[0].1[13]);
+    assert!(length > 0.04 && length < 0.0401, "length {length}");
+    assert!(opl > length && opl < 2f64.sqrt() * length, "opl {opl}");
 }

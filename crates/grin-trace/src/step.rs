@@ -56,7 +56,10 @@ impl StepController {
             StepSpec::Heuristic {
                 amplitude: Some(a), ..
             } => a,
-            _ => field.max_grad_n(),
+            StepSpec::Heuristic {
+                amplitude: None, ..
+            } => field.max_grad_n(),
+            _ => 0.0,
         };
         let ds_adapt = match spec {
             StepSpec::Adaptive {

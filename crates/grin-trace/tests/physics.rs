@@ -670,6 +670,31 @@ fn f32_path_matches_within_1e_4() {
         let res = box_tir_case::<f32>(exit);
         assert!((res.position - p).length() <= 1e-4 && (res.direction - q).length() <= 1e-4);
     }
+    // Linear n^2: the f32 path stays on the parabola and leaves where it should.
+    let (n0, k) = (1.2, 0.3);
+    let slab = TestField::cuboid(
+        Profile::LinearN2 { n0, k },
+        DVec3::splat(-1.0),
+        DVec3::splat(1.0),
+        1.2,
+    );
+    let o = DVec3::new(-0.9, -0.5, 0.1);
+    let d = DVec3::new(1.0, 0.2, 0.05).normalize();
+    let t0 = d * slab.sample(o).n;
+    let exact = |t: f64| o + t0 * t + DVec3::Y * (0.25 * k * t * t);
+    let s = settings(
+        IntegratorKind::Sharma,
+        StepSpec::Fixed(0.05),
+        ExitMethod::Hermite,
+    );
+    let (mut t_acc, mut worst) = (0.0, 0.0f64);
+    let res = trace_ray_observed::<f32>(&slab, &s, o, d, &mut |seg: &Segment| {
+        t_acc += seg.h;
+        worst = worst.max((seg.r1 - exact(t_acc)).length());
+        Control::Continue
+    });
+    assert!(worst <= 1e-4, "f32 parabola error {worst:e}");
+    assert!((res.position - exact((1.0 - o.x) / t0.x)).length() <= 1e-4);
     let worst = exit_distances::<f32>(&luneburg(), &boundary_rays());
     assert!(worst <= 1e-4, "f32 exit {worst:e} from the surface");
     let err = rod_period_error::<f32>(0.02);
