@@ -400,3 +400,41 @@ fn jitter_moves_steps_but_not_the_refracted_rays() {
     // A shorter first step shifts the step grid: some rays need one step more.
     assert!(moved > 10, "{moved} pixels changed their step count");
 }
+
+#[test]
+fn environment_maps_from_exr_and_hdr_light_the_background() {
+    let dir = std::env::temp_dir().join(format!("grin-envmap-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    // A uniform map: every direction sees the same radiance, so the pixel value is exact.
+    let value = [0.25f32, 0.5, 2.0];
+    exr::prelude::write_rgb_file(dir.join("sky.exr"), 16, 8, |_, _| {
+        (value[0], value[1], value[2])
+    })
+    .expect("exr");
+    let hdr = std::fs::File::create(dir.join("sky.hdr")).expect("hdr file");
+    let texels = vec![image::Rgb(value); 16 * 8];
+    image::codecs::hdr::HdrEncoder::new(std::io::BufWriter::new(hdr))
+        .encode(&texels, 16, 8)
+        .expect("hdr");
+    for name in ["sky.exr", "sky.hdr"] {
+        let text = format!(
+            "[camera]\nposition = [0.0, 0.0, 0.0]\nlook_at = [0.0, 0.0, 1.0]\n[sky]\nmap = {{ path = \"{name}\", intensity = 3.0 }}\n[render]\nwidth = 4\nheight = 2\n"
+        );
+        let s = scene(&text);
+        let rs = RenderScene::new(&s, &dir, None).expect("scene with a map");
+        let f = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("render");
+        for p in &f.pixels {
+            for c in 0..3 {
+                // Radiance HDR stores 8-bit mantissas: ~1% quantisation.
+                let rel = (p.rgb[c] - 3.0 * value[c]).abs() / (3.0 * value[c]);
+                assert!(rel < 1e-2, "{name}: {:?}", p.rgb);
+            }
+        }
+    }
+    let s = scene(
+        "[camera]\nposition = [0.0, 0.0, 0.0]\nlook_at = [0.0, 0.0, 1.0]\n[sky]\nmap = { path = \"nope.exr\" }\n",
+    );
+    let e = RenderScene::new(&s, &dir, None).expect_err("missing map");
+    assert!(e.to_string().contains("nope.exr"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
