@@ -807,3 +807,34 @@ fn hermite_exit_is_as_accurate_and_cheaper_than_bisection() {
         assert!(n_h < n_b, "hermite {n_h} evals vs bisection {n_b}");
     }
 }
+
+#[test]
+fn air_bubble_in_glass_reflects_grazing_rays_on_entry() {
+    // n = 1 inside, 1.5 outside: beyond the critical angle asin(1/1.5) the ray never enters.
+    let field = TestField::sphere(Profile::Uniform { n: 1.0 }, DVec3::ZERO, 1.0, 1.5);
+    let s = settings(
+        IntegratorKind::Sharma,
+        StepSpec::Fixed(0.05),
+        ExitMethod::Hermite,
+    );
+    let b: f64 = 0.9;
+    let res = trace_ray::<f64>(&field, &s, DVec3::new(-3.0, b, 0.0), DVec3::X);
+    assert_eq!(res.status, RayStatus::Exited);
+    let hit = DVec3::new(-(1.0 - b * b).sqrt(), b, 0.0);
+    assert!((res.position - hit).length() <= 1e-12);
+    let mirrored = DVec3::X - hit * (2.0 * DVec3::X.dot(hit));
+    assert!(
+        (res.direction - mirrored).length() <= 1e-12,
+        "{}",
+        res.direction
+    );
+    assert_eq!((res.steps, res.length), (0, 0.0));
+    // Below the critical angle it crosses, diverging: deviation 2 (theta_t - theta_i) away.
+    let b: f64 = 0.5;
+    let res = trace_ray::<f64>(&field, &s, DVec3::new(-3.0, b, 0.0), DVec3::X);
+    let (ti, tt) = (b.asin(), (1.5 * b).asin());
+    let dev = 2.0 * (tt - ti);
+    assert!((res.direction - DVec3::new(dev.cos(), dev.sin(), 0.0)).length() <= 1e-10);
+    let r = textbook_reflectance(1.5, 1.0, ti);
+    assert!((res.transmittance - (1.0 - r) * (1.0 - r)).abs() <= 1e-11);
+}
