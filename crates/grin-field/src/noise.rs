@@ -17,13 +17,18 @@
 //! (`map_quintic`), so grad n is continuous across lattice planes (a test checks it); the
 //! classic cubic fade would make grad n kinked there.
 //!
+//! Clamp: the crate's `perlin_3d` ends with `clamp(-1, 1)`, and 3D Perlin noise does
+//! exceed 1 a little, so the crate's output has flat plateaus with kinked edges (grad n
+//! jumps; baked errors there fall at first order only). [`perlin3`] is the same noise (the
+//! crate's permutation table, gradient set and quintic fade) without that clamp.
+//!
 //! The crate has no analytic gradient: grad n is the central difference of delta_n at
 //! `GRADIENT_STEP_PER_WAVELENGTH` of the finest octave's wavelength (6 extra evaluations,
 //! exactly what the paper pays at every Runge-Kutta stage).
 
 use glam::DVec3;
 use grin_scene::{NoiseSpec, NoiseType};
-use noise::{NoiseFn, Perlin};
+use noise::permutationtable::{NoiseHasher, PermutationTable};
 
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
@@ -47,7 +52,7 @@ pub struct NoiseField {
     spec: NoiseSpec,
     bounds: Bounds,
     ambient: f64,
-    octaves: Vec<Perlin>,
+    octaves: Vec<PermutationTable>,
     /// 1 / sum of octave weights.
     norm: f64,
     /// Central-difference step (world units).
@@ -106,8 +111,8 @@ impl NoiseField {
             NoiseType::Perlin => 1,
             NoiseType::Fbm | NoiseType::Turbulence => spec.octaves,
         };
-        let octaves: Vec<Perlin> = (0..count)
-            .map(|i| Perlin::new(spec.seed.wrapping_add(i)))
+        let octaves: Vec<PermutationTable> = (0..count)
+            .map(|i| PermutationTable::new(spec.seed.wrapping_add(i)))
             .collect();
         let weight_sum: f64 = (0..count).map(|i| spec.persistence.powi(i as i32)).sum();
         let finest_frequency = spec.frequency * spec.lacunarity.powi(count as i32 - 1);
@@ -141,11 +146,11 @@ impl NoiseField {
         let lac = self.spec.lacunarity;
         let pers = self.spec.persistence;
         match self.spec.noise {
-            NoiseType::Perlin => self.octaves[0].get(q.to_array()),
+            NoiseType::Perlin => perlin3(&self.octaves[0], q),
             NoiseType::Fbm => {
                 let (mut sum, mut f, mut w) = (0.0, 1.0, 1.0);
                 for o in &self.octaves {
-                    sum += w * o.get((q * f).to_array());
+                    sum += w * perlin3(o, q * f);
                     f *= lac;
                     w *= pers;
                 }
@@ -155,7 +160,7 @@ impl NoiseField {
                 let (mut sum, mut f, mut w) = (0.0, 1.0, 1.0);
                 let soft2 = TURBULENCE_SOFTNESS * TURBULENCE_SOFTNESS;
                 for o in &self.octaves {
-                    let v = o.get((q * f).to_array());
+                    let v = perlin3(o, q * f);
                     sum += w * (v * v + soft2).sqrt();
                     f *= lac;
                     w *= pers;
@@ -208,6 +213,40 @@ impl NoiseField {
         // Sampled maximum: allow for peaks between the sample points.
         g * 1.5
     }
+}
+
+/// Improved Perlin noise at q: `noise` 0.9's `perlin_3d` (same hash, gradients, quintic
+/// fade and scale) without its final clamp to [-1, 1], which would kink the field.
+pub fn perlin3(table: &PermutationTable, q: DVec3) -> f64 {
+    /// The crate's normalisation, 2 / sqrt(3).
+    const SCALE_FACTOR: f64 = 1.154_700_538_379_251_5;
+    let corner = q.floor();
+    let d = q - corner;
+    let c = [corner.x as isize, corner.y as isize, corner.z as isize];
+    let grad = |ox: isize, oy: isize, oz: isize| {
+        let p = d - DVec3::new(ox as f64, oy as f64, oz as f64);
+        match table.hash(&[c[0] + ox, c[1] + oy, c[2] + oz]) & 0b1111 {
+            0 | 12 => p.x + p.y,
+            1 | 13 => -p.x + p.y,
+            2 => p.x - p.y,
+            3 => -p.x - p.y,
+            4 => p.x + p.z,
+            5 => -p.x + p.z,
+            6 => p.x - p.z,
+            7 => -p.x - p.z,
+            8 => p.y + p.z,
+            9 | 14 => -p.y + p.z,
+            10 => p.y - p.z,
+            _ => -p.y - p.z,
+        }
+    };
+    let s = DVec3::new(smootherstep(d.x), smootherstep(d.y), smootherstep(d.z));
+    let lerp = |a: f64, b: f64, t: f64| a + t * (b - a);
+    let x00 = lerp(grad(0, 0, 0), grad(1, 0, 0), s.x);
+    let x10 = lerp(grad(0, 1, 0), grad(1, 1, 0), s.x);
+    let x01 = lerp(grad(0, 0, 1), grad(1, 0, 1), s.x);
+    let x11 = lerp(grad(0, 1, 1), grad(1, 1, 1), s.x);
+    lerp(lerp(x00, x10, s.y), lerp(x01, x11, s.y), s.z) * SCALE_FACTOR
 }
 
 /// C2 quintic smoothstep 6x^5 - 15x^4 + 10x^3 on [0, 1].
@@ -362,6 +401,44 @@ mod tests {
             worst_jump < 0.05 * typical,
             "d2n/dx2 jumps by {worst_jump} (max {typical})"
         );
+    }
+
+    /// perlin3 is the crate's Perlin noise wherever the crate does not clamp, and smooth
+    /// where it does.
+    #[test]
+    fn perlin3_matches_the_crate_without_its_clamp() {
+        use noise::NoiseFn;
+        let crate_noise = noise::Perlin::new(4);
+        let table = PermutationTable::new(4);
+        let mut clamped = 0;
+        for i in 0..20_000 {
+            let q = DVec3::new(
+                (i as f64 * 0.0137).sin() * 7.0,
+                (i as f64 * 0.0291).cos() * 5.0 - 2.0,
+                i as f64 * 3.1e-4,
+            );
+            let (ours, theirs) = (perlin3(&table, q), crate_noise.get(q.to_array()));
+            if theirs.abs() < 1.0 {
+                assert!((ours - theirs).abs() < 1e-12, "at {q}: {ours} vs {theirs}");
+            } else {
+                clamped += 1;
+                assert!(ours.abs() >= 1.0);
+            }
+        }
+        // The line the bake found: the crate clamps at q2.x ~ -0.042; perlin3 stays smooth.
+        let q = |x: f64| DVec3::new(x, 0.5017926347636392, 1.4929993569728819);
+        let h = 1e-3;
+        let d2 = |x: f64| {
+            (perlin3(&table, q(x + h)) - 2.0 * perlin3(&table, q(x)) + perlin3(&table, q(x - h)))
+                / (h * h)
+        };
+        assert!(crate_noise.get(q(-0.03).to_array()) == -1.0 && perlin3(&table, q(-0.03)) < -1.0);
+        let kink = (d2(-0.0425) - d2(-0.0415)).abs();
+        assert!(
+            kink < 0.05 * d2(-0.0425).abs().max(1.0),
+            "perlin3 kinked: {kink}"
+        );
+        eprintln!("{clamped} of 20000 crate samples clamped");
     }
 
     #[test]

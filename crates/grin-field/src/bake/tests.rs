@@ -301,3 +301,71 @@ fn storage_follows_the_budget() {
     );
     assert_eq!(field.data_bytes() as u64, report.bytes);
 }
+
+/// A scene's medium built by `build_field` (the real analytic / noise fields).
+fn scene_field(medium: &str) -> std::sync::Arc<dyn IndexField> {
+    let text = format!(
+        "[camera]\nposition = [0.0, 0.0, -4.0]\nlook_at = [0.0, 0.0, 0.0]\n[medium]\n{medium}\n"
+    );
+    let scene = grin_scene::parse_scene(&text, std::path::Path::new("test.toml")).expect("scene");
+    crate::build_field(&scene.medium.expect("medium"), std::path::Path::new(".")).expect("field")
+}
+
+/// The automatic resolution meets its budget on a plume, a noise field and Luneburg,
+/// checked on independent random points; where the field is simple it is coarser than the
+/// fixed default.
+#[test]
+fn automatic_resolution_meets_the_budget_on_real_fields() {
+    let cases = [
+        (
+            "plume",
+            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nfield = { kind = \"plume\", plumes = [{ a = 0.004, center = [0.0, -0.2, 0.0], s = 0.5 }] }",
+            Interp::Tricubic,
+            true,
+        ),
+        (
+            "luneburg",
+            "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"luneburg\" }",
+            Interp::Trilinear,
+            true,
+        ),
+        (
+            "noise",
+            "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"noise\", octaves = 2, frequency = 1.5, amplitude = 0.01, seed = 3 }",
+            Interp::Tricubic,
+            false,
+        ),
+    ];
+    for (name, medium, interp, simple) in cases {
+        let src = scene_field(medium);
+        // The default 20000 error points: noise is only C2 (quintic fade), so tricubic
+        // errors peak in thin layers at the lattice planes that sparse points miss.
+        let opts = BakeOptions {
+            interp,
+            ..Default::default()
+        };
+        let (field, report) = bake(src.as_ref(), &opts, &quiet()).expect("bake");
+        let check = measure_error(src.as_ref(), &field, GradientMode::Exact, 4000, 12345);
+        let rel = check.max_err_n / report.delta_n_range;
+        eprintln!(
+            "{name}: {interp:?} res {} dims {:?} {:?} {} bytes; rel error {:.2e} (independent {rel:.2e}); {:.2} s",
+            report.resolution,
+            report.dims,
+            report.storage,
+            report.bytes,
+            report.relative_error,
+            report.seconds
+        );
+        assert!(
+            rel <= DEFAULT_ERROR_BUDGET,
+            "{name}: independent relative error {rel}"
+        );
+        if simple {
+            assert!(
+                report.resolution < DEFAULT_RESOLUTION,
+                "{name}: {}",
+                report.resolution
+            );
+        }
+    }
+}
