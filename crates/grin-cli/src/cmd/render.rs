@@ -86,6 +86,9 @@ struct Summary {
     rays_per_second: f64,
     steps_per_ray: f64,
     evals_per_ray: f64,
+    /// Pixels by the camera ray's status in the medium (sample 0): missed, exited,
+    /// absorbed (stopped on an object inside), max_steps, error.
+    status_counts: std::collections::BTreeMap<&'static str, usize>,
     exr: PathBuf,
     png: PathBuf,
 }
@@ -186,9 +189,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rays_per_second: rays / seconds.max(1e-9),
         steps_per_ray: mean(|p| p.steps),
         evals_per_ray: mean(|p| p.evals),
+        status_counts: status_counts(&frame),
         exr: args.output.clone(),
         png,
     };
+    let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
+    if stuck > 0 {
+        eprintln!(
+            "grin: warning: {stuck} pixels stopped in the medium (max_steps {}, error {}): see the aov.status channel",
+            summary.status_counts["max_steps"], summary.status_counts["error"]
+        );
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
@@ -209,4 +220,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Pixels per `aov.status` value, by name.
+fn status_counts(frame: &Frame) -> std::collections::BTreeMap<&'static str, usize> {
+    let names = grin_trace::RayStatus::ALL.map(|s| s.name());
+    let mut counts: std::collections::BTreeMap<_, _> = names.iter().map(|&n| (n, 0)).collect();
+    for p in &frame.pixels {
+        if let Some(name) = names.get(p.status as usize)
+            && let Some(c) = counts.get_mut(name)
+        {
+            *c += 1;
+        }
+    }
+    counts
 }
