@@ -286,7 +286,7 @@ fn interrupted_render_leaves_no_output_file() {
         .arg(scene_path("paper-a.toml"))
         .arg("-o")
         .arg(&out)
-        .args(["--backend", "cpu", "--size", "4000x4000", "--spp", "16"])
+        .args(["--backend", "cpu", "--size", "1500x1500", "--spp", "32"])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()

@@ -32,6 +32,10 @@ use sky::SkyModel;
 /// step from being vanishingly small (GPU twin: MIN_JITTER_FRACTION in step.wgsl).
 pub const MIN_JITTER_FRACTION: f32 = 1e-3;
 
+/// Largest image rendered in one frame: 2^26 pixels (8192^2) keep the frame buffer
+/// plus the EXR's channel copies under ~6 GB.
+pub const MAX_PIXELS: u64 = 1 << 26;
+
 /// Why a scene cannot be rendered or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
@@ -105,6 +109,18 @@ impl RenderScene {
             return Err(RenderError::Settings(format!(
                 "image size {}x{} is empty",
                 s.width, s.height
+            )));
+        }
+        if u64::from(s.width) * u64::from(s.height) > MAX_PIXELS {
+            return Err(RenderError::Settings(format!(
+                "image size {}x{} exceeds {MAX_PIXELS} pixels (the frame and its EXR channels would need ~{} GB)",
+                s.width,
+                s.height,
+                u64::from(s.width)
+                    * u64::from(s.height)
+                    * 2
+                    * std::mem::size_of::<PixelOut>() as u64
+                    / 1_000_000_000
             )));
         }
         if s.spp == 0 {

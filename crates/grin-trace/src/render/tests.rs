@@ -302,6 +302,10 @@ fn step_cap_gives_max_steps_status_and_bad_settings_are_rejected() {
     s.render.step = StepSpec::Fixed(-1.0);
     let e = RenderScene::new(&s, Path::new("."), Some(field)).expect_err("negative step");
     assert!(e.to_string().contains("step"), "{e}");
+    let mut huge = scene(PAPER_LIKE);
+    (huge.render.width, huge.render.height) = (100_000, 100_000);
+    let e = RenderScene::new(&huge, Path::new("."), None).expect_err("too big");
+    assert!(e.to_string().contains("exceeds"), "{e}");
     let mut bad = scene(PAPER_LIKE);
     bad.camera.look_at = bad.camera.position;
     let e = RenderScene::new(&bad, Path::new("."), None).expect_err("degenerate camera");
