@@ -110,14 +110,36 @@ impl ExprField {
             n_range: (0.0, 0.0),
             max_grad_n: 0.0,
         };
-        let stats = sample_stats(&field, &format!("expression `{text}`"), CHECK_RESOLUTION)?;
+        field.update_sampled_ranges()?;
+        Ok(field)
+    }
+
+    /// The same formula at time `t` (for animation), re-checked for n > 0 at that time.
+    /// Reuses the parsed formula and its derivatives.
+    pub fn with_time(&self, t: f64) -> Result<Self, FieldError> {
+        if !t.is_finite() {
+            return Err(FieldError::Expr {
+                expr: self.text.clone(),
+                message: format!("time t = {t} is not finite"),
+            });
+        }
+        let mut field = ExprField { t, ..self.clone() };
+        field.update_sampled_ranges()?;
+        Ok(field)
+    }
+
+    /// Sample the check grid: fail where n <= 0 or is not finite, else store the sampled
+    /// n range and max |grad n| (widened by [`SAMPLED_MARGIN`]).
+    fn update_sampled_ranges(&mut self) -> Result<(), FieldError> {
+        let label = format!("expression `{}`", self.text);
+        let stats = sample_stats(self, &label, CHECK_RESOLUTION)?;
         let pad = SAMPLED_MARGIN * (stats.n_max - stats.n_min);
-        field.n_range = (
+        self.n_range = (
             (stats.n_min - pad).max(stats.n_min * 0.5),
             stats.n_max + pad,
         );
-        field.max_grad_n = stats.max_grad_n * (1.0 + SAMPLED_MARGIN);
-        Ok(field)
+        self.max_grad_n = stats.max_grad_n * (1.0 + SAMPLED_MARGIN);
+        Ok(())
     }
 
     /// The formula as written.
@@ -237,6 +259,21 @@ mod tests {
         assert_eq!((s.grad_n.y, s.grad_n.z), (0.0, 0.0));
         let c = ExprField::new("1.33", ball(), 1.0, 0.0).expect("constant");
         assert_eq!(c.sample(DVec3::ZERO).grad_n, DVec3::ZERO);
+    }
+
+    #[test]
+    fn with_time_moves_the_formula_and_rechecks_positivity() {
+        let f = ExprField::new("1 + 0.5*sin(x + t)", ball(), 1.0, 0.0).expect("valid");
+        let g = f.with_time(1.0).expect("still positive");
+        let p = DVec3::new(0.2, 0.5, 0.1);
+        assert!((g.n(p) - (1.0 + 0.5 * 1.2f64.sin())).abs() < 1e-15);
+        assert_eq!(g.time(), 1.0);
+        let f = ExprField::new("0.3 + t*x", ball(), 1.0, 0.0).expect("n = 0.3 at t = 0");
+        let e = f.with_time(1.0).expect_err("n = 0.3 + x < 0 for x < -0.3");
+        assert!(
+            e.to_string().starts_with("expression `0.3 + t*x`: n = -"),
+            "{e}"
+        );
     }
 
     #[test]
