@@ -1,9 +1,30 @@
-//! `grin bench`.
+//! `grin bench`: one module per mode (`grin bench <mode>`).
+
+mod bake;
+mod speed;
 
 /// Arguments of `grin bench`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    #[command(subcommand)]
+    pub mode: Mode,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`grin bench` is not implemented yet")
+/// The benchmark modes.
+#[derive(Debug, clap::Subcommand)]
+pub enum Mode {
+    /// GPU (wgpu; lavapipe without a GPU) vs CPU: rays/s and ms/frame for the paper's
+    /// scenes (a), (c) and heat haze, the noise/analytic frame-time ratio, and the
+    /// marcher's field-sample rate as a fraction of the adapter's raw rate.
+    Speed(speed::Args),
+    /// Procedural noise (the paper: fBm + gradient at every stage) vs the baked field on
+    /// the CPU: frame cost and speedup; bake time and bytes per resolution.
+    Bake(bake::Args),
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.mode {
+        Mode::Speed(a) => speed::run(a),
+        Mode::Bake(a) => bake::run(a),
+    }
 }

@@ -1,0 +1,297 @@
+//! `grin bench speed`: the GPU marcher (wgpu, lavapipe without a GPU) and the CPU
+//! reference on the same baked fields, in one run: rays/s and ms/frame for the paper's
+//! scene (a) (analytic sphere), (c) (Perlin noise) and the heat-haze scene; the
+//! noise/analytic frame-time ratio (the paper had 2.0); and the marcher's field-sample
+//! rate as a fraction of the adapter's raw trilinear 3D-texture sample rate measured by
+//! a microbenchmark (shaders/texture_bench.wgsl).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use grin_field::IndexField;
+use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
+use grin_trace::image::Frame;
+use grin_trace::render::{RenderScene, render_cpu};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+/// The benchmarked scenes (files in the scene directory) and their labels.
+const SCENES: [(&str, &str); 3] = [
+    ("paper-a.toml", "paper (a) analytic"),
+    ("paper-c.toml", "paper (c) noise"),
+    ("heat-haze.toml", "heat haze"),
+];
+
+/// Label of the close-up of paper (c) where every ray marches the medium.
+const MARCH_ONLY: &str = "(c) medium only";
+
+/// Image size of the full run (the 640x360) and of `--quick`.
+const FULL_SIZE: (u32, u32) = (640, 360);
+const QUICK_SIZE: (u32, u32) = (320, 180);
+/// Bake resolution (nodes along the longest axis) for both backends: the bake helper's
+/// default, so analytic and noise media cost the same to sample.
+const FULL_BAKE: usize = 128;
+const QUICK_BAKE: usize = 64;
+/// Timed frames per backend and scene (after one untimed warm-up frame on the GPU).
+const FULL_FRAMES: u32 = 3;
+const QUICK_FRAMES: u32 = 1;
+
+/// Arguments of `grin bench speed`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Smaller images, coarser bakes and one timed frame (for CI and smoke tests).
+    #[arg(long)]
+    pub quick: bool,
+    /// Print the results as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Directory holding paper-a.toml, paper-c.toml and heat-haze.toml.
+    #[arg(long, default_value = "data/scenes")]
+    pub scenes: PathBuf,
+    /// Skip the CPU backend.
+    #[arg(long)]
+    pub gpu_only: bool,
+}
+
+/// One backend on one scene.
+#[derive(Debug, Clone, Serialize)]
+struct Run {
+    scene: String,
+    backend: &'static str,
+    width: u32,
+    height: u32,
+    ms_per_frame: f64,
+    rays_per_second: f64,
+    steps_per_ray: f64,
+    evals_per_ray: f64,
+    /// Integration steps (and straight flights) per second over all rays.
+    ray_steps_per_second: f64,
+    /// Field evaluations per second over all rays.
+    field_evals_per_second: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    adapter: String,
+    cpu_threads: usize,
+    bake_resolution: usize,
+    runs: Vec<Run>,
+    /// Frame time of paper (c) over paper (a), both baked (the paper: 2.0).
+    noise_over_analytic_gpu: f64,
+    noise_over_analytic_cpu: Option<f64>,
+    /// Raw trilinear field samples per second on the adapter (microbenchmark).
+    raw_field_samples_per_second: f64,
+    /// The marcher's ray-steps/s (close-up of paper c's medium) over the raw sample rate.
+    ray_steps_fraction_of_raw: f64,
+    /// The marcher's field evaluations/s (same close-up) over the raw sample rate.
+    field_evals_fraction_of_raw: f64,
+}
+
+fn mean(frame: &Frame, f: fn(&grin_trace::image::PixelOut) -> f32) -> f64 {
+    frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / frame.pixels.len().max(1) as f64
+}
+
+fn run_of(scene: &str, backend: &'static str, frame: &Frame, spp: u32, seconds: f64) -> Run {
+    let rays = f64::from(frame.width) * f64::from(frame.height) * f64::from(spp);
+    let steps = mean(frame, |p| p.steps);
+    let evals = mean(frame, |p| p.evals);
+    let s = seconds.max(1e-9);
+    Run {
+        scene: scene.to_owned(),
+        backend,
+        width: frame.width,
+        height: frame.height,
+        ms_per_frame: seconds * 1e3,
+        rays_per_second: rays / s,
+        steps_per_ray: steps,
+        evals_per_ray: evals,
+        ray_steps_per_second: steps * rays / s,
+        field_evals_per_second: evals * rays / s,
+    }
+}
+
+fn bar(len: u64) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) =
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} {elapsed}")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_prefix("bench speed");
+    bar
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let (size, bake_res, frames) = if args.quick {
+        (QUICK_SIZE, QUICK_BAKE, QUICK_FRAMES)
+    } else {
+        (FULL_SIZE, FULL_BAKE, FULL_FRAMES)
+    };
+    // Load and bake every scene first: input errors stop the run before any GPU work.
+    let mut prepared = Vec::new();
+    for (file, label) in SCENES {
+        let path = args.scenes.join(file);
+        if !path.is_file() {
+            bail!(
+                "{}: not found (pass --scenes DIR with paper-a.toml, paper-c.toml, heat-haze.toml)",
+                path.display()
+            );
+        }
+        let mut scene = grin_scene::load_scene(&path)?;
+        scene.render.width = size.0;
+        scene.render.height = size.1;
+        scene.render.spp = 1;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let medium = scene
+            .medium
+            .as_ref()
+            .with_context(|| format!("{}: no [medium]", path.display()))?;
+        let field = grin_field::build_field(medium, dir)
+            .with_context(|| format!("{}: [medium]", path.display()))?;
+        let baked = Arc::new(
+            bake_for_gpu(field.as_ref(), bake_res)
+                .with_context(|| format!("{}: baking", path.display()))?,
+        );
+        let rs = RenderScene::new(&scene, dir, Some(baked.clone() as Arc<dyn IndexField>))
+            .with_context(|| path.display().to_string())?;
+        prepared.push((label, rs, baked));
+    }
+
+    // The marcher alone: paper (c)'s medium filling the frame, no objects or lights, so
+    // nearly every ray's cost is the march (for the fraction of the raw sample rate).
+    let closeup = {
+        let (_, rs, baked) = &prepared[1];
+        let mut rs = rs.clone();
+        let m = rs.medium.as_ref().context("paper (c) has a medium")?;
+        let (centre, radius) = (m.bounds.center(), m.bounds.radius());
+        let eye = centre - glam::DVec3::Z * (3.0 * radius);
+        let cam = grin_scene::Camera {
+            position: eye.to_array(),
+            look_at: centre.to_array(),
+            up: [0.0, 1.0, 0.0],
+            // The sphere's silhouette spans the frame's height.
+            fov_y_deg: 2.0 * (1.0f64 / 3.0).asin().to_degrees(),
+        };
+        rs.camera = grin_trace::render::camera::PinholeCamera::new(&cam, size.0, size.1)
+            .context("close-up camera")?;
+        rs.objects.clear();
+        rs.materials.clear();
+        rs.lights.clear();
+        (MARCH_ONLY, rs, baked.clone())
+    };
+    prepared.push(closeup);
+
+    let ctx = GpuContext::new_headless()?;
+    let adapter = ctx.adapter_name();
+    let cpu_threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let per_scene = u64::from(frames) * if args.gpu_only { 1 } else { 2 } + 1;
+    let progress = bar(per_scene * prepared.len() as u64 + 1);
+    let cancel = AtomicBool::new(false);
+    let mut runs = Vec::new();
+    let mut raw_rate = 0.0;
+    for (label, rs, baked) in &prepared {
+        progress.set_message(format!("{label} (gpu)"));
+        let renderer = GpuRenderer::new(&ctx, rs, Some(baked.as_ref()))?;
+        renderer.render(&|_| {}, &cancel)?; // warm-up: lavapipe compiles lazily
+        progress.inc(1);
+        let mut best: Option<(Frame, f64)> = None;
+        for _ in 0..frames {
+            let start = Instant::now();
+            let frame = renderer.render(&|_| {}, &cancel)?;
+            let t = start.elapsed().as_secs_f64();
+            if best.as_ref().is_none_or(|(_, b)| t < *b) {
+                best = Some((frame, t));
+            }
+            progress.inc(1);
+        }
+        if let Some((frame, t)) = best {
+            runs.push(run_of(label, "gpu", &frame, rs.settings.spp, t));
+        }
+        if *label == MARCH_ONLY {
+            raw_rate = renderer.field_sample_rate(3)?;
+        }
+        if !args.gpu_only {
+            progress.set_message(format!("{label} (cpu)"));
+            let mut best: Option<(Frame, f64)> = None;
+            for _ in 0..frames {
+                let start = Instant::now();
+                let frame = render_cpu(rs, &|_| {}, &cancel)?;
+                let t = start.elapsed().as_secs_f64();
+                if best.as_ref().is_none_or(|(_, b)| t < *b) {
+                    best = Some((frame, t));
+                }
+                progress.inc(1);
+            }
+            if let Some((frame, t)) = best {
+                runs.push(run_of(label, "cpu", &frame, rs.settings.spp, t));
+            }
+        }
+    }
+    progress.finish_and_clear();
+
+    let find = |scene: &str, backend: &str| {
+        runs.iter()
+            .find(|r| r.scene.contains(scene) && r.backend == backend)
+    };
+    let ratio = |backend: &str| match (find("(c)", backend), find("(a)", backend)) {
+        (Some(c), Some(a)) => Some(c.ms_per_frame / a.ms_per_frame),
+        _ => None,
+    };
+    let noise_gpu = find(MARCH_ONLY, "gpu");
+    let report = Report {
+        adapter,
+        cpu_threads,
+        bake_resolution: bake_res,
+        noise_over_analytic_gpu: ratio("gpu").unwrap_or(f64::NAN),
+        noise_over_analytic_cpu: ratio("cpu"),
+        raw_field_samples_per_second: raw_rate,
+        ray_steps_fraction_of_raw: noise_gpu
+            .map_or(f64::NAN, |r| r.ray_steps_per_second / raw_rate),
+        field_evals_fraction_of_raw: noise_gpu
+            .map_or(f64::NAN, |r| r.field_evals_per_second / raw_rate),
+        runs,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "adapter: {} | cpu: {} threads | bakes {}^3-class, both backends",
+        report.adapter, report.cpu_threads, report.bake_resolution
+    );
+    println!(
+        "{:<20} {:<4} {:>9} {:>10} {:>11} {:>9} {:>9} {:>12}",
+        "scene", "", "size", "ms/frame", "Mrays/s", "steps/ray", "evals/ray", "Msteps/s"
+    );
+    for r in &report.runs {
+        println!(
+            "{:<20} {:<4} {:>9} {:>10.1} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
+            r.scene,
+            r.backend,
+            format!("{}x{}", r.width, r.height),
+            r.ms_per_frame,
+            r.rays_per_second / 1e6,
+            r.steps_per_ray,
+            r.evals_per_ray,
+            r.ray_steps_per_second / 1e6
+        );
+    }
+    println!(
+        "noise / analytic frame time: gpu {:.2}{} (paper: 2.0; aim <= 1.2)",
+        report.noise_over_analytic_gpu,
+        report
+            .noise_over_analytic_cpu
+            .map(|c| format!(", cpu {c:.2}"))
+            .unwrap_or_default()
+    );
+    println!(
+        "raw trilinear field samples: {:.1} M/s; marcher ((c) medium only): ray-steps {:.1}% and field evals {:.1}% of it (aim >= 60%)",
+        report.raw_field_samples_per_second / 1e6,
+        report.ray_steps_fraction_of_raw * 100.0,
+        report.field_evals_fraction_of_raw * 100.0
+    );
+    Ok(())
+}
