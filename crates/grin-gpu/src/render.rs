@@ -464,52 +464,59 @@ impl<'a> GpuRenderer<'a> {
         let mut params = self.params;
         params.rows[0] = 0;
         params.rows[1] = rows;
-        let (pipeline, bind_group, params_buffer) = ctx.scoped("creating the texture microbenchmark", || {
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("texture_bench.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(shaders::TEXTURE_BENCH_WGSL.into()),
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("bench_main"),
-                layout: None,
-                module: &module,
-                entry_point: Some("bench_main"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                cache: None,
-            });
-            let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("bench params"),
-                size: std::mem::size_of::<FrameParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let field_view = self.field.field.create_view(&wgpu::TextureViewDescriptor::default());
-            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("bench bindings"),
-                layout: &pipeline.get_bind_group_layout(0),
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: wgpu::BindingResource::TextureView(&field_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 6,
-                        resource: self.out_buffer.as_entire_binding(),
-                    },
-                ],
-            });
-            (pipeline, bind_group, params_buffer)
-        })?;
-        ctx.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+        let (pipeline, bind_group, params_buffer) =
+            ctx.scoped("creating the texture microbenchmark", || {
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("texture_bench.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(shaders::TEXTURE_BENCH_WGSL.into()),
+                });
+                let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("bench_main"),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some("bench_main"),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    cache: None,
+                });
+                let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("bench params"),
+                    size: std::mem::size_of::<FrameParams>() as u64,
+                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                let field_view = self
+                    .field
+                    .field
+                    .create_view(&wgpu::TextureViewDescriptor::default());
+                let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("bench bindings"),
+                    layout: &pipeline.get_bind_group_layout(0),
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: params_buffer.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::TextureView(&field_view),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 6,
+                            resource: self.out_buffer.as_entire_binding(),
+                        },
+                    ],
+                });
+                (pipeline, bind_group, params_buffer)
+            })?;
+        ctx.queue
+            .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
         let mut best = f64::INFINITY;
         for _ in 0..repeats.max(1) {
             let start = Instant::now();
             ctx.scoped("dispatching the texture microbenchmark", || {
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("bench") });
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("bench"),
+                });
                 {
                     let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some("bench_main"),
@@ -517,7 +524,11 @@ impl<'a> GpuRenderer<'a> {
                     });
                     pass.set_pipeline(&pipeline);
                     pass.set_bind_group(0, &bind_group, &[]);
-                    pass.dispatch_workgroups(width.div_ceil(WORKGROUP), rows.div_ceil(WORKGROUP), 1);
+                    pass.dispatch_workgroups(
+                        width.div_ceil(WORKGROUP),
+                        rows.div_ceil(WORKGROUP),
+                        1,
+                    );
                 }
                 ctx.queue.submit([encoder.finish()]);
             })?;

@@ -1,0 +1,197 @@
+//! GPU physics and failure checks: a uniform-index medium renders like no medium, a
+//! constant-n ball deflects rays by Snell's law exactly, oversized fields fail with a
+//! clear error before anything is uploaded.
+
+mod harness;
+
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use glam::DVec3;
+use grin_field::Bounds;
+use grin_field::baked::{BakeProvenance, BakedField, GridGeometry, Interp, Outside, Voxels};
+use grin_gpu::{GpuError, GpuRenderer};
+use grin_scene::parse_scene;
+use grin_trace::image::diff_frames;
+use grin_trace::render::{RenderScene, render_cpu};
+
+const SCENE: &str = r#"
+[camera]
+position = [0.0, 1.0, -4.0]
+look_at = [0.0, 0.6, 0.0]
+fov_y_deg = 40.0
+
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
+material = { checker = { scale = 0.5 } }
+
+[[object]]
+shape = { sphere = { center = [0.8, 0.5, 1.4], radius = 0.5 } }
+material = "metal"
+
+[[light]]
+point = { position = [2.0, 4.0, -2.0], intensity = [30.0, 30.0, 30.0] }
+
+[render]
+width = 96
+height = 54
+"#;
+
+const MEDIUM_AMBIENT: &str = r#"
+[medium]
+bounds = { sphere = { center = [0.0, 0.7, -0.6], radius = 0.6 } }
+field = { kind = "uniform", n = 1.0 }
+"#;
+
+fn gpu_frame(
+    ctx: &grin_gpu::GpuContext,
+    toml: &str,
+    bake: Option<usize>,
+) -> grin_trace::image::Frame {
+    let scene = parse_scene(toml, Path::new("inline.toml")).expect("scene");
+    let baked = bake.and_then(|res| harness::baked(&scene, Path::new("."), res));
+    let field = baked.clone().map(|b| b as Arc<dyn grin_field::IndexField>);
+    let rs = RenderScene::new(&scene, Path::new("."), field).expect("render scene");
+    GpuRenderer::new(ctx, &rs, baked.as_deref())
+        .expect("renderer")
+        .render(&|_| {}, &AtomicBool::new(false))
+        .expect("render")
+}
+
+#[test]
+fn uniform_ambient_medium_renders_like_no_medium() {
+    let Some(ctx) = harness::context("uniform_ambient_medium_renders_like_no_medium") else {
+        return;
+    };
+    let without = gpu_frame(&ctx, SCENE, None);
+    let with = gpu_frame(&ctx, &format!("{SCENE}{MEDIUM_AMBIENT}"), Some(32));
+    let (stats, _) = diff_frames(&without, &with).expect("same size");
+    // Rays cross the medium straight (n = ambient: no refraction, no bending), ending on
+    // the projected surface point: only f32 rounding separates the two images.
+    assert!(
+        stats.mean <= 1e-5 && stats.p99 <= 1e-5,
+        "uniform medium changed the image: {stats:?}"
+    );
+    let crossed = with.pixels.iter().filter(|p| p.status == 1.0).count();
+    assert!(
+        crossed > 200,
+        "the medium covers part of the image ({crossed} pixels crossed it)"
+    );
+    assert!(
+        with.pixels
+            .iter()
+            .filter(|p| p.status == 1.0)
+            .all(|p| p.deflection_deg.abs() < 1e-3)
+    );
+}
+
+#[test]
+fn constant_n_ball_deflects_by_snell() {
+    let Some(ctx) = harness::context("constant_n_ball_deflects_by_snell") else {
+        return;
+    };
+    const N_BALL: f64 = 1.5;
+    let toml = format!(
+        r#"
+[camera]
+position = [0.0, 0.0, -4.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 32.0
+
+[medium]
+bounds = {{ sphere = {{ center = [0.0, 0.0, 0.0], radius = 1.0 }} }}
+field = {{ kind = "uniform", n = {N_BALL} }}
+
+[render]
+width = 64
+height = 64
+"#
+    );
+    let scene = parse_scene(&toml, Path::new("inline.toml")).expect("scene");
+    let baked = harness::baked(&scene, Path::new("."), 16).expect("medium");
+    let rs = RenderScene::new(
+        &scene,
+        Path::new("."),
+        Some(baked.clone() as Arc<dyn grin_field::IndexField>),
+    )
+    .expect("scene");
+    let gpu = GpuRenderer::new(&ctx, &rs, Some(&baked))
+        .expect("renderer")
+        .render(&|_| {}, &AtomicBool::new(false))
+        .expect("render");
+    let cpu = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("cpu");
+    let origin = DVec3::new(0.0, 0.0, -4.0);
+    let mut checked = 0;
+    let mut worst: f64 = 0.0;
+    for py in 0..64 {
+        for px in 0..64 {
+            let d = rs.camera.primary_ray(px, py, 0.5, 0.5);
+            // Impact parameter: distance of the camera ray's line from the centre.
+            let b = (-origin).cross(d).length();
+            if b > 0.95 {
+                continue; // grazing rays: the exit search and TIR-free but ill-conditioned
+            }
+            let i = b.asin();
+            let r = (b / N_BALL).asin();
+            let exact_deg = (2.0 * (i - r)).to_degrees();
+            let idx = (py * 64 + px) as usize;
+            for (name, p) in [("gpu", gpu.pixels[idx]), ("cpu", cpu.pixels[idx])] {
+                assert_eq!(p.status, 1.0, "{name} pixel ({px}, {py}) exits the ball");
+                let err = (f64::from(p.deflection_deg) - exact_deg).abs();
+                worst = worst.max(err);
+                assert!(
+                    err < 2e-3,
+                    "{name} pixel ({px}, {py}): deflection {} deg, Snell {exact_deg} deg",
+                    p.deflection_deg
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 1000, "only {checked} pixels through the ball");
+    eprintln!("constant-n ball: {checked} pixels, worst |deflection - Snell| = {worst:.2e} deg");
+}
+
+#[test]
+fn oversized_field_texture_is_a_clear_error() {
+    let Some(ctx) = harness::context("oversized_field_texture_is_a_clear_error") else {
+        return;
+    };
+    let limit = ctx.limits().max_texture_dimension_3d as usize;
+    let dims = [limit + 1, 2, 2];
+    let geometry = GridGeometry {
+        dims,
+        origin: DVec3::splat(-1.0),
+        spacing: DVec3::new(2.0 / limit as f64, 2.0, 2.0),
+    };
+    let bounds = Bounds::Sphere {
+        center: DVec3::ZERO,
+        radius: 1.0,
+    };
+    let baked = BakedField::new(
+        geometry,
+        Voxels::F32(vec![[0.0; 4]; dims[0] * dims[1] * dims[2]]),
+        Interp::Trilinear,
+        Outside::Clamp,
+        bounds,
+        1.0,
+        BakeProvenance::default(),
+    )
+    .expect("a valid (if oversized) grid");
+    let scene = parse_scene(SCENE, Path::new("inline.toml")).expect("scene");
+    let baked = Arc::new(baked);
+    let rs = RenderScene::new(
+        &scene,
+        Path::new("."),
+        Some(baked.clone() as Arc<dyn grin_field::IndexField>),
+    )
+    .expect("scene");
+    let err = GpuRenderer::new(&ctx, &rs, Some(&baked)).expect_err("too large for a 3D texture");
+    assert!(matches!(err, GpuError::TooLarge { .. }), "{err}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("max_texture_dimension_3d") && msg.contains(&format!("{}", limit + 1)),
+        "{msg}"
+    );
+}
