@@ -104,8 +104,8 @@ fn values_match_what_python_openvdb_wrote() {
             // World positions of voxels follow the file's transform.
             let h = floats(&rec["voxel_size"]);
             let origin = floats(&rec["origin"]);
-            for a in 0..3 {
-                assert!((info.voxel_size[a] - h[a]).abs() < 1e-12, "{file}:{name} voxel size");
+            for (got, want) in info.voxel_size.iter().zip(h) {
+                assert!((got - want).abs() < 1e-12, "{file}:{name} voxel size");
             }
             assert!(info.is_linear);
             for ijk in [bbox.min, bbox.max, [bbox.min[0], bbox.max[1], bbox.min[2]]] {
