@@ -403,28 +403,15 @@ impl BakedField {
     }
 
     fn trilinear(&self, g: DVec3) -> [f64; 4] {
-        let d = self.geometry.dims;
-        let base = |x: f64, n: usize| -> (usize, f64) {
-            let i = (x.floor() as usize).min(n - 2);
-            (i, x - i as f64)
-        };
-        let (i, tx) = base(g.x, d[0]);
-        let (j, ty) = base(g.y, d[1]);
-        let (k, tz) = base(g.z, d[2]);
-        let mut out = [0.0; 4];
-        for (dk, wz) in [(0, 1.0 - tz), (1, tz)] {
-            for (dj, wy) in [(0, 1.0 - ty), (1, ty)] {
-                let row = self.geometry.index(i, j + dj, k + dk);
-                for (di, wx) in [(0, 1.0 - tx), (1, tx)] {
-                    let w = wx * wy * wz;
-                    let v = self.voxels.get(row + di);
-                    for c in 0..4 {
-                        out[c] += w * f64::from(v[c]);
-                    }
-                }
+        // One match per sample, not per tap: i16 voxels are interpolated as integers and
+        // scaled once.
+        match &self.voxels {
+            Voxels::F32(v) => trilinear_in(&self.geometry, g, |i| v[i].map(f64::from)),
+            Voxels::I16 { data, scale } => {
+                let q = trilinear_in(&self.geometry, g, |i| data[i].map(f64::from));
+                std::array::from_fn(|c| q[c] * f64::from(scale[c]))
             }
         }
-        out
     }
 
     fn tricubic(&self, coeffs: &[[f32; 4]], g: DVec3) -> [f64; 4] {
@@ -462,6 +449,32 @@ impl BakedField {
         let gmax = self.geometry.grid_max();
         g.cmplt(DVec3::ZERO).any() || g.cmpgt(gmax).any()
     }
+}
+
+/// Trilinear interpolation of the 4 channels of `fetch(voxel index)` at grid point g
+/// (inside [0, dims - 1]).
+#[inline]
+fn trilinear_in(geometry: &GridGeometry, g: DVec3, fetch: impl Fn(usize) -> [f64; 4]) -> [f64; 4] {
+    let d = geometry.dims;
+    let base = |x: f64, n: usize| -> (usize, f64) {
+        let i = (x.floor() as usize).min(n - 2);
+        (i, x - i as f64)
+    };
+    let (i, tx) = base(g.x, d[0]);
+    let (j, ty) = base(g.y, d[1]);
+    let (k, tz) = base(g.z, d[2]);
+    let mut out = [0.0; 4];
+    for (dk, wz) in [(0, 1.0 - tz), (1, tz)] {
+        for (dj, wy) in [(0, 1.0 - ty), (1, ty)] {
+            let row = geometry.index(i, j + dj, k + dk);
+            let (a, b) = (fetch(row), fetch(row + 1));
+            let (w0, w1) = (wy * wz * (1.0 - tx), wy * wz * tx);
+            for c in 0..4 {
+                out[c] += w0 * a[c] + w1 * b[c];
+            }
+        }
+    }
+    out
 }
 
 /// Prefilter every channel along x, y, z into cubic B-spline coefficients.
