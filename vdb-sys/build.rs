@@ -8,6 +8,15 @@ const APT_PACKAGES: &str = "libopenvdb-dev libboost-dev libtbb-dev";
 /// Where OpenVDB's headers live unless `OPENVDB_INCLUDE_DIR` says otherwise.
 const DEFAULT_INCLUDE_DIRS: &[&str] = &["/usr/include", "/usr/local/include"];
 
+/// Where the OpenVDB, TBB and Imath shared libraries live unless `OPENVDB_LIB_DIR` says
+/// otherwise (Debian multiarch first).
+const DEFAULT_LIB_DIRS: &[&str] = &[
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib",
+    "/usr/local/lib",
+];
+
 fn main() {
     println!("cargo:rerun-if-changed=shim/grin_vdb.cpp");
     println!("cargo:rerun-if-changed=shim/grin_vdb.h");
@@ -33,13 +42,23 @@ fn main() {
     if !has("tbb/tbb.h") && !has("oneapi/tbb.h") {
         missing.push("TBB headers (tbb/tbb.h)");
     }
+    let lib_dirs: Vec<String> = match std::env::var("OPENVDB_LIB_DIR") {
+        Ok(dir) => vec![dir],
+        Err(_) => DEFAULT_LIB_DIRS.iter().map(|s| (*s).to_owned()).collect(),
+    };
+    for lib in ["libopenvdb.so", "libtbb.so", "libImath-3_1.so"] {
+        if !lib_dirs.iter().any(|d| Path::new(d).join(lib).exists()) {
+            missing.push(lib);
+        }
+    }
     if !missing.is_empty() {
         panic!(
-            "vdb-sys: cannot build the OpenVDB shim: missing {} in {:?}. \
+            "vdb-sys: cannot build the OpenVDB shim: missing {} (looked in {:?} and {:?}). \
              Install them with `sudo apt-get install {APT_PACKAGES}` (or run scripts/setup.sh), \
              or set OPENVDB_INCLUDE_DIR / OPENVDB_LIB_DIR.",
             missing.join(", "),
-            include_dirs
+            include_dirs,
+            lib_dirs
         );
     }
 
