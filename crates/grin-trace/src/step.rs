@@ -14,6 +14,12 @@ use crate::integrate::{self, RayState, Step};
 pub const ADAPTIVE_MAX_DS_REL: f64 = 0.25;
 /// ... nor shrink below this fraction (then the step is taken anyway: no endless loop).
 pub const ADAPTIVE_MIN_DS_REL: f64 = 1e-12;
+/// In precision R the smallest step is also >= this many units of roundoff (times the
+/// radius): below it r + ds rounds back to r in f32 and the ray would stall.
+pub const ADAPTIVE_MIN_DS_EPS: f64 = 1e3;
+/// Tolerances are raised to at least this many units of roundoff (times the radius): an
+/// f32 trace cannot resolve 1e-10, and step doubling would shrink the steps to nothing.
+pub const ADAPTIVE_TOL_FLOOR_EPS: f64 = 2.0;
 /// Default first error-controlled step, as a fraction of the bounds' radius.
 pub const ADAPTIVE_INITIAL_DS_REL: f64 = 0.01;
 /// Safety factor and growth limits of the step-size controller (Hairer, Norsett & Wanner, II.4).
@@ -146,7 +152,9 @@ impl StepController {
         let p = integrate::order(self.kind);
         // Error of the lower-order member: the exponent of the controller is 1/(p_low + 1).
         let exponent = 1.0 / p as f64;
-        let ds_min = ADAPTIVE_MIN_DS_REL * self.len_scale;
+        let eps = R::EPS.to_f64();
+        let ds_min = ADAPTIVE_MIN_DS_REL.max(ADAPTIVE_MIN_DS_EPS * eps) * self.len_scale;
+        let tol = tol.max(ADAPTIVE_TOL_FLOOR_EPS * eps * self.len_scale);
         let ds_max = ADAPTIVE_MAX_DS_REL * self.len_scale;
         let mut evals = 0;
         let mut rejections = 0;

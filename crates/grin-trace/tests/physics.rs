@@ -670,6 +670,28 @@ fn f32_path_matches_within_1e_4() {
         let res = box_tir_case::<f32>(exit);
         assert!((res.position - p).length() <= 1e-4 && (res.direction - q).length() <= 1e-4);
     }
+    // A tolerance below f32 resolution is raised to it instead of shrinking the steps to
+    // nothing (step doubling would otherwise stall until max_steps).
+    for kind in [
+        IntegratorKind::Adaptive,
+        IntegratorKind::Sharma,
+        IntegratorKind::Rk4,
+    ] {
+        let mut s = settings(
+            kind,
+            StepSpec::Adaptive {
+                tolerance: 1e-10,
+                initial: None,
+            },
+            ExitMethod::Hermite,
+        );
+        s.max_steps = 1000;
+        let (worst, _, _) = luneburg_focus::<f32>(&s);
+        assert!(
+            worst <= 1e-4,
+            "f32 {kind:?} at tolerance 1e-10: focus error {worst:e}"
+        );
+    }
     // Linear n^2: the f32 path stays on the parabola and leaves where it should.
     let (n0, k) = (1.2, 0.3);
     let slab = TestField::cuboid(
