@@ -11,12 +11,12 @@ use std::time::{Duration, Instant};
 use vdb_sys::VdbFile;
 
 /// Time budget of the loop in the normal test run.
-const DEFAULT_FUZZ_SECONDS: f64 = 5.0;
+const DEFAULT_FUZZ_SECONDS: f64 = 6.0;
 /// Dense reads of mutated files are capped low: a flipped bit may inflate a bounding box.
 const FUZZ_CAP_BYTES: u64 = 64 << 20;
 /// The header region covered by systematic truncations, and the step between cuts.
 const HEADER_BYTES: usize = 512;
-const HEADER_STEP: usize = 16;
+const HEADER_STEP: usize = 32;
 const FIXTURES: [&str; 4] = [
     "test/aniso.vdb",
     "test/nonfinite.vdb",
