@@ -354,7 +354,7 @@ pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
     };
     let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = (r.f64(), r.f64(), r.f64(), r.f64());
     let desc_len = r.u32() as usize;
-    if FIXED_HEADER_BYTES + desc_len > data_offset || data_offset % DATA_ALIGN != 0 {
+    if FIXED_HEADER_BYTES + desc_len > data_offset || !data_offset.is_multiple_of(DATA_ALIGN) {
         return Err(header_err(format!(
             "description of {desc_len} bytes does not fit before the data at {data_offset}"
         )));

@@ -511,6 +511,7 @@ fn prefilter(voxels: &Voxels, dims: [usize; 3]) -> Vec<[f32; 4]> {
 }
 
 /// Prefilter the 4 channels of the `n` values at `line[0], line[stride], ...`.
+#[expect(clippy::needless_range_loop, reason = "c indexes the channel inside strided voxels")]
 fn filter_strided(line: &mut [[f64; 4]], stride: usize, n: usize) {
     let mut buf = vec![0.0; n];
     for c in 0..4 {
