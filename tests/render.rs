@@ -321,6 +321,8 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
         .arg(&gpu_out)
         .args(["--backend", "gpu"])
         .args(args)
+        .arg("--compare")
+        .arg(&cpu_out)
         .output()
         .expect("grin runs");
     // CI installs lavapipe (mesa-vulkan-drivers): no adapter is a failure, said loudly.
@@ -353,6 +355,26 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
         "99th percentile per-pixel difference {}",
         stats.p99
     );
+    // `--compare` printed the same metric and wrote the difference image.
+    let cmp = &summary["comparison"];
+    assert!(
+        (cmp["mean"].as_f64().expect("mean") - stats.mean).abs() < 1e-9,
+        "{cmp}"
+    );
+    assert_eq!(png_size(&dir.path().join("gpu-difference.png")), (48, 27));
+    // A reference of another size is refused before rendering.
+    let o = run_render(
+        &scene,
+        &dir.path().join("x.exr"),
+        &[
+            "--size",
+            "20x10",
+            "--compare",
+            cpu_out.to_str().expect("utf8"),
+        ],
+    );
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("48x27"));
+    assert!(!dir.path().join("x.exr").exists());
     let same_status = cpu
         .pixels
         .iter()

@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use grin_trace::image::Frame;
+use grin_trace::image::{Frame, diff_frames};
 use grin_trace::render::{RenderScene, render_cpu};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -45,6 +45,10 @@ pub struct Args {
     /// Samples per pixel, overriding the scene's [render] spp.
     #[arg(long)]
     pub spp: Option<u32>,
+    /// Compare the beauty pass with a reference EXR (e.g. the other backend's): print the
+    /// mean, 99th percentile and max per-pixel difference and write `<out>-difference.png`.
+    #[arg(long, value_name = "REF.exr")]
+    pub compare: Option<PathBuf>,
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -91,6 +95,18 @@ struct Summary {
     status_counts: std::collections::BTreeMap<&'static str, usize>,
     exr: PathBuf,
     png: PathBuf,
+    /// `--compare`: per-pixel beauty difference against the reference (largest channel).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    comparison: Option<Comparison>,
+}
+
+/// The `--compare` result.
+#[derive(Debug, serde::Serialize)]
+struct Comparison {
+    mean: f64,
+    p99: f64,
+    max: f64,
+    difference_png: PathBuf,
 }
 
 fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
@@ -146,6 +162,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let rs = RenderScene::new(&scene, scene_dir, field)
         .with_context(|| format!("{}", args.scene.display()))?;
 
+    let reference = args
+        .compare
+        .as_deref()
+        .map(Frame::read_exr)
+        .transpose()
+        .context("--compare")?;
+    if let Some(r) = &reference
+        && (r.width, r.height) != (scene.render.width, scene.render.height)
+    {
+        bail!(
+            "--compare: reference is {}x{}, the render is {}x{}",
+            r.width,
+            r.height,
+            scene.render.width,
+            scene.render.height
+        );
+    }
+
     let cancel = AtomicBool::new(false);
     let bar = progress_bar(scene.render.height);
     let tick = |rows: u32| bar.inc(u64::from(rows));
@@ -172,6 +206,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     frame.write_exr(&args.output)?;
     frame.write_png(&png)?;
+    let comparison = match &reference {
+        Some(r) => {
+            let (stats, diff) = diff_frames(&frame, r).context("--compare: sizes differ")?;
+            let diff_png = args.output.with_file_name(format!(
+                "{}-difference.png",
+                args.output
+                    .file_stem()
+                    .map_or_else(|| "out".into(), |s| s.to_string_lossy())
+            ));
+            diff.write_png(&diff_png)?;
+            Some(Comparison {
+                mean: stats.mean,
+                p99: stats.p99,
+                max: stats.max,
+                difference_png: diff_png,
+            })
+        }
+        None => None,
+    };
 
     let n_pixels = f64::from(frame.width) * f64::from(frame.height);
     let rays = n_pixels * f64::from(scene.render.spp);
@@ -190,6 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         steps_per_ray: mean(|p| p.steps),
         evals_per_ray: mean(|p| p.evals),
         status_counts: status_counts(&frame),
+        comparison,
         exr: args.output.clone(),
         png,
     };
@@ -218,6 +272,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             summary.exr.display(),
             summary.png.display(),
         );
+        if let Some(c) = &summary.comparison {
+            println!(
+                "difference vs reference: mean {:.3e}, p99 {:.3e}, max {:.3e}; wrote {}",
+                c.mean,
+                c.p99,
+                c.max,
+                c.difference_png.display()
+            );
+        }
     }
     Ok(())
 }
