@@ -230,6 +230,8 @@ fn bake_refuses_bad_vdb_input_with_clear_errors() {
         "{}",
         String::from_utf8_lossy(&ok.stderr)
     );
+    let report = String::from_utf8_lossy(&ok.stdout);
+    assert!(report.contains("4 NaN/Inf voxels replaced by ambient"), "{report}");
     std::fs::remove_file(&out).expect("remove");
 
     let s = vdb_scene(
