@@ -231,7 +231,10 @@ fn bake_refuses_bad_vdb_input_with_clear_errors() {
         String::from_utf8_lossy(&ok.stderr)
     );
     let report = String::from_utf8_lossy(&ok.stdout);
-    assert!(report.contains("4 NaN/Inf voxels replaced by ambient"), "{report}");
+    assert!(
+        report.contains("4 NaN/Inf voxels replaced by ambient"),
+        "{report}"
+    );
     std::fs::remove_file(&out).expect("remove");
 
     let s = vdb_scene(
@@ -520,4 +523,59 @@ fn export_writes_delta_n_and_grad_n_that_read_back_exactly() {
         no_dir.to_str().expect("utf8"),
     ]);
     fails_cleanly(&out, "cannot write", None);
+}
+
+/// The mapped field puts each voxel's value at the world position the file's transform
+/// (non-uniform voxel size, negative index origin) and `units` give it.
+#[test]
+fn vdb_field_places_voxels_at_their_world_positions() {
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("manifest.json")).expect("manifest"))
+            .expect("json");
+    let rec = &manifest["test/aniso.vdb"][0];
+    let f3 = |v: &serde_json::Value| -> [f64; 3] {
+        std::array::from_fn(|a| v[a].as_f64().expect("number"))
+    };
+    let (h, origin) = (f3(&rec["voxel_size"]), f3(&rec["origin"]));
+    let lo = f3(&rec["dense_min"]);
+    let dims = f3(&rec["dense_dims"]);
+    let bytes = std::fs::read(data("test/aniso.vdb.value.f32")).expect("sidecar");
+    let values: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let (k, units) = (1e-3, 3.0);
+    let params = VdbFieldParams {
+        mapping: Mapping::Linear { k },
+        units,
+        non_finite: NonFinitePolicy::Reject,
+        bounds: Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius: 10.0,
+        },
+        ambient: 1.0,
+        max_bytes: DEFAULT_MAX_DENSE_BYTES,
+    };
+    let field = VdbField::load(&data("test/aniso.vdb"), "value", &params).expect("load");
+    let nx = dims[0] as usize;
+    let ny = dims[1] as usize;
+    for (off, &v) in values.iter().enumerate() {
+        let ijk = [
+            (off % nx) as f64 + lo[0],
+            ((off / nx) % ny) as f64 + lo[1],
+            (off / (nx * ny)) as f64 + lo[2],
+        ];
+        let world = DVec3::from_array(std::array::from_fn(|a| units * (origin[a] + h[a] * ijk[a])));
+        let n = field.sample(world).n;
+        assert!(
+            (n - (1.0 + k * f64::from(v))).abs() < 1e-12,
+            "voxel {ijk:?} at {world}: n = {n}, value {v}"
+        );
+    }
+    // Half a voxel off along x the value is no longer the voxel's (the placement matters).
+    let world = DVec3::from_array(std::array::from_fn(|a| {
+        units * (origin[a] + h[a] * (lo[a] + 1.0) + if a == 0 { 0.5 * h[0] } else { 0.0 })
+    }));
+    let at_node = 1.0 + k * f64::from(values[1 + nx * (1 + ny)]);
+    assert!((field.sample(world).n - at_node).abs() > 1e-6);
 }
