@@ -30,11 +30,11 @@ const MARCH_ONLY: &str = "(c) medium only";
 
 /// Image size of the full run (the 640x360) and of `--quick`.
 const FULL_SIZE: (u32, u32) = (640, 360);
-const QUICK_SIZE: (u32, u32) = (320, 180);
+const QUICK_SIZE: (u32, u32) = (160, 90);
 /// Bake resolution (nodes along the longest axis) for both backends: the bake helper's
 /// default, so analytic and noise media cost the same to sample.
 const FULL_BAKE: usize = 128;
-const QUICK_BAKE: usize = 64;
+const QUICK_BAKE: usize = 48;
 /// Timed frames per backend and scene (after one untimed warm-up frame on the GPU).
 const FULL_FRAMES: u32 = 3;
 const QUICK_FRAMES: u32 = 1;
