@@ -852,7 +852,11 @@ mod tests {
             let r = 1.5 * s * (f64::from(i) / 4000.0).cbrt();
             let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / 4000.0;
             let q = (1.0 - z * z).sqrt();
-            let p = DVec3::new(q * (t * 6.283).cos(), q * (t * 6.283).sin(), z) * r;
+            let p = DVec3::new(
+                q * (t * std::f64::consts::TAU).cos(),
+                q * (t * std::f64::consts::TAU).sin(),
+                z,
+            ) * r;
             let smp = field.sample(p);
             let g = p * (-2.0 * f(p) / (s * s));
             en = en.max((smp.n - 1.0 - f(p)).abs());
