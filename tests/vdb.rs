@@ -276,6 +276,19 @@ fn bake_refuses_bad_vdb_input_with_clear_errors() {
     let s = vdb_scene(d, &truncated, "temperature", GD, "", N_AIR_20C);
     fails_cleanly(&bake(&s, &out), "truncated or corrupt", Some(&out));
 
+    let empty = d.join("empty.vdb");
+    std::fs::write(&empty, b"").expect("write");
+    let s = vdb_scene(d, &empty, "temperature", GD, "", N_AIR_20C);
+    fails_cleanly(&bake(&s, &out), "the file is empty", Some(&out));
+
+    let random = d.join("random.vdb");
+    let junk: Vec<u8> = (0u32..4096)
+        .map(|i| (i.wrapping_mul(2_246_822_519) >> 9) as u8)
+        .collect();
+    std::fs::write(&random, junk).expect("write");
+    let s = vdb_scene(d, &random, "temperature", GD, "", N_AIR_20C);
+    fails_cleanly(&bake(&s, &out), "not a readable OpenVDB file", Some(&out));
+
     // Gladstone-Dale background (air at 20 C) against a vacuum ambient index.
     let s = vdb_scene(d, &blender, "temperature", GD, "", 1.0);
     fails_cleanly(
