@@ -592,3 +592,95 @@ fn vdb_field_places_voxels_at_their_world_positions() {
     let at_node = 1.0 + k * f64::from(values[1 + nx * (1 + ny)]);
     assert!((field.sample(world).n - at_node).abs() > 1e-6);
 }
+
+/// File -> Gladstone-Dale map -> tracer: a ray through a uniform 1000 K block of a VDB
+/// temperature grid has optical path / length = n(1000 K), and n - 1 matches the
+/// REFERENCES.md table (0.80e-4 at 1000 K).
+#[test]
+fn trace_through_a_uniform_hot_block_reads_the_gladstone_dale_index() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (t_amb, scale) = (293.15, 300.0);
+    let value = ((1000.0 - t_amb) / scale) as f32;
+    let half = 10;
+    let bbox = vdb_sys::IndexBox {
+        min: [-half; 3],
+        max: [half; 3],
+    };
+    let count = (2 * half + 1).pow(3) as usize;
+    let grid = vdb_sys::DenseGrid {
+        bbox,
+        world_from_index: vdb_sys::Transform::uniform(0.05, [0.0; 3]),
+        values: vec![value; count],
+    };
+    let vdb_path = dir.path().join("block.vdb");
+    let mut w = vdb_sys::VdbWriter::new().expect("writer");
+    w.add_float("temperature", &grid, &vdb_sys::WriteOptions::default())
+        .expect("add");
+    w.write(&vdb_path).expect("write");
+
+    // Medium: a box 4 voxels inside the data, where the interpolant is exactly uniform.
+    let scene = dir.path().join("block.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            r#"
+[camera]
+position = [0.0, 0.0, -3.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 40.0
+
+[medium]
+bounds = {{ box = {{ min = [-0.3, -0.3, -0.3], max = [0.3, 0.3, 0.3] }} }}
+ambient_index = {N_AIR_20C}
+field = {{ kind = "vdb", path = "block.vdb", grid = "temperature", map = {{ gladstone-dale = {{ ambient_temperature_k = {t_amb}, scale_k = {scale} }} }} }}
+
+[render]
+width = 8
+height = 8
+integrator = "rk4"
+step = {{ fixed = 0.01 }}
+"#
+        ),
+    )
+    .expect("scene");
+    let rays = dir.path().join("rays.csv");
+    std::fs::write(&rays, "ox,oy,oz,dx,dy,dz\n0.05,-0.1,-2,0,0,1\n").expect("rays");
+    let traced = dir.path().join("out.csv");
+    let out = run(&[
+        "trace",
+        scene.to_str().expect("utf8"),
+        "--rays",
+        rays.to_str().expect("utf8"),
+        "-o",
+        traced.to_str().expect("utf8"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&traced).expect("table");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let row: Vec<&str> = lines.next().expect("row").split(',').collect();
+    let col = |name: &str| {
+        let i = header.iter().position(|h| *h == name).expect("column");
+        row[i].parse::<f64>().expect("number")
+    };
+    assert_eq!(
+        row[header.iter().position(|h| *h == "status").expect("status")],
+        "exited"
+    );
+    let (opl, length) = (col("opl"), col("length"));
+    assert!((length - 0.6).abs() < 1e-9, "length {length}");
+    let n = opl / length;
+    // The grid stores the value as f32; the exact map of that value:
+    let t_k = t_amb + scale * f64::from(value);
+    let n_exact = 1.0 + 2.26e-4 * 101_325.0 / (287.05 * t_k);
+    assert!((n - n_exact).abs() < 1e-12, "n {n} vs {n_exact}");
+    assert!(
+        (n - 1.0 - 0.80e-4).abs() < 0.005e-4,
+        "n - 1 = {:e}",
+        n - 1.0
+    );
+}
