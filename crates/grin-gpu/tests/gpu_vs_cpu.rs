@@ -15,11 +15,19 @@ mod harness;
 use std::path::{Path, PathBuf};
 
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec, load_scene, parse_scene};
+use grin_trace::image::{Frame, PixelOut, diff_frames};
 
 /// Mean per-pixel difference allowed (linear radiance, largest channel).
 const MEAN_TOL: f64 = 1e-3;
 /// 99th-percentile per-pixel difference allowed.
 const P99_TOL: f64 = 1e-3;
+/// Scenes whose rays are chaotic inside the medium: the Eaton lens (n^2 = 2R/r - 1,
+/// n = 6.2 at its core of 0.05 R) retro-reflects rays around a near-singular core, where
+/// f32 and f64 paths separate (REFERENCES.md failure mode 6). Measured over the whole
+/// image: mean 1.2e-2, p99 0.5 (speckle across the lens).
+const CHAOTIC: [&str; 1] = ["eaton"];
+/// Mean difference allowed over the whole image of a chaotic scene.
+const CHAOTIC_MEAN_TOL: f64 = 3e-2;
 /// Test image size: big enough to show every object, small enough for lavapipe.
 const TEST_SIZE: (u32, u32) = (128, 72);
 /// Baked grid resolution for the comparisons (both backends march this grid).
@@ -42,6 +50,40 @@ fn compare_scene_file(ctx: &grin_gpu::GpuContext, path: &Path) {
         .expect("name")
         .to_string_lossy()
         .into_owned();
+    // Same work: mean steps per ray within 3% (catches rays stalling in f32).
+    let (sc, sg) = (cpu.mean_steps(), gpu.mean_steps());
+    assert!(
+        (sc - sg).abs() <= 0.03 * sc.max(1.0),
+        "{name}: mean steps CPU {sc} vs GPU {sg}"
+    );
+    if CHAOTIC.contains(&name.as_str()) {
+        // Outside the lens the images agree as tightly as anywhere; inside, only on
+        // average (f32 and f64 paths through the steep core separate).
+        let outside = |f: &Frame, other: &Frame| Frame {
+            width: f.width,
+            height: f.height,
+            pixels: f
+                .pixels
+                .iter()
+                .zip(&other.pixels)
+                .map(|(p, q)| {
+                    if p.status == 0.0 && q.status == 0.0 {
+                        *p
+                    } else {
+                        PixelOut::default()
+                    }
+                })
+                .collect(),
+        };
+        let (a, b) = (outside(&cpu, &gpu), outside(&gpu, &cpu));
+        harness::assert_images_agree(&format!("{name}-outside"), &a, &b, MEAN_TOL, P99_TOL);
+        let (stats, _) = diff_frames(&cpu, &gpu).expect("same size");
+        assert!(
+            stats.mean <= CHAOTIC_MEAN_TOL,
+            "{name}: mean difference {stats:?}"
+        );
+        return;
+    }
     harness::assert_images_agree(&name, &cpu, &gpu, MEAN_TOL, P99_TOL);
 }
 
@@ -76,6 +118,7 @@ macro_rules! example_scene_tests {
 }
 
 example_scene_tests! {
+    scene_eaton => "eaton.toml",
     scene_grin_rod => "grin-rod.toml",
     scene_heat_haze => "heat-haze.toml",
     scene_luneburg => "luneburg.toml",
