@@ -246,3 +246,39 @@ fn every_integrator_step_policy_and_exit_matches_cpu() {
         );
     }
 }
+
+#[test]
+fn environment_map_sky_matches_cpu() {
+    let Some(ctx) = harness::context("environment_map_sky_matches_cpu") else {
+        return;
+    };
+    let dir = tempfile_dir("envmap");
+    // A map that varies with azimuth and elevation, so the lookup's orientation,
+    // wrap-around and bilinear weights all show; constant along the pole rows, as a real
+    // map is (the azimuth of the exact zenith, atan2(0, -0), is a matter of signed zeros).
+    exr::prelude::write_rgb_file(dir.join("sky.exr"), 64, 32, |x, y| {
+        let u = x as f32 / 64.0;
+        let pole = (std::f32::consts::PI * y as f32 / 31.0).sin();
+        (
+            0.2 + 0.8 * u * pole,
+            1.0 - y as f32 / 31.0,
+            0.5 + 0.5 * (6.0 * u).sin() * pole,
+        )
+    })
+    .expect("write exr");
+    let text = PAPER_LUNEBURG.replace(
+        "[render]",
+        "[sky]\nmap = { path = \"sky.exr\", intensity = 2.0 }\n\n[render]",
+    );
+    let scene = parse_scene(&text, &dir.join("scene.toml")).expect("scene");
+    let baked = harness::baked(&scene, &dir, 48);
+    let (cpu, gpu) = harness::render_both(&ctx, &scene, &dir, baked);
+    harness::assert_images_agree("envmap", &cpu, &gpu, MEAN_TOL, P99_TOL);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn tempfile_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("grin-gpu-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    dir
+}
