@@ -158,3 +158,33 @@ impl PixelOut {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shaders::RENDER_WGSL;
+
+    /// The Rust structs and their WGSL twins have the same size (naga's layouter on the
+    /// assembled render kernel): the "keep in sync" comments, checked.
+    #[test]
+    fn structs_match_their_wgsl_layouts() {
+        let module = naga::front::wgsl::parse_str(RENDER_WGSL).expect("render.wgsl parses");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let size_of_wgsl = |name: &str| {
+            let (handle, _) = module
+                .types
+                .iter()
+                .find(|(_, t)| t.name.as_deref() == Some(name))
+                .unwrap_or_else(|| panic!("{name} not in render.wgsl"));
+            layouter[handle].size as usize
+        };
+        assert_eq!(
+            size_of_wgsl("FrameParams"),
+            std::mem::size_of::<FrameParams>()
+        );
+        assert_eq!(size_of_wgsl("GpuObject"), std::mem::size_of::<GpuObject>());
+        assert_eq!(size_of_wgsl("GpuLight"), std::mem::size_of::<GpuLight>());
+        assert_eq!(size_of_wgsl("PixelOut"), std::mem::size_of::<PixelOut>());
+    }
+}
