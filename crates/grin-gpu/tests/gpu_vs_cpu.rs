@@ -282,3 +282,29 @@ fn tempfile_dir(tag: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("tmp dir");
     dir
 }
+
+#[test]
+fn bent_shadow_rays_match_cpu() {
+    let Some(ctx) = harness::context("bent_shadow_rays_match_cpu") else {
+        return;
+    };
+    // The light above a constant-n ball: bent shadow rays through it carry its Fresnel
+    // transmittance (1 - R)^2, straight ones ignore the medium (the paper).
+    let text = PAPER_LUNEBURG
+        .replace("position = [2.0, 4.0, -2.0]", "position = [0.0, 4.0, -0.6]")
+        .replace(r#"field = { kind = "luneburg" }"#, r#"field = { kind = "uniform", n = 1.5 }"#)
+        .replace("[render]", "[render]\nbend_shadow_rays = true");
+    let bent = parse_scene(&text, Path::new("inline.toml")).expect("scene");
+    let baked = harness::baked(&bent, Path::new("."), 48);
+    let (cpu, gpu) = harness::render_both(&ctx, &bent, Path::new("."), baked.clone());
+    harness::assert_images_agree("bent-shadows", &cpu, &gpu, MEAN_TOL, P99_TOL);
+    // And bending is exercised: the straight-shadow image differs under the lens.
+    let mut straight = bent.clone();
+    straight.render.bend_shadow_rays = false;
+    let (_, gpu_straight) = harness::render_both(&ctx, &straight, Path::new("."), baked);
+    let (stats, _) = diff_frames(&gpu, &gpu_straight).expect("same size");
+    assert!(
+        stats.max > 0.05,
+        "bending shadow rays changed nothing: {stats:?}"
+    );
+}
