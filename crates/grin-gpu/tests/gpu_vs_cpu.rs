@@ -292,7 +292,10 @@ fn bent_shadow_rays_match_cpu() {
     // transmittance (1 - R)^2, straight ones ignore the medium (the paper).
     let text = PAPER_LUNEBURG
         .replace("position = [2.0, 4.0, -2.0]", "position = [0.0, 4.0, -0.6]")
-        .replace(r#"field = { kind = "luneburg" }"#, r#"field = { kind = "uniform", n = 1.5 }"#)
+        .replace(
+            r#"field = { kind = "luneburg" }"#,
+            r#"field = { kind = "uniform", n = 1.5 }"#,
+        )
         .replace("[render]", "[render]\nbend_shadow_rays = true");
     let bent = parse_scene(&text, Path::new("inline.toml")).expect("scene");
     let baked = harness::baked(&bent, Path::new("."), 48);
@@ -307,4 +310,20 @@ fn bent_shadow_rays_match_cpu() {
         stats.max > 0.05,
         "bending shadow rays changed nothing: {stats:?}"
     );
+}
+
+#[test]
+fn tricubic_field_matches_cpu() {
+    let Some(ctx) = harness::context("tricubic_field_matches_cpu") else {
+        return;
+    };
+    let scene = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    let trilinear = harness::baked(&scene, Path::new("."), 32).expect("medium");
+    let tricubic = std::sync::Arc::new(
+        (*trilinear)
+            .clone()
+            .with_interp(grin_field::baked::Interp::Tricubic),
+    );
+    let (cpu, gpu) = harness::render_both(&ctx, &scene, Path::new("."), Some(tricubic));
+    harness::assert_images_agree("tricubic", &cpu, &gpu, MEAN_TOL, P99_TOL);
 }
