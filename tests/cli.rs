@@ -15,3 +15,28 @@ fn help_lists_subcommands() {
         assert!(text.contains(sub), "help lacks `{sub}`: {text}");
     }
 }
+
+/// `grin info file | head`: a reader that closes the pipe early must not make grin panic.
+#[test]
+fn closed_stdout_is_not_a_crash() {
+    let vdb = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/vdb/blender_fire.vdb"
+    );
+    let mut child = grin()
+        .args(["info", vdb])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run grin");
+    // Close the read end before grin (which first opens the VDB file) writes anything.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("wait for grin");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "grin panicked: {stderr}");
+    assert!(
+        out.status.success() || out.status.code() == Some(141),
+        "unexpected exit {:?}: {stderr}",
+        out.status
+    );
+}

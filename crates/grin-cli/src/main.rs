@@ -32,7 +32,29 @@ enum Command {
     Bench(cmd::bench::Args),
 }
 
+/// `grin info x.vdb | head` closes stdout early; `println!` then panics. Treat that as the
+/// reader being done (as a SIGPIPE would), not as a crash.
+fn quiet_on_closed_stdout() {
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(SIGPIPE_EXIT_CODE);
+        }
+        default_hook(info);
+    }));
+}
+
+/// 128 + SIGPIPE, what a shell reports for a process killed by a closed pipe.
+const SIGPIPE_EXIT_CODE: i32 = 141;
+
 fn main() -> ExitCode {
+    quiet_on_closed_stdout();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Trace(a) => cmd::trace::run(a),
