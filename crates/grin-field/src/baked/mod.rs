@@ -9,6 +9,7 @@
 //! with a per-channel scale (value = q * scale[c]).
 
 pub mod bspline;
+mod layout;
 pub mod macrocell;
 
 use glam::{DMat4, DVec3};
@@ -16,6 +17,7 @@ use rayon::prelude::*;
 
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
+use layout::Bricks;
 pub use macrocell::MacroGrid;
 
 /// How voxels are stored.
@@ -235,6 +237,14 @@ pub struct BakedField {
     /// B-spline coefficients of the 4 channels (tricubic only).
     coeffs: Option<Vec<[f32; 4]>>,
     macro_grid: MacroGrid,
+    /// Largest grid coordinate per axis (dims - 1), cached for `sample`.
+    gmax: DVec3,
+    /// Where node (i, j, k) sits in the sampling copies below (4x4x4 bricks).
+    bricks: Bricks,
+    /// The voxels (trilinear) or spline coefficients (tricubic, as f32) in brick order:
+    /// the same numbers as `voxels` / `coeffs`, only laid out so that a sample's taps
+    /// share cache lines and pages whatever the ray direction.
+    sampled: Voxels,
 }
 
 impl BakedField {
@@ -304,6 +314,9 @@ impl BakedField {
                 max_grad: vec![0.0],
                 threshold: 0.0,
             },
+            gmax: geometry.grid_max(),
+            bricks: Bricks::new(geometry.dims),
+            sampled: Voxels::F32(Vec::new()),
         };
         field.prepare();
         Ok(field)
@@ -346,6 +359,14 @@ impl BakedField {
         };
         self.macro_grid =
             MacroGrid::build(dims, reach, self.max_grad, |i, j, k| grads[idx(i, j, k)]);
+        self.sampled = match (&self.coeffs, &self.voxels) {
+            (Some(c), _) => Voxels::F32(self.bricks.reorder(dims, c)),
+            (None, Voxels::F32(v)) => Voxels::F32(self.bricks.reorder(dims, v)),
+            (None, Voxels::I16 { data, scale }) => Voxels::I16 {
+                data: self.bricks.reorder(dims, data),
+                scale: *scale,
+            },
+        };
     }
 
     pub fn geometry(&self) -> &GridGeometry {
@@ -394,26 +415,30 @@ impl BakedField {
     /// [delta_n, grad n] at grid point g (already known to be inside, or clamped).
     #[inline]
     fn interpolate(&self, g: DVec3) -> [f64; 4] {
-        let gmax = self.geometry.grid_max();
-        let g = g.clamp(DVec3::ZERO, gmax);
-        match &self.coeffs {
-            None => self.trilinear(g),
-            Some(c) => self.tricubic(c, g),
+        let g = g.clamp(DVec3::ZERO, self.gmax);
+        match (self.interp, &self.sampled) {
+            (Interp::Tricubic, Voxels::F32(c)) => self.tricubic(c, g),
+            (_, v) => self.trilinear(v, g),
         }
     }
 
-    fn trilinear(&self, g: DVec3) -> [f64; 4] {
+    #[inline]
+    fn trilinear(&self, voxels: &Voxels, g: DVec3) -> [f64; 4] {
         // One match per sample, not per tap: i16 voxels are interpolated as integers and
         // scaled once.
-        match &self.voxels {
-            Voxels::F32(v) => trilinear_in(&self.geometry, g, |i| v[i].map(f64::from)),
+        match voxels {
+            Voxels::F32(v) => {
+                trilinear_in(&self.geometry, &self.bricks, g, |i| v[i].map(f64::from))
+            }
             Voxels::I16 { data, scale } => {
-                let q = trilinear_in(&self.geometry, g, |i| data[i].map(f64::from));
+                let q = trilinear_in(&self.geometry, &self.bricks, g, |i| data[i].map(f64::from));
                 std::array::from_fn(|c| q[c] * f64::from(scale[c]))
             }
         }
     }
 
+    /// `coeffs` in brick order (`self.sampled`).
+    #[inline]
     fn tricubic(&self, coeffs: &[[f32; 4]], g: DVec3) -> [f64; 4] {
         let d = self.geometry.dims;
         let fl = g.floor();
@@ -423,13 +448,13 @@ impl BakedField {
             bspline::weights(g.z - fl.z),
         );
         let (bi, bj, bk) = (fl.x as isize - 1, fl.y as isize - 1, fl.z as isize - 1);
-        let ix: [usize; 4] = std::array::from_fn(|a| bspline::mirror(bi + a as isize, d[0]));
+        let b = &self.bricks;
+        let ix: [usize; 4] = std::array::from_fn(|a| b.x(bspline::mirror(bi + a as isize, d[0])));
         let mut out = [0.0; 4];
         for (c_k, w_k) in wz.iter().enumerate() {
-            let k = bspline::mirror(bk + c_k as isize, d[2]);
+            let k = b.z(bspline::mirror(bk + c_k as isize, d[2]));
             for (c_j, w_j) in wy.iter().enumerate() {
-                let j = bspline::mirror(bj + c_j as isize, d[1]);
-                let row = d[0] * (j + d[1] * k);
+                let row = b.y(bspline::mirror(bj + c_j as isize, d[1])) + k;
                 let wjk = w_k * w_j;
                 for (a, w_i) in wx.iter().enumerate() {
                     let w = wjk * w_i;
@@ -446,15 +471,19 @@ impl BakedField {
     /// Is grid point g beyond the nodes (where `Outside::Ambient` applies)?
     #[inline]
     fn beyond_grid(&self, g: DVec3) -> bool {
-        let gmax = self.geometry.grid_max();
-        g.cmplt(DVec3::ZERO).any() || g.cmpgt(gmax).any()
+        g.cmplt(DVec3::ZERO).any() || g.cmpgt(self.gmax).any()
     }
 }
 
-/// Trilinear interpolation of the 4 channels of `fetch(voxel index)` at grid point g
-/// (inside [0, dims - 1]).
+/// Trilinear interpolation of the 4 channels of `fetch(voxel index in brick order)` at
+/// grid point g (inside [0, dims - 1]).
 #[inline]
-fn trilinear_in(geometry: &GridGeometry, g: DVec3, fetch: impl Fn(usize) -> [f64; 4]) -> [f64; 4] {
+fn trilinear_in(
+    geometry: &GridGeometry,
+    bricks: &Bricks,
+    g: DVec3,
+    fetch: impl Fn(usize) -> [f64; 4],
+) -> [f64; 4] {
     let d = geometry.dims;
     let base = |x: f64, n: usize| -> (usize, f64) {
         let i = (x.floor() as usize).min(n - 2);
@@ -463,11 +492,13 @@ fn trilinear_in(geometry: &GridGeometry, g: DVec3, fetch: impl Fn(usize) -> [f64
     let (i, tx) = base(g.x, d[0]);
     let (j, ty) = base(g.y, d[1]);
     let (k, tz) = base(g.z, d[2]);
+    let (x0, x1) = (bricks.x(i), bricks.x(i + 1));
     let mut out = [0.0; 4];
     for (dk, wz) in [(0, 1.0 - tz), (1, tz)] {
+        let z = bricks.z(k + dk);
         for (dj, wy) in [(0, 1.0 - ty), (1, ty)] {
-            let row = geometry.index(i, j + dj, k + dk);
-            let (a, b) = (fetch(row), fetch(row + 1));
+            let row = bricks.y(j + dj) + z;
+            let (a, b) = (fetch(row + x0), fetch(row + x1));
             let (w0, w1) = (wy * wz * (1.0 - tx), wy * wz * tx);
             for c in 0..4 {
                 out[c] += w0 * a[c] + w1 * b[c];
@@ -511,7 +542,10 @@ fn prefilter(voxels: &Voxels, dims: [usize; 3]) -> Vec<[f32; 4]> {
 }
 
 /// Prefilter the 4 channels of the `n` values at `line[0], line[stride], ...`.
-#[expect(clippy::needless_range_loop, reason = "c indexes the channel inside strided voxels")]
+#[expect(
+    clippy::needless_range_loop,
+    reason = "c indexes the channel inside strided voxels"
+)]
 fn filter_strided(line: &mut [[f64; 4]], stride: usize, n: usize) {
     let mut buf = vec![0.0; n];
     for c in 0..4 {
