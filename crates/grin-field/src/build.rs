@@ -9,6 +9,7 @@ use grin_scene::{FieldSpec, MediumSpec};
 use crate::analytic::{
     Eaton, ExponentialAtmosphere, GrinRod, LinearN2, Luneburg, MaxwellFishEye, Plume, Uniform,
 };
+use crate::baked::Interp;
 use crate::bounds::Bounds;
 use crate::check::check_positive;
 use crate::expr::ExprField;
@@ -67,9 +68,17 @@ pub fn build_field(
             scene_dir,
             crate::vdb::DEFAULT_MAX_DENSE_BYTES,
         )?),
-        FieldSpec::Baked { path } => Arc::new(crate::grinf::load_for_medium(
-            path, scene_dir, bounds, ambient,
-        )?),
+        FieldSpec::Baked {
+            path,
+            interpolation,
+        } => {
+            let baked = crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)?;
+            Arc::new(match interpolation {
+                Some(grin_scene::Interpolation::Trilinear) => baked.with_interp(Interp::Trilinear),
+                Some(grin_scene::Interpolation::Tricubic) => baked.with_interp(Interp::Tricubic),
+                None => baked,
+            })
+        }
     };
     check_positive(field.as_ref(), &field.describe())?;
     Ok(field)
@@ -192,5 +201,47 @@ mod tests {
             }
         }
         assert!(built >= 4, "only {built} example scenes built");
+    }
+
+    /// `field = { kind = "baked", interpolation = ... }` overrides the file's stored
+    /// interpolation; without it the file's choice stands.
+    #[test]
+    fn baked_interpolation_overrides_the_file_header() {
+        let source = medium(r#"{ kind = "luneburg" }"#);
+        let luneburg = build_field(&source, Path::new(".")).expect("luneburg");
+        let opts = crate::bake::BakeOptions {
+            resolution: Some(24),
+            interp: Interp::Trilinear,
+            ..Default::default()
+        };
+        let (baked, _) = crate::bake::bake(luneburg.as_ref(), &opts, &|_, _, _| {}).expect("bake");
+        let dir = tempfile::tempdir().expect("temp dir");
+        crate::grinf::save(&baked, &dir.path().join("l.grinf")).expect("save");
+
+        let p = glam::DVec3::new(0.31, -0.22, 0.17);
+        let from_file = build_field(
+            &medium(r#"{ kind = "baked", path = "l.grinf" }"#),
+            dir.path(),
+        )
+        .expect("baked, file default");
+        let tricubic = build_field(
+            &medium(r#"{ kind = "baked", path = "l.grinf", interpolation = "tricubic" }"#),
+            dir.path(),
+        )
+        .expect("baked, tricubic");
+        assert_eq!(
+            from_file.sample(p),
+            baked.sample(p),
+            "file default is trilinear"
+        );
+        let cubic = baked.with_interp(Interp::Tricubic);
+        assert_eq!(
+            tricubic.sample(p),
+            cubic.sample(p),
+            "override selects tricubic"
+        );
+        // Tricubic is the closer of the two to the source at an off-node point.
+        let exact = luneburg.sample(p).n;
+        assert!((tricubic.sample(p).n - exact).abs() < (from_file.sample(p).n - exact).abs());
     }
 }

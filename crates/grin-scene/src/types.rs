@@ -189,8 +189,13 @@ pub enum FieldSpec {
     Noise(NoiseSpec),
     /// An OpenVDB grid mapped to n (grin-field `vdb` module).
     Vdb(VdbSpec),
-    /// A baked `.grinf` file.
-    Baked { path: String },
+    /// A baked `.grinf` file (path relative to the scene file). `interpolation` overrides
+    /// the one stored in the file's header (chosen at bake time with `grin bake --interp`).
+    Baked {
+        path: String,
+        #[serde(default)]
+        interpolation: Option<Interpolation>,
+    },
 }
 
 fn default_axis_y() -> Axis {
@@ -493,13 +498,12 @@ pub struct RenderSettings {
     pub jitter: bool,
     /// Bend shadow rays through the medium (false: straight, as in the paper).
     pub bend_shadow_rays: bool,
-    /// Bilinear (trilinear) or tricubic sampling of baked fields.
-    pub interpolation: Interpolation,
     /// Seed for jitter and sampling.
     pub seed: u64,
 }
 
-/// Sampling of baked grids.
+/// Sampling of baked grids: trilinear (C0, 2nd order) or the prefiltered tricubic
+/// B-spline (C2, 4th order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Interpolation {
@@ -526,7 +530,6 @@ impl Default for RenderSettings {
             macro_cells: true,
             jitter: true,
             bend_shadow_rays: false,
-            interpolation: Interpolation::Trilinear,
             seed: 0,
         }
     }

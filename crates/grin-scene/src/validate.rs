@@ -257,7 +257,7 @@ fn field(f: &FieldSpec) -> Check {
         }
         FieldSpec::Noise(spec) => noise(spec),
         FieldSpec::Vdb(spec) => vdb(spec),
-        FieldSpec::Baked { path } => non_empty(&k("path"), path),
+        FieldSpec::Baked { path, .. } => non_empty(&k("path"), path),
     }
 }
 
