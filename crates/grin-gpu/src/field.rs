@@ -12,7 +12,7 @@
 //! ~19 M trilinear samples/s. i16-quantized baked files are decoded to f32 on upload.
 
 use grin_field::IndexField;
-use grin_field::bake::{BakeOptions, bake};
+use grin_field::bake::{BakeOptions, BakeReport, DEFAULT_ERROR_BUDGET, bake};
 use grin_field::baked::{BakedField, Interp, Outside};
 
 use crate::gpu_data::{FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
@@ -38,16 +38,51 @@ pub struct FieldTextures {
 }
 
 /// Bake `field` on a grid for the GPU (trilinear, f32 voxels, fixed resolution).
+///
+/// A fixed resolution can under-resolve a thin layer (a 128-node grid along a long, flat
+/// box): when the bake's measured error is over [`DEFAULT_ERROR_BUDGET`] this prints
+/// [`bake_warning`] to stderr, so an under-resolved field never renders silently wrong.
+/// Use [`bake_for_gpu_with_report`] to get the report (and the warning) instead.
 pub fn bake_for_gpu(field: &dyn IndexField, resolution: usize) -> Result<BakedField, GpuError> {
+    let (baked, report) = bake_for_gpu_with_report(field, resolution)?;
+    if let Some(w) = bake_warning(&report) {
+        eprintln!("grin: warning: {w}");
+    }
+    Ok(baked)
+}
+
+/// [`bake_for_gpu`] without the stderr warning: the baked field and the baker's report
+/// (measured max error relative to the field's delta_n range).
+pub fn bake_for_gpu_with_report(
+    field: &dyn IndexField,
+    resolution: usize,
+) -> Result<(BakedField, BakeReport), GpuError> {
     let opts = BakeOptions {
         resolution: Some(resolution),
         interp: Interp::Trilinear,
         storage: Some(grin_field::baked::Storage::F32),
         ..BakeOptions::default()
     };
-    let (baked, _report) =
-        bake(field, &opts, &|_, _, _| {}).map_err(|e| GpuError::Bake(e.to_string()))?;
-    Ok(baked)
+    bake(field, &opts, &|_, _, _| {}).map_err(|e| GpuError::Bake(e.to_string()))
+}
+
+/// A one-line warning when a GPU bake's measured error is over the default budget
+/// ([`DEFAULT_ERROR_BUDGET`] of the delta_n range), naming the grid, its spacing and the
+/// error; `None` when the bake meets the budget.
+pub fn bake_warning(report: &BakeReport) -> Option<String> {
+    if report.relative_error <= DEFAULT_ERROR_BUDGET {
+        return None;
+    }
+    let [nx, ny, nz] = report.dims;
+    let spacing = (report.grid_max.x - report.grid_min.x) / (nx.max(2) - 1) as f64;
+    Some(format!(
+        "the GPU field bake ({nx}x{ny}x{nz} nodes, spacing {spacing:.3}) has max |n error| {:.3e} = {:.2}% of the delta_n range {:.3e} ({:.0}x the budget of {}%): the field is under-resolved and the GPU image will differ from the CPU's; shrink the medium's bounds to where the field matters or pass a finer baked field",
+        report.errors.max_err_n,
+        report.relative_error * 100.0,
+        report.delta_n_range,
+        report.relative_error / DEFAULT_ERROR_BUDGET,
+        DEFAULT_ERROR_BUDGET * 100.0,
+    ))
 }
 
 fn check_dims(ctx: &GpuContext, what: &str, dims: [u32; 3]) -> Result<(), GpuError> {
@@ -212,4 +247,49 @@ pub fn empty_field(ctx: &GpuContext, params: &mut FrameParams) -> Result<FieldTe
         bytes: 0,
         dims: [2, 2, 2],
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+    use grin_field::Bounds;
+    use grin_field::analytic::ExponentialAtmosphere;
+    use grin_scene::Axis;
+
+    /// An exponential hot layer (scale height `h`) over a box `len` long and 1.6 tall.
+    fn layer(len: f64, h: f64) -> ExponentialAtmosphere {
+        let bounds = Bounds::Box {
+            min: DVec3::new(-len / 2.0, -0.1, 0.0),
+            max: DVec3::new(len / 2.0, 1.5, len),
+        };
+        ExponentialAtmosphere::new(bounds, 1.0, -6e-4, h, 0.0, Axis::Y).expect("valid layer")
+    }
+
+    #[test]
+    fn thin_layer_in_long_box_is_reported_under_resolved() {
+        // The old mirage scene: a 120-unit box at 128 nodes (spacing ~0.95) against a
+        // 0.15 scale height; its n error is hundreds of times the budget.
+        let (_, report) =
+            bake_for_gpu_with_report(&layer(120.0, 0.15), DEFAULT_GPU_BAKE_RESOLUTION)
+                .expect("bake");
+        assert!(
+            report.relative_error > 100.0 * DEFAULT_ERROR_BUDGET,
+            "{report:?}"
+        );
+        let w = bake_warning(&report).expect("a warning");
+        assert!(
+            w.contains("under-resolved") && w.contains("spacing 0.94"),
+            "{w}"
+        );
+    }
+
+    #[test]
+    fn resolved_layer_has_no_warning() {
+        // 11.5 nodes per scale height: trilinear error (h/H)^2/8 ~ 1e-3 of the range.
+        let (_, report) =
+            bake_for_gpu_with_report(&layer(1.5, 0.15), DEFAULT_GPU_BAKE_RESOLUTION).expect("bake");
+        assert!(report.relative_error <= DEFAULT_ERROR_BUDGET, "{report:?}");
+        assert_eq!(bake_warning(&report), None);
+    }
 }
