@@ -8,7 +8,9 @@ pub mod table;
 pub mod trace;
 
 pub use boundary::{Interface, Segment, fresnel, refract};
-pub use trace::{Control, RayResult, RayStatus, TraceError, TraceSettings, trace_ray, trace_ray_observed};
+pub use trace::{
+    Control, RayResult, RayStatus, TraceError, TraceSettings, trace_ray, trace_ray_observed,
+};
 
 pub mod image;
 pub mod render;

@@ -207,8 +207,15 @@ impl StepController {
         let er = (second.state.r - big.state.r) * scale;
         let et = (second.state.t - big.state.t) * scale;
         let err = self.norm::<R>(er, et, mid.n.to_f64());
+        // The increments from `s`: the first half step as rounded (the second started
+        // there), then the second's.
+        let delta = RayState {
+            r: (first.state.r - s.r) + second.delta.r,
+            t: (first.state.t - s.t) + second.delta.t,
+        };
         let step = Step {
             evals: big.evals + first.evals + mid_evals + second.evals,
+            delta,
             ..second
         };
         (step, err)

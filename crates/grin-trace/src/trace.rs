@@ -261,7 +261,11 @@ pub fn trace_ray_jittered<R: Real>(
         r,
         t: R::V3::from_dvec3(d_in) * s0.n,
     };
-    let mut ctrl = StepController::new(settings.step, settings.integrator, field).with_jitter(first_step_scale);
+    // Roundoff of the state updates not yet added in (compensated summation, reset at
+    // every jump of the state: straight flights, surface hits, reflections).
+    let mut comp = RayState::<R>::zero();
+    let mut ctrl = StepController::new(settings.step, settings.integrator, field)
+        .with_jitter(first_step_scale);
     let len_scale = bounds.radius();
     let exit_tol = EXIT_TOL_REL * len_scale;
 
@@ -312,6 +316,7 @@ pub fn trace_ray_jittered<R: Real>(
                 return res;
             }
             state.r = R::V3::from_dvec3(p1);
+            comp = RayState::zero();
             s0 = R::sample_field(field, state.r);
             res.evals += 1;
             if exits {
@@ -325,7 +330,7 @@ pub fn trace_ray_jittered<R: Real>(
 
         let taken: Taken<R> = ctrl.take(field, state, &s0);
         res.evals += u64::from(taken.evals);
-        let mut next = taken.step.state;
+        let mut next = integrate::add_compensated(state, taken.step.delta, &mut comp);
         let mut h = taken.h;
         let outside = bounds.signed_distance(next.r.to_dvec3()) > 0.0;
         if outside && is_finite_v::<R>(next.r) {
@@ -334,6 +339,7 @@ pub fn trace_ray_jittered<R: Real>(
             res.evals += u64::from(evals);
             next = exit_state;
             h = exit_h;
+            comp = RayState::zero();
         }
         let s1 = match taken.step.end {
             Some(e) if !outside => e,

@@ -55,6 +55,7 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
     let mut ts = [s.t; 7];
     let mut ds = [d0; 7];
     let mut r_end = s.r;
+    let mut delta = RayState::zero();
     let mut end = None;
     for i in 1..7 {
         let row = &A[i - 1];
@@ -64,8 +65,12 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
             dr += ts[j] * c::<R>(row[j]);
             dt += ds[j] * c::<R>(row[j]);
         }
-        let ri = s.r + dr * h;
-        ts[i] = s.t + dt * h;
+        delta = RayState {
+            r: dr * h,
+            t: dt * h,
+        };
+        let ri = s.r + delta.r;
+        ts[i] = s.t + delta.t;
         let sample = R::sample_field(field, ri);
         ds[i] = sample.n_grad_n();
         // Stage 7 sits at the new point: r7 = r1, T7 = T1 (FSAL).
@@ -80,6 +85,7 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
     }
     Step {
         state: RayState { r: r_end, t: ts[6] },
+        delta,
         evals: 6,
         end,
         error: Some((er * h, et * h)),

@@ -6,5 +6,5 @@ use super::{RayState, Step};
 
 /// One explicit Euler step; no evaluations beyond the start sample.
 pub fn euler_step<R: Real>(_field: &dyn IndexField, s: RayState<R>, d0: R::V3, h: R) -> Step<R> {
-    Step::plain(s.r + s.t * h, s.t + d0 * h, 0)
+    Step::plain(s, s.t * h, d0 * h, 0)
 }

@@ -20,7 +20,7 @@ pub fn rk4_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h: R
     let d4 = sample_d::<R>(field, r + t3 * h);
     let sixth = h * c::<R>(1.0 / 6.0);
     let two = c::<R>(2.0);
-    let r_new = r + (t1 + t2 * two + t3 * two + t4) * sixth;
-    let t_new = t + (d1 + d2 * two + d3 * two + d4) * sixth;
-    Step::plain(r_new, t_new, 3)
+    let dr = (t1 + t2 * two + t3 * two + t4) * sixth;
+    let dt = (d1 + d2 * two + d3 * two + d4) * sixth;
+    Step::plain(s, dr, dt, 3)
 }

@@ -14,7 +14,7 @@ pub fn sharma_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h
     let b = sample_d::<R>(field, r + t * (h * c::<R>(0.5)) + a * (h * c::<R>(0.125))) * h;
     let cc = sample_d::<R>(field, r + t * h + b * (h * c::<R>(0.5))) * h;
     let sixth = c::<R>(1.0 / 6.0);
-    let r1 = r + (t + (a + b * c::<R>(2.0)) * sixth) * h;
-    let t1 = t + (a + b * c::<R>(4.0) + cc) * sixth;
-    Step::plain(r1, t1, 2)
+    let dr = (t + (a + b * c::<R>(2.0)) * sixth) * h;
+    let dt = (a + b * c::<R>(4.0) + cc) * sixth;
+    Step::plain(s, dr, dt, 2)
 }

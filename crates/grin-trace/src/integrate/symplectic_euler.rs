@@ -12,6 +12,6 @@ pub fn symplectic_euler_step<R: Real>(
     d0: R::V3,
     h: R,
 ) -> Step<R> {
-    let t1 = s.t + d0 * h;
-    Step::plain(s.r + t1 * h, t1, 0)
+    let dt = d0 * h;
+    Step::plain(s, (s.t + dt) * h, dt, 0)
 }

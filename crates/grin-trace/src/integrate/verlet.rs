@@ -9,11 +9,13 @@ use super::{RayState, Step, c};
 pub fn verlet_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h: R) -> Step<R> {
     let half = h * c::<R>(0.5);
     let t_half = s.t + d0 * half;
-    let r1 = s.r + t_half * h;
+    let dr = t_half * h;
+    let r1 = s.r + dr;
     let end = R::sample_field(field, r1);
-    let t1 = t_half + end.n_grad_n() * half;
+    let dt = (d0 + end.n_grad_n()) * half;
     Step {
-        state: RayState { r: r1, t: t1 },
+        state: RayState { r: r1, t: s.t + dt },
+        delta: RayState { r: dr, t: dt },
         evals: 1,
         end: Some(end),
         error: None,
