@@ -43,7 +43,9 @@ impl Bounds {
     /// Axis-aligned box enclosing the bounds.
     pub fn aabb(&self) -> (DVec3, DVec3) {
         match *self {
-            Bounds::Sphere { center, radius } => (center - DVec3::splat(radius), center + DVec3::splat(radius)),
+            Bounds::Sphere { center, radius } => {
+                (center - DVec3::splat(radius), center + DVec3::splat(radius))
+            }
             Bounds::Box { min, max } => (min, max),
         }
     }
