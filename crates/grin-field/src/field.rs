@@ -66,6 +66,12 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
     fn homogeneous_span(&self, _p: DVec3, _dir: DVec3) -> Option<f64> {
         None
     }
+
+    /// The grid itself when this field is a baked one (a `.grinf` file): the GPU
+    /// uploads it as it is instead of baking the field again.
+    fn as_baked(&self) -> Option<&crate::baked::BakedField> {
+        None
+    }
 }
 
 /// Why a field could not be built or evaluated.

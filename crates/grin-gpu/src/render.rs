@@ -122,9 +122,11 @@ fn light(l: &Light) -> GpuLight {
 
 impl<'a> GpuRenderer<'a> {
     /// Upload `scene` (already validated by [`RenderScene::new`]) and its medium. The
-    /// medium is marched through `baked` if given, else through a bake of the scene's
-    /// field at [`DEFAULT_GPU_BAKE_RESOLUTION`]. For GPU and CPU images to agree, render
-    /// the CPU reference with the same baked field.
+    /// medium is marched through `baked` if given, else through the scene's field itself
+    /// when it is a baked one (`kind = "baked"`: the file's grid, resolution and
+    /// interpolation, so GPU and CPU march the same field), else through a bake of the
+    /// field at [`DEFAULT_GPU_BAKE_RESOLUTION`]. For GPU and CPU images to agree in that
+    /// last case, render the CPU reference with the same baked field.
     pub fn new(
         ctx: &'a GpuContext,
         scene: &RenderScene,
@@ -210,7 +212,9 @@ impl<'a> GpuRenderer<'a> {
                     }
                 }
                 let owned;
-                let baked = match baked {
+                // The caller's grid, else the scene's own baked file as it is, else a
+                // bake of the field here.
+                let baked = match baked.or_else(|| m.field.as_baked()) {
                     Some(b) => b,
                     None => {
                         owned = bake_for_gpu(m.field.as_ref(), DEFAULT_GPU_BAKE_RESOLUTION)?;
@@ -411,6 +415,11 @@ impl<'a> GpuRenderer<'a> {
     /// `name (backend, device type)` of the adapter.
     pub fn adapter_info(&self) -> String {
         self.ctx.adapter_name()
+    }
+
+    /// Node counts of the field grid on the device (a placeholder without a medium).
+    pub fn field_dims(&self) -> [u32; 3] {
+        self.field.dims
     }
 
     /// Bytes of field data on the device.

@@ -353,3 +353,39 @@ fn tricubic_field_matches_cpu() {
     let (cpu, gpu) = harness::render_both(&ctx, &scene, Path::new("."), Some(tricubic));
     harness::assert_images_agree("tricubic", &cpu, &gpu, MEAN_TOL, P99_TOL);
 }
+
+/// A scene whose field is a baked file (`kind = "baked"`) is marched on the GPU through
+/// that file's grid as it is (its 24 nodes, tricubic), not a fresh 128-node trilinear
+/// bake, so GPU and CPU images of it agree without the caller passing a grid.
+#[test]
+fn baked_file_scene_is_marched_through_its_own_grid() {
+    let Some(ctx) = harness::context("baked_file_scene_is_marched_through_its_own_grid") else {
+        return;
+    };
+    let dir = tempfile_dir("baked-scene");
+    let source = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    let coarse = harness::baked(&source, Path::new("."), 24).expect("medium");
+    let tricubic = (*coarse)
+        .clone()
+        .with_interp(grin_field::baked::Interp::Tricubic);
+    grin_field::grinf::save(&tricubic, &dir.join("lens.grinf")).expect("save .grinf");
+    let text = PAPER_LUNEBURG.replace(
+        r#"field = { kind = "luneburg" }"#,
+        r#"field = { kind = "baked", path = "lens.grinf" }"#,
+    );
+    let scene = parse_scene(&text, &dir.join("scene.toml")).expect("baked scene");
+    let field = harness::build_field(&scene, &dir).expect("medium");
+    let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field)).expect("scene");
+    let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, None).expect("GPU renderer");
+    let dims = tricubic.geometry().dims;
+    assert_eq!(
+        renderer.field_dims().map(|d| d as usize),
+        dims,
+        "the GPU must upload the file's grid"
+    );
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let gpu = renderer.render(&|_| {}, &cancel).expect("GPU render");
+    let cpu = grin_trace::render::render_cpu(&rs, &|_| {}, &cancel).expect("CPU render");
+    harness::assert_images_agree("baked-file", &cpu, &gpu, MEAN_TOL, P99_TOL);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -560,6 +560,10 @@ fn filter_strided(line: &mut [[f64; 4]], stride: usize, n: usize) {
 }
 
 impl IndexField for BakedField {
+    fn as_baked(&self) -> Option<&BakedField> {
+        Some(self)
+    }
+
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let g = self.geometry.grid_from_world_point(p);
         if self.outside == Outside::Ambient && self.beyond_grid(g) {
