@@ -134,27 +134,59 @@ fn segment_point(seg: Segment, tau: f32) -> vec3<f32> {
     return seg.r0 * h00 + seg.t0 * (h10 * seg.h) + seg.r1 * h01 + seg.t1 * (h11 * seg.h);
 }
 
-// Smallest tau in [0, h] where the dense output crosses out of the bounds.
+// Smallest tau in [0, h] where the dense output crosses out of the bounds: an
+// 8-point scan, then the Illinois method on the bracket until it is one ulp wide
+// (bisection when the start reads outside, after total reflection).
 fn first_crossing(seg: Segment) -> f32 {
     var lo = 0.0;
+    var f_lo = 0.0;
     var hi = seg.h;
+    var f_hi = 0.0;
+    var found = false;
     for (var k = 1u; k <= HERMITE_SCAN; k++) {
         let tau = seg.h * f32(k) / f32(HERMITE_SCAN);
-        if bounds_signed_distance(segment_point(seg, tau)) > 0.0 {
+        let v = bounds_signed_distance(segment_point(seg, tau));
+        if v > 0.0 {
             hi = tau;
+            f_hi = v;
+            found = true;
             break;
         }
         lo = tau;
+        f_lo = v;
     }
+    if lo == 0.0 {
+        f_lo = bounds_signed_distance(seg.r0);
+    }
+    let secant = found && f_lo <= 0.0 && f_hi > 0.0;
+    var stuck = 0;
     for (var i = 0u; i < MAX_BISECTIONS; i++) {
         let mid = 0.5 * (lo + hi);
-        if mid <= lo || mid >= hi {
+        var m = mid;
+        if secant {
+            m = hi - f_hi * (hi - lo) / (f_hi - f_lo);
+            if !(m > lo && m < hi) {
+                m = mid;
+            }
+        }
+        if m <= lo || m >= hi {
             break;
         }
-        if bounds_signed_distance(segment_point(seg, mid)) > 0.0 {
-            hi = mid;
+        let v = bounds_signed_distance(segment_point(seg, m));
+        if v > 0.0 {
+            hi = m;
+            f_hi = v;
+            if stuck > 0 {
+                f_lo *= 0.5;
+            }
+            stuck = 1;
         } else {
-            lo = mid;
+            lo = m;
+            f_lo = v;
+            if stuck < 0 {
+                f_hi *= 0.5;
+            }
+            stuck = -1;
         }
     }
     return 0.5 * (lo + hi);
