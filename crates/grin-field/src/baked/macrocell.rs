@@ -90,10 +90,11 @@ impl MacroGrid {
             (node_dims[1] - 1) as f64,
             (node_dims[2] - 1) as f64,
         );
-        let gc = g.clamp(DVec3::ZERO, gmax) / cell;
+        let gc = g.clamp(DVec3::ZERO, gmax) * cell.recip();
         let mut c = [0usize; 3];
         for a in 0..3 {
-            c[a] = (gc[a].floor().max(0.0) as usize).min(self.dims[a] - 1);
+            // gc >= 0: truncation is floor (no libm call).
+            c[a] = (gc[a] as usize).min(self.dims[a] - 1);
         }
         if !self.homogeneous(c) {
             return None;

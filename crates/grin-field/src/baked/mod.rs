@@ -621,8 +621,8 @@ impl IndexField for BakedField {
     }
 
     fn homogeneous_span(&self, p: DVec3, dir: DVec3) -> Option<f64> {
-        let g = self.geometry.grid_from_world_point(p);
-        let dg = dir / self.geometry.spacing;
+        let g = (p - self.geometry.origin) * self.inv_spacing;
+        let dg = dir * self.inv_spacing;
         if self.beyond_grid(g) {
             if self.outside == Outside::Clamp {
                 return None;
