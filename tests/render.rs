@@ -334,6 +334,8 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert_eq!(summary["backend"], "gpu");
     assert!(summary["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+    // The lens's 128-node GPU bake meets the error budget: nothing to warn about.
+    assert_eq!(summary["warnings"], serde_json::json!([]), "{summary}");
     let cpu = Frame::read_exr(&cpu_out).expect("cpu exr");
     let gpu = Frame::read_exr(&gpu_out).expect("gpu exr");
     let (stats, _) = grin_trace::image::diff_frames(&cpu, &gpu).expect("same size");
@@ -386,4 +388,47 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
         "{same_status} of {} statuses agree",
         cpu.pixels.len()
     );
+}
+
+/// A field the GPU's fixed 128-node bake under-resolves (the Eaton lens's steep core) is
+/// rendered, with the warning on stderr and in the `--json` summary, not silently.
+#[test]
+fn gpu_render_reports_an_under_resolved_bake() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("eaton.exr");
+    let o = grin()
+        .arg("render")
+        .arg(scene_path("eaton.toml"))
+        .arg("-o")
+        .arg(&out)
+        .args([
+            "--backend",
+            "gpu",
+            "--size",
+            "32x18",
+            "--spp",
+            "1",
+            "--json",
+        ])
+        .output()
+        .expect("grin runs");
+    assert!(
+        o.status.success(),
+        "GPU render failed (is a Vulkan adapter, e.g. lavapipe, installed?): {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("grin: warning:") && stderr.contains("under-resolved"),
+        "{stderr}"
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let warnings = summary["warnings"].as_array().expect("warnings array");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().is_some_and(|w| w.contains("under-resolved"))),
+        "{summary}"
+    );
+    assert!(out.exists());
 }

@@ -15,7 +15,7 @@ use grin_trace::render::primitives::Primitive;
 use grin_trace::render::sky::SkyModel;
 
 use crate::field::{
-    DEFAULT_GPU_BAKE_RESOLUTION, FieldTextures, bake_for_gpu, empty_field, upload_field,
+    DEFAULT_GPU_BAKE_RESOLUTION, FieldTextures, bake_for_gpu_with_report, empty_field, upload_field,
 };
 use crate::gpu_data::*;
 use crate::{GpuContext, GpuError, shaders};
@@ -49,6 +49,8 @@ pub struct GpuRenderer<'a> {
     readback: wgpu::Buffer,
     rows_per_band: u32,
     field: FieldTextures,
+    /// Set when the field was baked here and the bake is over the error budget.
+    bake_warning: Option<String>,
 }
 
 fn v4(v: DVec3, w: f32) -> [f32; 4] {
@@ -197,6 +199,7 @@ impl<'a> GpuRenderer<'a> {
             }
         }
 
+        let mut bake_warning = None;
         let field = match &scene.medium {
             Some(m) => {
                 params.march[3] |= FLAG_HAS_MEDIUM;
@@ -213,11 +216,16 @@ impl<'a> GpuRenderer<'a> {
                 }
                 let owned;
                 // The caller's grid, else the scene's own baked file as it is, else a
-                // bake of the field here.
+                // bake of the field here (its warning, if any, is kept for the caller).
                 let baked = match baked.or_else(|| m.field.as_baked()) {
                     Some(b) => b,
                     None => {
-                        owned = bake_for_gpu(m.field.as_ref(), DEFAULT_GPU_BAKE_RESOLUTION)?;
+                        let (b, report) = bake_for_gpu_with_report(
+                            m.field.as_ref(),
+                            DEFAULT_GPU_BAKE_RESOLUTION,
+                        )?;
+                        bake_warning = crate::field::bake_warning(&report);
+                        owned = b;
                         &owned
                     }
                 };
@@ -409,12 +417,20 @@ impl<'a> GpuRenderer<'a> {
             readback,
             rows_per_band,
             field,
+            bake_warning,
         })
     }
 
     /// `name (backend, device type)` of the adapter.
     pub fn adapter_info(&self) -> String {
         self.ctx.adapter_name()
+    }
+
+    /// The warning of the bake made here when it is over the default error budget
+    /// ([`crate::field::bake_warning`]); `None` when the bake meets it or the field came
+    /// baked.
+    pub fn bake_warning(&self) -> Option<&str> {
+        self.bake_warning.as_deref()
     }
 
     /// Node counts of the field grid on the device (a placeholder without a medium).

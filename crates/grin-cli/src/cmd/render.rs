@@ -95,6 +95,9 @@ struct Summary {
     status_counts: std::collections::BTreeMap<&'static str, usize>,
     exr: PathBuf,
     png: PathBuf,
+    /// Warnings also printed on stderr: an under-resolved GPU bake, pixels stopped in
+    /// the medium.
+    warnings: Vec<String>,
     /// `--compare`: per-pixel beauty difference against the reference (largest channel).
     #[serde(skip_serializing_if = "Option::is_none")]
     comparison: Option<Comparison>,
@@ -184,6 +187,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let bar = progress_bar(scene.render.height);
     let tick = |rows: u32| bar.inc(u64::from(rows));
     let setup_start = Instant::now();
+    let mut warnings = Vec::new();
     let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
         Backend::Cpu => {
             let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -195,6 +199,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Backend::Gpu => {
             let ctx = grin_gpu::GpuContext::new_headless()?;
             let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, None)?;
+            if let Some(w) = renderer.bake_warning() {
+                bar.suspend(|| eprintln!("grin: warning: {w}"));
+                warnings.push(w.to_string());
+            }
             let adapter = renderer.adapter_info();
             let start = Instant::now();
             let frame = renderer.render(&tick, &cancel)?;
@@ -231,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mean = |f: fn(&grin_trace::image::PixelOut) -> f32| {
         frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / n_pixels.max(1.0)
     };
-    let summary = Summary {
+    let mut summary = Summary {
         backend: args.backend.name(),
         adapter,
         width: frame.width,
@@ -246,13 +254,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         comparison,
         exr: args.output.clone(),
         png,
+        warnings,
     };
     let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
     if stuck > 0 {
-        eprintln!(
-            "grin: warning: {stuck} pixels stopped in the medium (max_steps {}, error {}): see the aov.status channel",
+        let w = format!(
+            "{stuck} pixels stopped in the medium (max_steps {}, error {}): see the aov.status channel",
             summary.status_counts["max_steps"], summary.status_counts["error"]
         );
+        eprintln!("grin: warning: {w}");
+        summary.warnings.push(w);
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
