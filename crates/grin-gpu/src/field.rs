@@ -12,7 +12,9 @@
 //! ~19 M trilinear samples/s. i16-quantized baked files are decoded to f32 on upload.
 
 use grin_field::IndexField;
-use grin_field::bake::{BakeOptions, BakeReport, DEFAULT_ERROR_BUDGET, bake};
+use grin_field::bake::{
+    BUDGET_SAFETY, BakeOptions, BakeReport, CANDIDATE_RESOLUTIONS, DEFAULT_ERROR_BUDGET, bake,
+};
 use grin_field::baked::{BakedField, Interp, Outside};
 
 use crate::gpu_data::{FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
@@ -64,6 +66,39 @@ pub fn bake_for_gpu_with_report(
         ..BakeOptions::default()
     };
     bake(field, &opts, &|_, _, _| {}).map_err(|e| GpuError::Bake(e.to_string()))
+}
+
+/// Bake `field` for the GPU with no more nodes than it needs: first at
+/// [`DEFAULT_GPU_BAKE_RESOLUTION`]; if that meets the default error budget
+/// ([`DEFAULT_ERROR_BUDGET`], with the bake's [`BUDGET_SAFETY`] margin), trilinear error
+/// falling as h^2 predicts the coarsest candidate resolution that still meets it, which
+/// is baked and kept if its measured error confirms it. Over budget at the full
+/// resolution, that bake is used and [`bake_warning`] of the report says so. Two bakes
+/// at most (the automatic search of `grin bake` would try every coarser candidate first).
+pub fn bake_for_gpu_auto(field: &dyn IndexField) -> Result<(BakedField, BakeReport), GpuError> {
+    let full = bake_for_gpu_with_report(field, DEFAULT_GPU_BAKE_RESOLUTION)?;
+    let goal = DEFAULT_ERROR_BUDGET * BUDGET_SAFETY;
+    let rel = full.1.relative_error;
+    if rel > goal {
+        return Ok(full);
+    }
+    let predicted = if rel > 0.0 {
+        DEFAULT_GPU_BAKE_RESOLUTION as f64 * (rel / goal).sqrt()
+    } else {
+        0.0
+    };
+    let Some(&coarse) = CANDIDATE_RESOLUTIONS
+        .iter()
+        .find(|&&r| r as f64 >= predicted && r < DEFAULT_GPU_BAKE_RESOLUTION)
+    else {
+        return Ok(full);
+    };
+    let small = bake_for_gpu_with_report(field, coarse)?;
+    Ok(if small.1.relative_error <= goal {
+        small
+    } else {
+        full
+    })
 }
 
 /// A one-line warning when a GPU bake's measured error is over the default budget
@@ -291,5 +326,35 @@ mod tests {
             bake_for_gpu_with_report(&layer(1.5, 0.15), DEFAULT_GPU_BAKE_RESOLUTION).expect("bake");
         assert!(report.relative_error <= DEFAULT_ERROR_BUDGET, "{report:?}");
         assert_eq!(bake_warning(&report), None);
+    }
+
+    /// The GPU bakes no more than the field needs: a smooth lens meets the budget on a
+    /// coarser grid than 128 nodes (and the coarse grid's measured error says so); a
+    /// field no grid up to 128 resolves keeps 128 nodes and its warning.
+    #[test]
+    fn automatic_gpu_bake_is_as_coarse_as_the_budget_allows() {
+        let lens = grin_field::analytic::Luneburg::new(
+            Bounds::Sphere {
+                center: DVec3::ZERO,
+                radius: 1.0,
+            },
+            1.0,
+            None,
+        )
+        .expect("lens");
+        let (_, full) = bake_for_gpu_with_report(&lens, DEFAULT_GPU_BAKE_RESOLUTION).expect("bake");
+        let (_, auto) = bake_for_gpu_auto(&lens).expect("bake");
+        assert!(auto.resolution < DEFAULT_GPU_BAKE_RESOLUTION, "{auto:?}");
+        assert!(auto.relative_error <= DEFAULT_ERROR_BUDGET * BUDGET_SAFETY);
+        assert!(
+            auto.bytes * 2 < full.bytes,
+            "{} vs {}",
+            auto.bytes,
+            full.bytes
+        );
+
+        let (_, thin) = bake_for_gpu_auto(&layer(120.0, 0.15)).expect("bake");
+        assert_eq!(thin.resolution, DEFAULT_GPU_BAKE_RESOLUTION);
+        assert!(bake_warning(&thin).is_some());
     }
 }

@@ -14,9 +14,7 @@ use grin_trace::render::RenderScene;
 use grin_trace::render::primitives::Primitive;
 use grin_trace::render::sky::SkyModel;
 
-use crate::field::{
-    DEFAULT_GPU_BAKE_RESOLUTION, FieldTextures, bake_for_gpu_with_report, empty_field, upload_field,
-};
+use crate::field::{FieldTextures, bake_for_gpu_auto, empty_field, upload_field};
 use crate::gpu_data::*;
 use crate::{GpuContext, GpuError, shaders};
 
@@ -127,8 +125,10 @@ impl<'a> GpuRenderer<'a> {
     /// medium is marched through `baked` if given, else through the scene's field itself
     /// when it is a baked one (`kind = "baked"`: the file's grid, resolution and
     /// interpolation, so GPU and CPU march the same field), else through a bake of the
-    /// field at [`DEFAULT_GPU_BAKE_RESOLUTION`]. For GPU and CPU images to agree in that
-    /// last case, render the CPU reference with the same baked field.
+    /// field at the coarsest grid meeting the error budget, at most
+    /// [`crate::field::DEFAULT_GPU_BAKE_RESOLUTION`] nodes ([`crate::field::bake_for_gpu_auto`]). For
+    /// GPU and CPU images to agree in that last case, render the CPU reference with the
+    /// same baked field.
     pub fn new(
         ctx: &'a GpuContext,
         scene: &RenderScene,
@@ -220,10 +220,7 @@ impl<'a> GpuRenderer<'a> {
                 let baked = match baked.or_else(|| m.field.as_baked()) {
                     Some(b) => b,
                     None => {
-                        let (b, report) = bake_for_gpu_with_report(
-                            m.field.as_ref(),
-                            DEFAULT_GPU_BAKE_RESOLUTION,
-                        )?;
+                        let (b, report) = bake_for_gpu_auto(m.field.as_ref())?;
                         bake_warning = crate::field::bake_warning(&report);
                         owned = b;
                         &owned

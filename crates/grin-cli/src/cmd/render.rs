@@ -98,9 +98,20 @@ struct Summary {
     /// Warnings also printed on stderr: an under-resolved GPU bake, pixels stopped in
     /// the medium.
     warnings: Vec<String>,
+    /// GPU: the baked grid the marcher sampled (a `.grinf` file as it is, else the
+    /// coarsest bake meeting the error budget, at most 128 nodes per axis).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gpu_field: Option<GpuField>,
     /// `--compare`: per-pixel beauty difference against the reference (largest channel).
     #[serde(skip_serializing_if = "Option::is_none")]
     comparison: Option<Comparison>,
+}
+
+/// The field grid on the device.
+#[derive(Debug, serde::Serialize)]
+struct GpuField {
+    dims: [u32; 3],
+    bytes: u64,
 }
 
 /// The `--compare` result.
@@ -188,6 +199,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let tick = |rows: u32| bar.inc(u64::from(rows));
     let setup_start = Instant::now();
     let mut warnings = Vec::new();
+    let mut gpu_field = None;
     let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
         Backend::Cpu => {
             let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -202,6 +214,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some(w) = renderer.bake_warning() {
                 bar.suspend(|| eprintln!("grin: warning: {w}"));
                 warnings.push(w.to_string());
+            }
+            if scene.medium.is_some() {
+                gpu_field = Some(GpuField {
+                    dims: renderer.field_dims(),
+                    bytes: renderer.field_bytes(),
+                });
             }
             let adapter = renderer.adapter_info();
             let start = Instant::now();
@@ -255,6 +273,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         exr: args.output.clone(),
         png,
         warnings,
+        gpu_field,
     };
     let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
     if stuck > 0 {
