@@ -192,6 +192,26 @@ fn bake_of_the_example_vdb_scene_succeeds() {
     assert!(out_file.exists());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
     assert!(v.is_object(), "{v}");
+
+    // --max-memory also caps the dense copy of the VDB grid: refused while reading, with
+    // the cap named, and no output file.
+    let sub = dir.path().join("capped");
+    std::fs::create_dir(&sub).expect("subdir");
+    let capped = sub.join("capped.grinf");
+    let out = run(&[
+        "bake",
+        data("fire-haze.toml").to_str().expect("utf8"),
+        "-o",
+        capped.to_str().expect("utf8"),
+        "--max-memory",
+        "1k",
+    ]);
+    fails_cleanly(&out, "dense copy", Some(&capped));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("memory cap of 1024 bytes"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]

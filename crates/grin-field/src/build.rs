@@ -21,6 +21,16 @@ pub fn build_field(
     medium: &MediumSpec,
     scene_dir: &Path,
 ) -> Result<Arc<dyn IndexField>, FieldError> {
+    build_field_capped(medium, scene_dir, crate::vdb::DEFAULT_MAX_DENSE_BYTES)
+}
+
+/// [`build_field`] with a memory cap in bytes for the dense copy of a VDB grid (the
+/// bake command passes its `--max-memory`).
+pub fn build_field_capped(
+    medium: &MediumSpec,
+    scene_dir: &Path,
+    max_dense_bytes: u64,
+) -> Result<Arc<dyn IndexField>, FieldError> {
     let bounds = Bounds::from_spec(&medium.bounds);
     let ambient = medium.ambient_index;
     if !(ambient.is_finite() && ambient > 0.0) {
@@ -66,7 +76,7 @@ pub fn build_field(
             medium,
             spec,
             scene_dir,
-            crate::vdb::DEFAULT_MAX_DENSE_BYTES,
+            max_dense_bytes,
         )?),
         FieldSpec::Baked {
             path,

@@ -16,6 +16,6 @@ pub mod real;
 pub mod vdb;
 
 pub use bounds::Bounds;
-pub use build::build_field;
+pub use build::{build_field, build_field_capped};
 pub use field::{FieldError, FieldSample, IndexField};
 pub use real::{Real, Vec3Like};

@@ -24,7 +24,8 @@ pub struct Args {
     /// Error budget: max |n error| relative to the field's delta_n range, on random points.
     #[arg(long, default_value_t = bake::DEFAULT_ERROR_BUDGET)]
     pub error: f64,
-    /// Memory cap in bytes for the baked grid (suffixes k, M, G allowed: 512M).
+    /// Memory cap in bytes for the baked grid, and for the dense copy of a VDB grid being
+    /// read (suffixes k, M, G allowed: 512M).
     #[arg(long, value_parser = parse_bytes, default_value = "1G")]
     pub max_memory: u64,
     /// Interpolation stored as the file's default (and used to measure the error).
@@ -87,7 +88,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("{}: output directory does not exist", dir.display());
     }
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
-    let field = grin_field::build_field(medium, scene_dir)
+    // --max-memory caps the dense copy of a VDB grid too, not only the baked grid.
+    let field = grin_field::build_field_capped(medium, scene_dir, args.max_memory)
         .with_context(|| format!("{}: [medium]", args.scene.display()))?;
     let opts = BakeOptions {
         resolution: args.resolution,
