@@ -120,6 +120,29 @@ pub fn bake_warning(report: &BakeReport) -> Option<String> {
     ))
 }
 
+/// Whether `baked` fits the device as it is: its node counts within
+/// `max_texture_dimension_3d` and its f32 texels within `max_buffer_size`. `Err` says
+/// what is over which limit.
+pub fn fits_device(ctx: &GpuContext, baked: &BakedField) -> Result<(), String> {
+    let limits = ctx.limits();
+    let d = baked.geometry().dims;
+    let axis = limits.max_texture_dimension_3d as usize;
+    if d.iter().any(|&n| n > axis) {
+        return Err(format!(
+            "grid {}x{}x{} has more than the adapter's {axis} texels per axis",
+            d[0], d[1], d[2]
+        ));
+    }
+    let bytes = d.iter().map(|&n| n as u64).product::<u64>() * FIELD_TEXEL_BYTES;
+    if bytes > limits.max_buffer_size {
+        return Err(format!(
+            "grid {}x{}x{} needs {bytes} bytes as f32 texels, more than the adapter's max_buffer_size of {}",
+            d[0], d[1], d[2], limits.max_buffer_size
+        ));
+    }
+    Ok(())
+}
+
 fn check_dims(ctx: &GpuContext, what: &str, dims: [u32; 3]) -> Result<(), GpuError> {
     let limit = ctx.limits().max_texture_dimension_3d;
     if dims.iter().any(|&d| d > limit) {

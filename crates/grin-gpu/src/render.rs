@@ -14,7 +14,10 @@ use grin_trace::render::RenderScene;
 use grin_trace::render::primitives::Primitive;
 use grin_trace::render::sky::SkyModel;
 
-use crate::field::{FieldTextures, bake_for_gpu_auto, empty_field, upload_field};
+use crate::field::{
+    DEFAULT_GPU_BAKE_RESOLUTION, FieldTextures, bake_for_gpu_auto, empty_field, fits_device,
+    upload_field,
+};
 use crate::gpu_data::*;
 use crate::{GpuContext, GpuError, shaders};
 
@@ -47,8 +50,9 @@ pub struct GpuRenderer<'a> {
     readback: wgpu::Buffer,
     rows_per_band: u32,
     field: FieldTextures,
-    /// Set when the field was baked here and the bake is over the error budget.
-    bake_warning: Option<String>,
+    /// What the caller should tell the user about the field: a bake here over the error
+    /// budget, a baked file too big for the device and baked again.
+    warnings: Vec<String>,
 }
 
 fn v4(v: DVec3, w: f32) -> [f32; 4] {
@@ -124,7 +128,8 @@ impl<'a> GpuRenderer<'a> {
     /// Upload `scene` (already validated by [`RenderScene::new`]) and its medium. The
     /// medium is marched through `baked` if given, else through the scene's field itself
     /// when it is a baked one (`kind = "baked"`: the file's grid, resolution and
-    /// interpolation, so GPU and CPU march the same field), else through a bake of the
+    /// interpolation, so GPU and CPU march the same field) and fits the device (else it
+    /// is baked again, with a warning in [`Self::warnings`]), else through a bake of the
     /// field at the coarsest grid meeting the error budget, at most
     /// [`crate::field::DEFAULT_GPU_BAKE_RESOLUTION`] nodes ([`crate::field::bake_for_gpu_auto`]). For
     /// GPU and CPU images to agree in that last case, render the CPU reference with the
@@ -199,7 +204,7 @@ impl<'a> GpuRenderer<'a> {
             }
         }
 
-        let mut bake_warning = None;
+        let mut warnings = Vec::new();
         let field = match &scene.medium {
             Some(m) => {
                 params.march[3] |= FLAG_HAS_MEDIUM;
@@ -215,13 +220,23 @@ impl<'a> GpuRenderer<'a> {
                     }
                 }
                 let owned;
-                // The caller's grid, else the scene's own baked file as it is, else a
-                // bake of the field here (its warning, if any, is kept for the caller).
-                let baked = match baked.or_else(|| m.field.as_baked()) {
+                // The caller's grid, else the scene's own baked file as it is (if the
+                // device can hold it), else a bake of the field here; warnings are kept
+                // for the caller.
+                let file = m.field.as_baked().filter(|b| match fits_device(ctx, b) {
+                    Ok(()) => true,
+                    Err(why) => {
+                        warnings.push(format!(
+                            "the scene's baked field does not fit the GPU ({why}); it is baked again for the GPU at up to {DEFAULT_GPU_BAKE_RESOLUTION} nodes per axis"
+                        ));
+                        false
+                    }
+                });
+                let baked = match baked.or(file) {
                     Some(b) => b,
                     None => {
                         let (b, report) = bake_for_gpu_auto(m.field.as_ref())?;
-                        bake_warning = crate::field::bake_warning(&report);
+                        warnings.extend(crate::field::bake_warning(&report));
                         owned = b;
                         &owned
                     }
@@ -414,7 +429,7 @@ impl<'a> GpuRenderer<'a> {
             readback,
             rows_per_band,
             field,
-            bake_warning,
+            warnings,
         })
     }
 
@@ -423,11 +438,11 @@ impl<'a> GpuRenderer<'a> {
         self.ctx.adapter_name()
     }
 
-    /// The warning of the bake made here when it is over the default error budget
-    /// ([`crate::field::bake_warning`]); `None` when the bake meets it or the field came
-    /// baked.
-    pub fn bake_warning(&self) -> Option<&str> {
-        self.bake_warning.as_deref()
+    /// Warnings about the field, for the user: the bake made here is over the default
+    /// error budget ([`crate::field::bake_warning`]), or the scene's baked file did not
+    /// fit the device and was baked again. Empty when the field is as the scene asked.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// Node counts of the field grid on the device (a placeholder without a medium).

@@ -194,4 +194,13 @@ fn oversized_field_texture_is_a_clear_error() {
         msg.contains("max_texture_dimension_3d") && msg.contains(&format!("{}", limit + 1)),
         "{msg}"
     );
+    // The same grid as the scene's own baked field (a `.grinf` file): too big to upload
+    // as it is, so it is baked again for the GPU, with a warning saying so.
+    let renderer = GpuRenderer::new(&ctx, &rs, None).expect("re-baked for the GPU");
+    assert!(renderer.field_dims().iter().all(|&d| d <= 132));
+    let w = renderer.warnings().join("\n");
+    assert!(
+        w.contains("does not fit the GPU") && w.contains("texels per axis"),
+        "{w}"
+    );
 }

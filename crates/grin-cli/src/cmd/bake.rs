@@ -24,10 +24,10 @@ pub struct Args {
     /// Error budget: max |n error| relative to the field's delta_n range, on random points.
     #[arg(long, default_value_t = bake::DEFAULT_ERROR_BUDGET)]
     pub error: f64,
-    /// Memory cap in bytes for the baked grid, and for the dense copy of a VDB grid being
-    /// read (suffixes k, M, G allowed: 512M).
-    #[arg(long, value_parser = parse_bytes, default_value = "1G")]
-    pub max_memory: u64,
+    /// Memory cap in bytes for the baked grid (default 1G) and, when given, for the dense
+    /// copy of a VDB grid being read (default 2G there); suffixes k, M, G allowed: 512M.
+    #[arg(long, value_parser = parse_bytes)]
+    pub max_memory: Option<u64>,
     /// Interpolation stored as the file's default (and used to measure the error).
     #[arg(long, value_enum, default_value_t = InterpArg::Trilinear)]
     pub interp: InterpArg,
@@ -88,13 +88,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("{}: output directory does not exist", dir.display());
     }
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
-    // --max-memory caps the dense copy of a VDB grid too, not only the baked grid.
-    let field = grin_field::build_field_capped(medium, scene_dir, args.max_memory)
+    // An explicit --max-memory caps the dense copy of a VDB grid too, not only the bake.
+    let vdb_cap = args
+        .max_memory
+        .unwrap_or(grin_field::vdb::DEFAULT_MAX_DENSE_BYTES);
+    let field = grin_field::build_field_capped(medium, scene_dir, vdb_cap)
         .with_context(|| format!("{}: [medium]", args.scene.display()))?;
     let opts = BakeOptions {
         resolution: args.resolution,
         error_budget: args.error,
-        max_memory: args.max_memory,
+        max_memory: args.max_memory.unwrap_or(bake::DEFAULT_MAX_MEMORY),
         interp: match args.interp {
             InterpArg::Trilinear => Interp::Trilinear,
             InterpArg::Tricubic => Interp::Tricubic,

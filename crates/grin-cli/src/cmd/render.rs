@@ -211,9 +211,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Backend::Gpu => {
             let ctx = grin_gpu::GpuContext::new_headless()?;
             let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, None)?;
-            if let Some(w) = renderer.bake_warning() {
+            for w in renderer.warnings() {
                 bar.suspend(|| eprintln!("grin: warning: {w}"));
-                warnings.push(w.to_string());
+                warnings.push(w.clone());
             }
             if scene.medium.is_some() {
                 gpu_field = Some(GpuField {
