@@ -55,9 +55,9 @@ fn compare_scene_file(ctx: &grin_gpu::GpuContext, path: &Path) {
         // of steps on one backend and not the other (measured: 2 of 1812 lens pixels,
         // 20106 vs 73 steps), which swamps the plain mean. Median within 3% or one step,
         // the mean without the top 5% of lens pixels within 3% (measured 22 vs 22, 23.25
-        // vs 23.18). The
-        // tail is chaotic: a 1e-11 change in the CPU's exit points (bisection -> Illinois)
-        // moved its mean without the top 1% from 26.1 to 26.6 (GPU 25.7).
+        // vs 23.18). The tail is chaotic: a 1e-11 change in the CPU's exit points
+        // (bisection -> Illinois) moved its mean without the top 1% from 26.1 to 26.6
+        // (GPU 25.7).
         let (mc, tc) = robust_steps(&cpu);
         let (mg, tg) = robust_steps(&gpu);
         eprintln!("{name}: lens steps median/trimmed mean CPU {mc}/{tc} vs GPU {mg}/{tg}");
