@@ -172,6 +172,20 @@ fn macro_span(g: vec3<f32>, dg: vec3<f32>) -> f32 {
     return -1.0;
 }
 
+// The cheap part of homogeneous_span: false where it certainly returns -1 (inside the
+// grid in a varying macro cell, or beyond the grid when that is not ambient). The
+// marcher's hot loop tests this and leaves the cell walk to its event code.
+fn may_fly(p: vec3<f32>) -> bool {
+    let g = grid_from_world_point(p);
+    if beyond_grid(g) {
+        return field_flag(FLAG_OUTSIDE_AMBIENT);
+    }
+    let cell = f32(params.macro_dims.w);
+    let gc = clamp(g, vec3<f32>(0.0), grid_max()) / cell;
+    let c = min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), vec3<i32>(params.macro_dims.xyz) - vec3<i32>(1));
+    return macro_homogeneous(c);
+}
+
 // BakedField::homogeneous_span: positive world length of a straight flight, or -1.
 fn homogeneous_span(p: vec3<f32>, dir: vec3<f32>) -> f32 {
     let g = grid_from_world_point(p);

@@ -30,6 +30,12 @@ const END_OBJECT: u32 = 1u;
 const END_MISSED: u32 = 2u;
 const END_STOPPED: u32 = 3u;
 
+// Why march_medium's hot loop stopped stepping.
+const MARCH_EVENT_STOP: u32 = 0u;
+const MARCH_EVENT_FLIGHT: u32 = 1u;
+const MARCH_EVENT_LEAVE: u32 = 2u;
+const MARCH_EVENT_OBJECT: u32 = 3u;
+
 const STATUS_MISSED: u32 = 0u;
 const STATUS_EXITED: u32 = 1u;
 const STATUS_ABSORBED: u32 = 2u;
@@ -252,14 +258,19 @@ fn accumulate(stats: ptr<function, MarchStats>, a: RayState, sa: FieldSample, b:
     return Segment(a.r, a.t, b.r, b.t, h);
 }
 
-// The first object met by a segment's chord (render::medium::chord_hit).
+// The first object met by a segment's chord (render::medium::chord_hit). Only the
+// objects that reach into the bounds are tested (params.medium_objects; none: no test at
+// all); the CPU tests every object, and the others cannot meet a chord inside the bounds.
 fn chord_hit(seg: Segment) -> Hit {
+    if !field_flag(FLAG_MEDIUM_OBJECTS) {
+        return no_hit();
+    }
     let chord = seg.r1 - seg.r0;
     let len = length(chord);
     if len == 0.0 {
         return no_hit();
     }
-    return intersect_scene(seg.r0, chord / len, 0.0, len);
+    return intersect_objects(params.medium_objects.x, params.medium_objects.y, seg.r0, chord / len, 0.0, len);
 }
 
 fn finite3(v: vec3<f32>) -> bool {
@@ -322,23 +333,71 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     let len_scale = ctrl.len_scale;
     let exit_tol = EXIT_TOL_REL * len_scale;
     let max_steps = params.march.z;
-    // Each pass takes a step or a flight (counted), or reflects totally inside after
-    // one: 2 * max_steps + 2 passes bound the loop whatever happens.
-    for (var guard = 0u; guard < 2u * max_steps + 2u; guard++) {
-        let position = state.r;
-        let direction = normalize_or_zero(state.t);
-        if !finite3(position) || !finite3(state.t) || !sample_ok(s0) {
-            return march_end(END_STOPPED, STATUS_ERROR, position, direction, transmittance);
-        }
-        if (*stats).steps >= max_steps {
-            return march_end(END_STOPPED, STATUS_MAX_STEPS, position, direction, transmittance);
+    // The hot loop below runs plain integration steps only and breaks out for every
+    // rarer event (a straight flight, leaving the bounds, an object, a stop), handled
+    // after it. SIMD implementations that execute both sides of a branch under a lane
+    // mask (lavapipe does) then pay for the event code once per event instead of on
+    // every step; on a GPU it keeps divergent lanes out of the step's critical path.
+    // Each outer pass handles one event that takes a step or a flight (counted), reflects
+    // totally inside after one, or finds a flight too short (the next pass then takes a
+    // step): 3 * max_steps + 3 passes bound it whatever happens.
+    var step_once = false;
+    for (var guard = 0u; guard < 3u * max_steps + 3u; guard++) {
+        var event = MARCH_EVENT_STOP;
+        var taken: Taken;
+        var next: RayState;
+        var s1: FieldSample;
+        var seg: Segment;
+        var hit: Hit;
+        loop {
+            if !finite3(state.r) || !finite3(state.t) || !sample_ok(s0) || (*stats).steps >= max_steps {
+                event = MARCH_EVENT_STOP;
+                break;
+            }
+            // Straight flight through a homogeneous macro cell: the cell walk is left to
+            // the event code; a span found too short there sets `step_once`.
+            if field_flag(FLAG_MACRO_CELLS) && !step_once && may_fly(state.r) {
+                event = MARCH_EVENT_FLIGHT;
+                break;
+            }
+            step_once = false;
+            taken = take_step(&ctrl, state, s0);
+            (*stats).evals += taken.evals;
+            next = taken.step.state;
+            if bounds_signed_distance(next.r) > 0.0 {
+                event = MARCH_EVENT_LEAVE;
+                break;
+            }
+            if taken.step.has_end {
+                s1 = taken.step.end;
+            } else {
+                (*stats).evals += 1u;
+                s1 = sample_field(next.r);
+            }
+            seg = accumulate(stats, state, s0, next, s1, taken.h);
+            (*stats).steps += 1u;
+            hit = chord_hit(seg);
+            if hit.found {
+                event = MARCH_EVENT_OBJECT;
+                break;
+            }
+            state = next;
+            s0 = s1;
         }
 
-        // Straight flight through a homogeneous macro cell.
-        if field_flag(FLAG_MACRO_CELLS) {
-            let span = homogeneous_span(position, direction);
-            let voxel = 1.0 / max_element(params.grid_inv_spacing.xyz);
-            if span > max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS * voxel) {
+        let position = state.r;
+        let direction = normalize_or_zero(state.t);
+        switch event {
+            case MARCH_EVENT_OBJECT: {
+                return absorbed(stats, seg, hit, transmittance);
+            }
+            case MARCH_EVENT_FLIGHT: {
+                let span = homogeneous_span(position, direction);
+                let voxel = 1.0 / max_element(params.grid_inv_spacing.xyz);
+                if span <= max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS * voxel) {
+                    step_once = true;
+                    continue;
+                }
                 let b = bounds_intersect(position, direction);
                 var to_exit = 0.0;
                 if b.found {
@@ -354,10 +413,10 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 (*stats).length += fly;
                 (*stats).opl += n * fly;
                 (*stats).steps += 1u;
-                let seg = Segment(position, direction * n, p1, direction * n, fly / n);
-                let hit = chord_hit(seg);
-                if hit.found {
-                    return absorbed(stats, seg, hit, transmittance);
+                let flight = Segment(position, direction * n, p1, direction * n, fly / n);
+                let met = chord_hit(flight);
+                if met.found {
+                    return absorbed(stats, flight, met, transmittance);
                 }
                 state.r = p1;
                 s0 = sample_field(p1);
@@ -370,45 +429,42 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                     let nrm = bounds_normal(p1);
                     state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
                 }
-                continue;
             }
-        }
-
-        let taken = take_step(&ctrl, state, s0);
-        (*stats).evals += taken.evals;
-        var next = taken.step.state;
-        var h = taken.h;
-        let outside = bounds_signed_distance(next.r) > 0.0;
-        if outside && finite3(next.r) {
-            let ex = exit_medium(state, s0, taken, exit_tol);
-            (*stats).evals += ex.evals;
-            next = ex.state;
-            h = ex.h;
-        }
-        var s1: FieldSample;
-        if taken.step.has_end && !outside {
-            s1 = taken.step.end;
-        } else {
-            (*stats).evals += 1u;
-            s1 = sample_field(next.r);
-        }
-        let seg = accumulate(stats, state, s0, next, s1, h);
-        (*stats).steps += 1u;
-        let hit = chord_hit(seg);
-        if hit.found {
-            return absorbed(stats, seg, hit, transmittance);
-        }
-        state = next;
-        s0 = s1;
-        if outside {
-            // leave(): refract out, or reflect T totally back inside.
-            let p = state.r;
-            let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
-            if i.transmitted {
-                return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance * (1.0 - i.reflectance));
+            case MARCH_EVENT_LEAVE: {
+                // The step ended outside: cut it at the surface (a non-finite end is
+                // kept as is and stops the ray on the next pass).
+                var h = taken.h;
+                if finite3(next.r) {
+                    let ex = exit_medium(state, s0, taken, exit_tol);
+                    (*stats).evals += ex.evals;
+                    next = ex.state;
+                    h = ex.h;
+                }
+                (*stats).evals += 1u;
+                s1 = sample_field(next.r);
+                seg = accumulate(stats, state, s0, next, s1, h);
+                (*stats).steps += 1u;
+                hit = chord_hit(seg);
+                if hit.found {
+                    return absorbed(stats, seg, hit, transmittance);
+                }
+                state = next;
+                s0 = s1;
+                // leave(): refract out, or reflect T totally back inside.
+                let p = state.r;
+                let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
+                if i.transmitted {
+                    return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance * (1.0 - i.reflectance));
+                }
+                let nrm = bounds_normal(p);
+                state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
             }
-            let nrm = bounds_normal(p);
-            state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
+            default: {
+                if (*stats).steps >= max_steps && finite3(position) && finite3(state.t) && sample_ok(s0) {
+                    return march_end(END_STOPPED, STATUS_MAX_STEPS, position, direction, transmittance);
+                }
+                return march_end(END_STOPPED, STATUS_ERROR, position, direction, transmittance);
+            }
         }
     }
     return march_end(END_STOPPED, STATUS_MAX_STEPS, state.r, normalize_or_zero(state.t), transmittance);

@@ -118,17 +118,22 @@ fn intersect_object(obj: GpuObject, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_ma
 
 // Nearest hit among the scene objects along o + t d, t in (t_min, t_max).
 fn intersect_scene(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> Hit {
+    return intersect_objects(0u, params.rows.w, o, d, t_min, t_max);
+}
+
+// The nearest hit among objects[first .. first + count] (hit.object: the scene index).
+fn intersect_objects(first: u32, count: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> Hit {
     var best = Hit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), false, 0u);
     var t_best = t_max;
     var outward = vec3<f32>(0.0);
-    let count = params.rows.w;
-    for (var i = 0u; i < count; i++) {
-        let h = intersect_object(objects[i], o, d, t_min, t_best);
+    for (var i = first; i < first + count; i++) {
+        let obj = objects[i];
+        let h = intersect_object(obj, o, d, t_min, t_best);
         if h.found {
             t_best = h.t;
             best.found = true;
             best.t = h.t;
-            best.object = i;
+            best.object = obj.kinds.z;
             outward = h.outward;
         }
     }

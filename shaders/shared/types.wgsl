@@ -19,6 +19,7 @@ struct FrameParams {
     sky_horizon: vec4<f32>,      // w = sky kind
     sky_zenith: vec4<f32>,       // w = environment map intensity
     sky_ground: vec4<f32>,
+    medium_objects: vec4<u32>,   // first, count (copies with kinds.z = scene index)
 }
 
 struct GpuObject {
@@ -26,7 +27,7 @@ struct GpuObject {
     b: vec4<f32>,
     color_a: vec4<f32>,          // w = checker scale | glass ior
     color_b: vec4<f32>,
-    kinds: vec4<u32>,            // shape, material
+    kinds: vec4<u32>,            // shape, material, scene index
 }
 
 struct GpuLight {
@@ -62,6 +63,7 @@ const FLAG_BEND_SHADOWS: u32 = 8u;
 const FLAG_OUTSIDE_AMBIENT: u32 = 16u;
 const FLAG_TRICUBIC: u32 = 32u;
 const FLAG_EXIT_HERMITE: u32 = 64u;
+const FLAG_MEDIUM_OBJECTS: u32 = 128u;
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_PLANE: u32 = 1u;
 const SHAPE_BOX: u32 = 2u;

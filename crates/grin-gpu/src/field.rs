@@ -17,7 +17,7 @@ use grin_field::bake::{
 };
 use grin_field::baked::{BakedField, Interp, Outside};
 
-use crate::gpu_data::{FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
+use crate::gpu_data::{FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
 use crate::{GpuContext, GpuError};
 
 /// Bytes per texel of the field texture (rgba32float).
@@ -268,6 +268,10 @@ pub fn upload_field(
     }
     if baked.interp() == Interp::Tricubic {
         params.march[3] |= FLAG_TRICUBIC;
+    }
+    // No straight flight anywhere: the marcher skips the macro-cell test (same result).
+    if !baked.may_fly() {
+        params.march[3] &= !FLAG_MACRO_CELLS;
     }
     Ok(FieldTextures {
         field,

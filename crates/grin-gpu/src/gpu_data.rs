@@ -30,6 +30,9 @@ pub const FLAG_OUTSIDE_AMBIENT: u32 = 16;
 pub const FLAG_TRICUBIC: u32 = 32;
 /// Exit found by the root of the Hermite dense output instead of bisection.
 pub const FLAG_EXIT_HERMITE: u32 = 64;
+/// Some object can meet a chord inside the medium (`FrameParams::medium_objects`); else
+/// the marcher skips the per-step object test.
+pub const FLAG_MEDIUM_OBJECTS: u32 = 128;
 
 /// Shape codes (`GpuObject::kinds[0]`).
 pub const SHAPE_SPHERE: u32 = 0;
@@ -97,8 +100,11 @@ pub struct FrameParams {
     pub sky_zenith: [f32; 4],
     /// Gradient sky ground colour; w unused.
     pub sky_ground: [f32; 4],
+    /// The objects a chord inside the medium can meet, as copies in the objects array:
+    /// first index, count; z, w unused.
+    pub medium_objects: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameParams>() == 18 * 16);
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 19 * 16);
 
 /// One scene object. Keep in sync with `GpuObject` in shaders/shared/types.wgsl.
 #[repr(C)]

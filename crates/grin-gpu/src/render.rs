@@ -75,7 +75,19 @@ fn integrator_code(k: IntegratorKind) -> u32 {
     }
 }
 
-fn object(prim: &Primitive, material: &Material) -> GpuObject {
+/// Relative margin of the ball around the medium's bounds within which objects are
+/// tested against the marcher's chords (f32 positions may stray ulps outside the bounds).
+const MEDIUM_BALL_MARGIN: f64 = 1e-3;
+
+/// Centre and radius of the smallest ball holding the bounds.
+fn bounding_ball(bounds: &Bounds) -> (DVec3, f64) {
+    match *bounds {
+        Bounds::Sphere { center, radius } => (center, radius),
+        Bounds::Box { min, max } => ((min + max) * 0.5, (max - min).length() * 0.5),
+    }
+}
+
+fn object(prim: &Primitive, material: &Material, index: u32) -> GpuObject {
     let (a, b, shape) = match *prim {
         Primitive::Sphere { center, radius } => (v4(center, radius as f32), [0.0; 4], SHAPE_SPHERE),
         Primitive::Plane { point, normal } => (v4(point, 0.0), v4(normal, 0.0), SHAPE_PLANE),
@@ -101,7 +113,7 @@ fn object(prim: &Primitive, material: &Material) -> GpuObject {
         b,
         color_a,
         color_b,
-        kinds: [shape, mat, 0, 0],
+        kinds: [shape, mat, index, 0],
     }
 }
 
@@ -291,12 +303,32 @@ impl<'a> GpuRenderer<'a> {
             SkyModel::Gradient { .. } => (1, 1, vec![[0.0; 4]]),
         };
 
-        let objects: Vec<GpuObject> = scene
+        let mut objects: Vec<GpuObject> = scene
             .objects
             .iter()
             .zip(&scene.materials)
-            .map(|(p, m)| object(p, m))
+            .zip(0u32..)
+            .map(|((p, m), i)| object(p, m, i))
             .collect();
+        // After them, copies of the objects a chord inside the medium can meet (those
+        // reaching into the bounds' bounding ball, with a margin for f32 roundoff): the
+        // marcher tests only these at each step, and none when there are none.
+        if let Some(m) = &scene.medium {
+            let (centre, radius) = bounding_ball(&m.bounds);
+            let ball = radius * (1.0 + MEDIUM_BALL_MARGIN);
+            let inside: Vec<GpuObject> = scene
+                .objects
+                .iter()
+                .zip(&objects)
+                .filter(|(p, _)| p.may_meet_ball(centre, ball))
+                .map(|(_, o)| *o)
+                .collect();
+            if !inside.is_empty() {
+                params.medium_objects = [n_objects, inside.len() as u32, 0, 0];
+                params.march[3] |= FLAG_MEDIUM_OBJECTS;
+                objects.extend(inside);
+            }
+        }
         let lights: Vec<GpuLight> = scene.lights.iter().map(light).collect();
         // Storage arrays may not be empty: pad with one unused element.
         let objects = if objects.is_empty() {

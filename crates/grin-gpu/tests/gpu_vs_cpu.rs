@@ -394,3 +394,42 @@ fn baked_file_scene_is_marched_through_its_own_grid() {
     harness::assert_images_agree("baked-file", &cpu, &gpu, MEAN_TOL, P99_TOL);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Objects inside the medium and across its surface stop the march where a step's chord
+/// meets them (the paper's step 4). The GPU tests only the objects reaching into the
+/// bounds at each step (here the two added ones and the ground plane, not the balls far
+/// behind); the CPU tests all: same images, same absorbed pixels.
+#[test]
+fn objects_inside_the_medium_match_cpu() {
+    let Some(ctx) = harness::context("objects_inside_the_medium_match_cpu") else {
+        return;
+    };
+    let text = PAPER_LUNEBURG.replace(
+        "[medium]",
+        r#"[[object]]
+shape = { sphere = { center = [0.15, 0.75, -0.6], radius = 0.15 } }
+material = { diffuse = { color = [0.9, 0.2, 0.1] } }
+
+[[object]]
+shape = { box = { min = [-0.75, 0.3, -0.9], max = [-0.4, 0.6, -0.5] } }
+material = "mirror"
+
+[medium]"#,
+    );
+    let scene = parse_scene(&text, Path::new("inline.toml")).expect("scene");
+    let baked = harness::baked(&scene, Path::new("."), 48);
+    let (cpu, gpu) = harness::render_both(&ctx, &scene, Path::new("."), baked);
+    harness::assert_images_agree("objects-inside", &cpu, &gpu, MEAN_TOL, P99_TOL);
+    let absorbed = |f: &Frame| f.pixels.iter().filter(|p| p.status == 2.0).count();
+    let (a_cpu, a_gpu) = (absorbed(&cpu), absorbed(&gpu));
+    eprintln!("absorbed pixels: CPU {a_cpu}, GPU {a_gpu}");
+    // Measured: 68 of the 96x54 pixels on both backends.
+    assert!(
+        a_cpu > 40,
+        "the objects inside are met by few rays: {a_cpu}"
+    );
+    assert!(
+        a_cpu.abs_diff(a_gpu) <= a_cpu / 50,
+        "absorbed pixels CPU {a_cpu} vs GPU {a_gpu}"
+    );
+}

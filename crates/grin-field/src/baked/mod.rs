@@ -410,6 +410,26 @@ impl BakedField {
     pub fn macro_grid(&self) -> &MacroGrid {
         &self.macro_grid
     }
+    /// False when [`IndexField::homogeneous_span`] is `None` at every point: no macro
+    /// cell is homogeneous, and no point of the bounds lies beyond an ambient-outside
+    /// grid. A marcher may then skip the macro-cell test at every step.
+    pub fn may_fly(&self) -> bool {
+        let threshold = self.macro_grid.threshold;
+        if self
+            .macro_grid
+            .max_grad
+            .iter()
+            .any(|&g| f64::from(g) <= threshold)
+        {
+            return true;
+        }
+        if self.outside == Outside::Clamp {
+            return false;
+        }
+        let (lo, hi) = self.geometry.world_box();
+        let (b_lo, b_hi) = self.bounds.aabb();
+        !(lo.cmple(b_lo).all() && hi.cmpge(b_hi).all())
+    }
     /// Bytes of voxel data.
     pub fn data_bytes(&self) -> usize {
         self.voxels.len() * self.storage().bytes_per_voxel()

@@ -232,3 +232,51 @@ fn macro_cells_find_homogeneous_runs() {
         assert!((s - 0.1).abs() < 1e-9, "{interp:?}: {s}");
     }
 }
+
+/// `may_fly` is false exactly where `homogeneous_span` can never give a flight: a field
+/// varying in every macro cell of a grid that covers its bounds.
+#[test]
+fn may_fly_only_where_a_flight_exists() {
+    let h = 1.0 / 31.0;
+    let wavy = |p: DVec3| {
+        let (s, c) = (10.0 * p.x).sin_cos();
+        [1e-3 * s + 1e-3 * p.y, 1e-2 * c, 1e-3, 0.0]
+    };
+    let bake = |bounds: Bounds, outside: Outside, f: &dyn Fn(DVec3) -> [f64; 4]| {
+        let (g, v) = grid_of([32, 32, 32], DVec3::ZERO, h, f);
+        BakedField::new(
+            g,
+            Voxels::F32(v),
+            Interp::Trilinear,
+            outside,
+            bounds,
+            1.0,
+            BakeProvenance::default(),
+        )
+        .expect("valid grid")
+    };
+    let varying = bake(unit_box(), Outside::Ambient, &wavy);
+    assert_eq!(varying.macro_grid().homogeneous_fraction(), 0.0);
+    assert!(!varying.may_fly());
+    // Everywhere along a few rays there is no flight either.
+    for i in 0..20 {
+        let p = DVec3::new(0.05 * i as f64, 0.5, 0.3);
+        assert_eq!(varying.homogeneous_span(p, DVec3::Y), None, "at {p}");
+    }
+    // The same grid cropped inside larger bounds: beyond it the field is ambient and a
+    // ray flies to the grid.
+    let larger = Bounds::Box {
+        min: DVec3::splat(-0.5),
+        max: DVec3::splat(1.5),
+    };
+    let cropped = bake(larger, Outside::Ambient, &wavy);
+    assert!(cropped.may_fly());
+    let s = cropped
+        .homogeneous_span(DVec3::new(-0.25, 0.5, 0.5), DVec3::X)
+        .expect("flight to the grid");
+    assert!((s - 0.25).abs() < 1e-9, "{s}");
+    // Clamped beyond the grid: no flight there.
+    assert!(!bake(larger, Outside::Clamp, &wavy).may_fly());
+    // A constant field: every cell is homogeneous.
+    assert!(bake(unit_box(), Outside::Ambient, &|_| [0.0; 4]).may_fly());
+}

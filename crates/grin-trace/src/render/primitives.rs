@@ -55,6 +55,23 @@ impl Primitive {
         }
     }
 
+    /// Whether the surface can pass within `radius` of `centre` (conservative: a false
+    /// answer means no point of the surface lies in that ball). The GPU lists the objects
+    /// a chord inside the medium can meet with it.
+    pub fn may_meet_ball(&self, centre: DVec3, radius: f64) -> bool {
+        match *self {
+            Primitive::Sphere { center, radius: r } => {
+                let d = center.distance(centre);
+                d <= r + radius && d >= r - radius
+            }
+            Primitive::Plane { point, normal } => (centre - point).dot(normal).abs() <= radius,
+            Primitive::Box { min, max } => {
+                let nearest = centre.clamp(min, max);
+                nearest.distance(centre) <= radius
+            }
+        }
+    }
+
     /// Nearest hit of `o + t d` (unit `d`) with t in (t_min, t_max): (t, outward normal).
     pub fn intersect(&self, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<(f64, DVec3)> {
         match *self {
@@ -193,6 +210,31 @@ pub fn occluded(objects: &[Primitive], o: DVec3, d: DVec3, t_min: f64, t_max: f6
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn may_meet_ball_is_true_exactly_when_the_surface_reaches_in() {
+        let c = DVec3::new(1.0, 2.0, 3.0);
+        let sphere = |center: DVec3, radius| Primitive::Sphere { center, radius };
+        // A sphere meets the ball unless it lies wholly outside it or wholly around it.
+        assert!(sphere(c + DVec3::X * 1.4, 0.5).may_meet_ball(c, 1.0));
+        assert!(!sphere(c + DVec3::X * 1.6, 0.5).may_meet_ball(c, 1.0));
+        assert!(!sphere(c, 3.0).may_meet_ball(c, 1.0));
+        assert!(sphere(c, 0.2).may_meet_ball(c, 1.0));
+        let plane = |y: f64| Primitive::Plane {
+            point: DVec3::new(0.0, y, 0.0),
+            normal: DVec3::Y,
+        };
+        assert!(plane(2.9).may_meet_ball(c, 1.0));
+        assert!(plane(1.0).may_meet_ball(c, 1.0));
+        assert!(!plane(0.9).may_meet_ball(c, 1.0));
+        let cube = |lo: DVec3| Primitive::Box {
+            min: lo,
+            max: lo + DVec3::ONE,
+        };
+        assert!(cube(c + DVec3::splat(0.5)).may_meet_ball(c, 1.0));
+        // Corner at distance sqrt(3) * 0.7 = 1.21 > 1.
+        assert!(!cube(c + DVec3::splat(0.7)).may_meet_ball(c, 1.0));
+    }
 
     #[test]
     fn sphere_hit_from_outside_and_inside() {
