@@ -28,6 +28,9 @@ const SCENES: [(&str, &str); 3] = [
 /// Label of the close-up of paper (c) where every ray marches the medium.
 const MARCH_ONLY: &str = "(c) medium only";
 
+/// The close-up's frame corners at this fraction of the medium's angular radius.
+const CLOSEUP_FILL: f64 = 0.95;
+
 /// Image size of the full run (the 640x360) and of `--quick`.
 const FULL_SIZE: (u32, u32) = (640, 360);
 const QUICK_SIZE: (u32, u32) = (160, 90);
@@ -160,20 +163,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         prepared.push((label, rs, baked));
     }
 
-    // The marcher alone: paper (c)'s medium filling the frame, no objects or lights, so
-    // nearly every ray's cost is the march (for the fraction of the raw sample rate).
+    // The marcher alone: paper (c)'s medium filling the whole frame (its silhouette
+    // reaches past the corners), no objects or lights, so every ray marches and its
+    // cost is the march (for the fraction of the raw sample rate).
     let closeup = {
         let (_, rs, baked) = &prepared[1];
         let mut rs = rs.clone();
         let m = rs.medium.as_ref().context("paper (c) has a medium")?;
         let (centre, radius) = (m.bounds.center(), m.bounds.radius());
-        let eye = centre - glam::DVec3::Z * (3.0 * radius);
+        let distance = 3.0 * radius;
+        let eye = centre - glam::DVec3::Z * distance;
+        // The frame's half-diagonal at 95% of the silhouette's angular radius.
+        let tan_silhouette = radius / (distance * distance - radius * radius).sqrt();
+        let aspect = f64::from(size.0) / f64::from(size.1);
+        let tan_half_y = CLOSEUP_FILL * tan_silhouette / (1.0 + aspect * aspect).sqrt();
         let cam = grin_scene::Camera {
             position: eye.to_array(),
             look_at: centre.to_array(),
             up: [0.0, 1.0, 0.0],
-            // The sphere's silhouette spans the frame's height.
-            fov_y_deg: 2.0 * (1.0f64 / 3.0).asin().to_degrees(),
+            fov_y_deg: 2.0 * tan_half_y.atan().to_degrees(),
         };
         rs.camera = grin_trace::render::camera::PinholeCamera::new(&cam, size.0, size.1)
             .context("close-up camera")?;
