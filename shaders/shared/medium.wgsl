@@ -305,29 +305,29 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     let n_amb = ambient_index();
     var transmittance = 1.0;
     var start = origin;
-    var d_in = d;
-    if bounds_signed_distance(origin) >= 0.0 {
+    let outside = bounds_signed_distance(origin) >= 0.0;
+    if outside {
         let b = bounds_intersect(origin, d);
         if !b.found || b.s_out < 0.0 || b.s_out <= b.s_in {
             return march_end(END_MISSED, STATUS_MISSED, origin, d, 1.0);
         }
-        let p = origin + d * max(b.s_in, 0.0);
-        let f = sample_field(p);
-        (*stats).evals += 1u;
-        if !sample_ok(f) {
-            return march_end(END_STOPPED, STATUS_ERROR, p, d, transmittance);
-        }
-        let i = refract(d, bounds_normal(p), n_amb, f.n);
-        if !i.transmitted {
-            return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance);
-        }
-        transmittance *= 1.0 - i.reflectance;
-        start = p;
-        d_in = i.dir;
+        start = origin + d * max(b.s_in, 0.0);
     }
-
+    // The first sample: where the ray enters, or where it starts inside.
     var s0 = sample_field(start);
     (*stats).evals += 1u;
+    var d_in = d;
+    if outside {
+        if !sample_ok(s0) {
+            return march_end(END_STOPPED, STATUS_ERROR, start, d, transmittance);
+        }
+        let i = refract(d, bounds_normal(start), n_amb, s0.n);
+        if !i.transmitted {
+            return march_end(END_EXITED, STATUS_EXITED, start, i.dir, transmittance);
+        }
+        transmittance *= 1.0 - i.reflectance;
+        d_in = i.dir;
+    }
     var state = RayState(start, d_in * s0.n);
     var ctrl = step_controller_new(jitter);
     let len_scale = ctrl.len_scale;

@@ -221,9 +221,9 @@ pub fn trace_ray_jittered<R: Real>(
     let bounds = field.bounds();
     let n_amb = field.ambient_index();
 
-    // Entry.
-    let (start, d_in) = if bounds.signed_distance(origin) < 0.0 {
-        (origin, d)
+    // Entry (the field sampled where the ray enters is the march's first sample).
+    let (start, d_in, s_entry) = if bounds.signed_distance(origin) < 0.0 {
+        (origin, d, None)
     } else {
         let Some((s_in, s_out)) = bounds.intersect(origin, d) else {
             res.status = RayStatus::Missed;
@@ -234,7 +234,8 @@ pub fn trace_ray_jittered<R: Real>(
             return res;
         }
         let p = origin + d * s_in.max(0.0);
-        let n_in = R::sample_field(field, R::V3::from_dvec3(p)).n.to_f64();
+        let entry = R::sample_field(field, R::V3::from_dvec3(p));
+        let n_in = entry.n.to_f64();
         res.evals += 1;
         if !(n_in.is_finite() && n_in > 0.0) {
             res.position = p;
@@ -243,7 +244,7 @@ pub fn trace_ray_jittered<R: Real>(
         match refract(d, bounds.normal(p), n_amb, n_in) {
             Interface::Transmitted { dir, reflectance } => {
                 res.transmittance *= 1.0 - reflectance;
-                (p, dir)
+                (p, dir, Some(entry))
             }
             Interface::Reflected { dir } => {
                 res.status = RayStatus::Exited;
@@ -255,8 +256,13 @@ pub fn trace_ray_jittered<R: Real>(
     };
 
     let mut r = R::V3::from_dvec3(start);
-    let mut s0 = R::sample_field(field, r);
-    res.evals += 1;
+    let mut s0 = match s_entry {
+        Some(s) => s,
+        None => {
+            res.evals += 1;
+            R::sample_field(field, r)
+        }
+    };
     let mut state = RayState {
         r,
         t: R::V3::from_dvec3(d_in) * s0.n,
