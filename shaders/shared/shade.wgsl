@@ -50,7 +50,10 @@ fn index_at(p: vec3<f32>) -> f32 {
 
 // Nearest event along a straight ray from o outside the medium.
 fn next_event_outside(o: vec3<f32>, d: vec3<f32>) -> Event {
-    let hit = intersect_scene(o, d, SURFACE_EPS, INF);
+    var hit = no_hit();
+    if field_flag(FLAG_HAS_OBJECTS) {
+        hit = intersect_scene(o, d, SURFACE_EPS, INF);
+    }
     if has_medium() {
         let b = bounds_intersect(o, d);
         if b.found && b.s_in > SURFACE_EPS && (!hit.found || b.s_in < hit.t) {
@@ -146,7 +149,11 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
                 break;
             }
         }
-        // A surface.
+        // A surface (never reached without objects: the flag lets the compiler drop
+        // the surface code, which lavapipe would otherwise run under a mask).
+        if !field_flag(FLAG_HAS_OBJECTS) {
+            break;
+        }
         primary = false;
         if bounces >= params.rows.z {
             break;

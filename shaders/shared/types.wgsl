@@ -64,6 +64,7 @@ const FLAG_OUTSIDE_AMBIENT: u32 = 16u;
 const FLAG_TRICUBIC: u32 = 32u;
 const FLAG_EXIT_HERMITE: u32 = 64u;
 const FLAG_MEDIUM_OBJECTS: u32 = 128u;
+const FLAG_HAS_OBJECTS: u32 = 256u;
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_PLANE: u32 = 1u;
 const SHAPE_BOX: u32 = 2u;

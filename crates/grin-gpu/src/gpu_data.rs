@@ -33,6 +33,8 @@ pub const FLAG_EXIT_HERMITE: u32 = 64;
 /// Some object can meet a chord inside the medium (`FrameParams::medium_objects`); else
 /// the marcher skips the per-step object test.
 pub const FLAG_MEDIUM_OBJECTS: u32 = 128;
+/// The scene has objects (else the kernel is compiled without its surface code).
+pub const FLAG_HAS_OBJECTS: u32 = 256;
 
 /// Shape codes (`GpuObject::kinds[0]`).
 pub const SHAPE_SPHERE: u32 = 0;

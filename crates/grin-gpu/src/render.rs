@@ -198,6 +198,9 @@ impl<'a> GpuRenderer<'a> {
         if s.exit == ExitMethod::Hermite {
             flags |= FLAG_EXIT_HERMITE;
         }
+        if !scene.objects.is_empty() {
+            flags |= FLAG_HAS_OBJECTS;
+        }
         params.march = [integrator_code(s.integrator), step_code, s.max_steps, flags];
         params.step = step;
         match &scene.sky {
