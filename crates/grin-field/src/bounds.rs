@@ -40,6 +40,18 @@ impl Bounds {
         }
     }
 
+    /// Whether the box [lo, hi] comes within `margin` of the bounds.
+    pub fn meets_box(&self, lo: DVec3, hi: DVec3, margin: f64) -> bool {
+        match *self {
+            Bounds::Sphere { center, radius } => {
+                center.clamp(lo, hi).distance(center) <= radius + margin
+            }
+            Bounds::Box { min, max } => {
+                (lo - max).max_element() <= margin && (min - hi).max_element() <= margin
+            }
+        }
+    }
+
     /// Axis-aligned box enclosing the bounds.
     pub fn aabb(&self) -> (DVec3, DVec3) {
         match *self {

@@ -65,7 +65,7 @@ impl MacroGrid {
         }
     }
 
-    fn homogeneous(&self, c: [usize; 3]) -> bool {
+    pub(crate) fn homogeneous(&self, c: [usize; 3]) -> bool {
         f64::from(self.max_grad[c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])])
             <= self.threshold
     }

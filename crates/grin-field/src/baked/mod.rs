@@ -410,18 +410,30 @@ impl BakedField {
     pub fn macro_grid(&self) -> &MacroGrid {
         &self.macro_grid
     }
-    /// False when [`IndexField::homogeneous_span`] is `None` at every point: no macro
-    /// cell is homogeneous, and no point of the bounds lies beyond an ambient-outside
-    /// grid. A marcher may then skip the macro-cell test at every step.
+    /// False when [`IndexField::homogeneous_span`] is `None` at every point of the
+    /// bounds (within a voxel): no macro cell reaching into them is homogeneous, and none
+    /// of them lies beyond an ambient-outside grid. A marcher may then skip the
+    /// macro-cell test at every step. (Homogeneous cells wholly outside the bounds, such
+    /// as the corners of a sphere's grid, hold no ray.)
     pub fn may_fly(&self) -> bool {
-        let threshold = self.macro_grid.threshold;
-        if self
-            .macro_grid
-            .max_grad
-            .iter()
-            .any(|&g| f64::from(g) <= threshold)
-        {
-            return true;
+        let mg = &self.macro_grid;
+        let margin = self.geometry.spacing.max_element();
+        let gmax = self.geometry.grid_max();
+        let cell = mg.cell as f64;
+        for ck in 0..mg.dims[2] {
+            for cj in 0..mg.dims[1] {
+                for ci in 0..mg.dims[0] {
+                    if !mg.homogeneous([ci, cj, ck]) {
+                        continue;
+                    }
+                    let c = DVec3::new(ci as f64, cj as f64, ck as f64) * cell;
+                    let lo = self.geometry.origin + self.geometry.spacing * c.min(gmax);
+                    let hi = self.geometry.origin + self.geometry.spacing * (c + cell).min(gmax);
+                    if self.bounds.meets_box(lo, hi, margin) {
+                        return true;
+                    }
+                }
+            }
         }
         if self.outside == Outside::Clamp {
             return false;

@@ -279,4 +279,37 @@ fn may_fly_only_where_a_flight_exists() {
     assert!(!bake(larger, Outside::Clamp, &wavy).may_fly());
     // A constant field: every cell is homogeneous.
     assert!(bake(unit_box(), Outside::Ambient, &|_| [0.0; 4]).may_fly());
+
+    // A field varying throughout a ball and ambient outside it, on a 64-node grid (8
+    // macro cells per axis): the grid's corner cells are homogeneous but lie outside the
+    // ball, so a ball-bounded medium has no flight, a box-bounded one has.
+    let centre = DVec3::splat(0.5);
+    let ball_field = move |p: DVec3| {
+        if (p - centre).length() > 0.52 {
+            [0.0; 4]
+        } else {
+            wavy(p)
+        }
+    };
+    let h64 = 1.0 / 63.0;
+    let (g, v) = grid_of([64, 64, 64], DVec3::ZERO, h64, ball_field);
+    let with = |bounds: Bounds| {
+        BakedField::new(
+            g.clone(),
+            Voxels::F32(v.clone()),
+            Interp::Trilinear,
+            Outside::Ambient,
+            bounds,
+            1.0,
+            BakeProvenance::default(),
+        )
+        .expect("valid grid")
+    };
+    let ball = with(Bounds::Sphere {
+        center: centre,
+        radius: 0.5,
+    });
+    assert!(ball.macro_grid().homogeneous_fraction() > 0.0);
+    assert!(!ball.may_fly());
+    assert!(with(unit_box()).may_fly());
 }
