@@ -30,10 +30,11 @@ const END_OBJECT: u32 = 1u;
 const END_MISSED: u32 = 2u;
 const END_STOPPED: u32 = 3u;
 
-// Why march_medium's hot loop stopped stepping.
+// Why march_medium's hot loop stopped: a stop (max_steps, error), a step ending outside
+// the bounds, a flight ending on them, an object met.
 const MARCH_EVENT_STOP: u32 = 0u;
-const MARCH_EVENT_FLIGHT: u32 = 1u;
-const MARCH_EVENT_LEAVE: u32 = 2u;
+const MARCH_EVENT_LEAVE: u32 = 1u;
+const MARCH_EVENT_SURFACE: u32 = 2u;
 const MARCH_EVENT_OBJECT: u32 = 3u;
 
 const STATUS_MISSED: u32 = 0u;
@@ -333,16 +334,15 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     let len_scale = ctrl.len_scale;
     let exit_tol = EXIT_TOL_REL * len_scale;
     let max_steps = params.march.z;
-    // The hot loop below runs plain integration steps only and breaks out for every
-    // rarer event (a straight flight, leaving the bounds, an object, a stop), handled
-    // after it. SIMD implementations that execute both sides of a branch under a lane
-    // mask (lavapipe does) then pay for the event code once per event instead of on
-    // every step; on a GPU it keeps divergent lanes out of the step's critical path.
-    // Each outer pass handles one event that takes a step or a flight (counted), reflects
-    // totally inside after one, or finds a flight too short (the next pass then takes a
-    // step): 3 * max_steps + 3 passes bound it whatever happens.
-    var step_once = false;
-    for (var guard = 0u; guard < 3u * max_steps + 3u; guard++) {
+    // The hot loop below takes steps and straight flights, which share its field
+    // sample, length sum and object test, and breaks out for the rarer events (leaving
+    // the bounds, an object, a stop), handled after it. SIMD implementations that run
+    // both sides of a branch under a lane mask (lavapipe does) then pay for the event
+    // code once per event instead of on every step; on a GPU it keeps divergent lanes
+    // out of the step's critical path. Each outer pass ends with a counted step or
+    // flight, or a total reflection after one: 2 * max_steps + 2 passes bound it.
+    let min_flight = max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS / max_element(params.grid_inv_spacing.xyz));
+    for (var guard = 0u; guard < 2u * max_steps + 2u; guard++) {
         var event = MARCH_EVENT_STOP;
         var taken: Taken;
         var next: RayState;
@@ -354,27 +354,54 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 event = MARCH_EVENT_STOP;
                 break;
             }
-            // Straight flight through a homogeneous macro cell: the cell walk is left to
-            // the event code; a span found too short there sets `step_once`.
-            if field_flag(FLAG_MACRO_CELLS) && !step_once && may_fly(state.r) {
-                event = MARCH_EVENT_FLIGHT;
-                break;
+            // A straight flight through homogeneous macro cells, else a step. Both end
+            // in the same sample, length sum and object test below.
+            let position = state.r;
+            let direction = normalize_or_zero(state.t);
+            var span = -1.0;
+            if field_flag(FLAG_MACRO_CELLS) && may_fly(position) {
+                span = homogeneous_span(position, direction);
             }
-            step_once = false;
-            taken = take_step(&ctrl, state, s0);
+            let fly = field_flag(FLAG_MACRO_CELLS) && span > min_flight;
+            var exits = false;
+            var fly_len = 0.0;
+            if fly {
+                let b = bounds_intersect(position, direction);
+                var to_exit = 0.0;
+                if b.found {
+                    to_exit = max(b.s_out, 0.0);
+                }
+                fly_len = min(span, to_exit);
+                exits = span >= to_exit;
+                var p1 = position + direction * fly_len;
+                if exits {
+                    p1 = project_to_surface(p1);
+                }
+                // (Every pass assigns all of `taken`: nothing of it is carried round the loop.)
+                taken = Taken(plain_step(p1, state.t, 0u), fly_len / s0.n, 0u);
+            } else {
+                taken = take_step(&ctrl, state, s0);
+            }
             (*stats).evals += taken.evals;
             next = taken.step.state;
-            if bounds_signed_distance(next.r) > 0.0 {
+            if !fly && bounds_signed_distance(next.r) > 0.0 {
                 event = MARCH_EVENT_LEAVE;
                 break;
             }
-            if taken.step.has_end {
+            if taken.step.has_end && !fly {
                 s1 = taken.step.end;
             } else {
                 (*stats).evals += 1u;
                 s1 = sample_field(next.r);
             }
-            seg = accumulate(stats, state, s0, next, s1, taken.h);
+            if fly {
+                let n = s0.n;
+                (*stats).length += fly_len;
+                (*stats).opl += n * fly_len;
+                seg = Segment(position, direction * n, next.r, direction * n, taken.h);
+            } else {
+                seg = accumulate(stats, state, s0, next, s1, taken.h);
+            }
             (*stats).steps += 1u;
             hit = chord_hit(seg);
             if hit.found {
@@ -383,89 +410,53 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             }
             state = next;
             s0 = s1;
+            if exits {
+                event = MARCH_EVENT_SURFACE;
+                break;
+            }
         }
 
-        let position = state.r;
-        let direction = normalize_or_zero(state.t);
-        switch event {
-            case MARCH_EVENT_OBJECT: {
+        if event == MARCH_EVENT_OBJECT {
+            return absorbed(stats, seg, hit, transmittance);
+        }
+        if event == MARCH_EVENT_STOP {
+            let position = state.r;
+            let direction = normalize_or_zero(state.t);
+            if (*stats).steps >= max_steps && finite3(position) && finite3(state.t) && sample_ok(s0) {
+                return march_end(END_STOPPED, STATUS_MAX_STEPS, position, direction, transmittance);
+            }
+            return march_end(END_STOPPED, STATUS_ERROR, position, direction, transmittance);
+        }
+        if event == MARCH_EVENT_LEAVE {
+            // The step ended outside: cut it at the surface (a non-finite end is kept as
+            // is and stops the ray on the next pass).
+            var h = taken.h;
+            if finite3(next.r) {
+                let ex = exit_medium(state, s0, taken, exit_tol);
+                (*stats).evals += ex.evals;
+                next = ex.state;
+                h = ex.h;
+            }
+            (*stats).evals += 1u;
+            s1 = sample_field(next.r);
+            seg = accumulate(stats, state, s0, next, s1, h);
+            (*stats).steps += 1u;
+            hit = chord_hit(seg);
+            if hit.found {
                 return absorbed(stats, seg, hit, transmittance);
             }
-            case MARCH_EVENT_FLIGHT: {
-                let span = homogeneous_span(position, direction);
-                let voxel = 1.0 / max_element(params.grid_inv_spacing.xyz);
-                if span <= max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS * voxel) {
-                    step_once = true;
-                    continue;
-                }
-                let b = bounds_intersect(position, direction);
-                var to_exit = 0.0;
-                if b.found {
-                    to_exit = max(b.s_out, 0.0);
-                }
-                let fly = min(span, to_exit);
-                let exits = span >= to_exit;
-                var p1 = position + direction * fly;
-                if exits {
-                    p1 = project_to_surface(p1);
-                }
-                let n = s0.n;
-                (*stats).length += fly;
-                (*stats).opl += n * fly;
-                (*stats).steps += 1u;
-                let flight = Segment(position, direction * n, p1, direction * n, fly / n);
-                let met = chord_hit(flight);
-                if met.found {
-                    return absorbed(stats, flight, met, transmittance);
-                }
-                state.r = p1;
-                s0 = sample_field(p1);
-                (*stats).evals += 1u;
-                if exits {
-                    let i = refract(normalize_or_zero(state.t), bounds_normal(p1), s0.n, n_amb);
-                    if i.transmitted {
-                        return march_end(END_EXITED, STATUS_EXITED, p1, i.dir, transmittance * (1.0 - i.reflectance));
-                    }
-                    let nrm = bounds_normal(p1);
-                    state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
-                }
-            }
-            case MARCH_EVENT_LEAVE: {
-                // The step ended outside: cut it at the surface (a non-finite end is
-                // kept as is and stops the ray on the next pass).
-                var h = taken.h;
-                if finite3(next.r) {
-                    let ex = exit_medium(state, s0, taken, exit_tol);
-                    (*stats).evals += ex.evals;
-                    next = ex.state;
-                    h = ex.h;
-                }
-                (*stats).evals += 1u;
-                s1 = sample_field(next.r);
-                seg = accumulate(stats, state, s0, next, s1, h);
-                (*stats).steps += 1u;
-                hit = chord_hit(seg);
-                if hit.found {
-                    return absorbed(stats, seg, hit, transmittance);
-                }
-                state = next;
-                s0 = s1;
-                // leave(): refract out, or reflect T totally back inside.
-                let p = state.r;
-                let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
-                if i.transmitted {
-                    return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance * (1.0 - i.reflectance));
-                }
-                let nrm = bounds_normal(p);
-                state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
-            }
-            default: {
-                if (*stats).steps >= max_steps && finite3(position) && finite3(state.t) && sample_ok(s0) {
-                    return march_end(END_STOPPED, STATUS_MAX_STEPS, position, direction, transmittance);
-                }
-                return march_end(END_STOPPED, STATUS_ERROR, position, direction, transmittance);
-            }
+            state = next;
+            s0 = s1;
         }
+        // On the surface (a step cut there, or a flight to it): leave(), refract out or
+        // reflect T totally back inside.
+        let p = state.r;
+        let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
+        if i.transmitted {
+            return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance * (1.0 - i.reflectance));
+        }
+        let nrm = bounds_normal(p);
+        state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
     }
     return march_end(END_STOPPED, STATUS_MAX_STEPS, state.r, normalize_or_zero(state.t), transmittance);
 }
