@@ -179,4 +179,11 @@ fn bench_speed_quick_reports_both_backends() {
         frac > 0.0 && frac < 2.0,
         "marcher rate is a plausible fraction of the raw rate: {r}"
     );
+    // Verlet makes one evaluation per step, sharma three: its ray-steps are the larger
+    // fraction of the raw rate.
+    let verlet = r["verlet_ray_steps_fraction_of_raw"]
+        .as_f64()
+        .expect("verlet fraction");
+    let sharma = r["ray_steps_fraction_of_raw"].as_f64().expect("fraction");
+    assert!(verlet > sharma && verlet < 2.0, "{r}");
 }
