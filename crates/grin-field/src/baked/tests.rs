@@ -295,7 +295,7 @@ fn may_fly_only_where_a_flight_exists() {
     let (g, v) = grid_of([64, 64, 64], DVec3::ZERO, h64, ball_field);
     let with = |bounds: Bounds| {
         BakedField::new(
-            g.clone(),
+            g,
             Voxels::F32(v.clone()),
             Interp::Trilinear,
             Outside::Ambient,
