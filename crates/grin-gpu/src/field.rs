@@ -9,7 +9,8 @@
 //! Manual trilinear costs 8 loads per sample but uses the CPU's weights exactly, so GPU
 //! and CPU march the same field: the GPU-vs-CPU tests measure p99 pixel differences
 //! <= 2e-5 with it. Its speed on lavapipe (`grin bench speed`, docs/benchmarks.md) is
-//! ~19 M trilinear samples/s. i16-quantized baked files are decoded to f32 on upload.
+//! ~100 M trilinear samples/s on a 2-core VM. i16-quantized baked files are decoded to f32
+//! on upload.
 
 use grin_field::IndexField;
 use grin_field::bake::{
