@@ -1,17 +1,44 @@
 // #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/medium.wgsl shared/shade.wgsl
 //
-// The render kernel: one invocation per pixel of a band of rows, all samples of the
-// pixel, the mean radiance and the AOVs into `out_pixels`.
+// The render kernels: one invocation per pixel of a band of rows (render_main), or per
+// pixel PASS_FIRST listed (render_deferred); all samples of the pixel, the mean radiance
+// and the AOVs into `out_pixels`.
 // CPU twin: grin_trace::render::RenderScene::render_pixel.
 
 @compute @workgroup_size(8, 8, 1)
 fn render_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let width = params.image.x;
-    let px = gid.x;
-    let row = gid.y;
-    if px >= width || row >= params.rows.y {
+    if gid.x >= width || gid.y >= params.rows.y {
         return;
     }
+    if !render_pixel(gid.x, gid.y) {
+        // PASS_FIRST: the pixel's paths reach the medium; list it for PASS_MEDIUM and
+        // count the workgroups of that pass's indirect dispatch.
+        let slot = atomicAdd(&deferred_pixels.count, 1u);
+        deferred[slot] = gid.y * width + gid.x;
+        if slot % DEFERRED_WORKGROUP == 0u {
+            atomicAdd(&deferred_pixels.workgroups, 1u);
+        }
+    }
+}
+
+// PASS_MEDIUM: the pixels PASS_FIRST listed, traced whole.
+const DEFERRED_WORKGROUP: u32 = 64u;
+
+@compute @workgroup_size(64, 1, 1)
+fn render_deferred(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= atomicLoad(&deferred_pixels.count) {
+        return;
+    }
+    let local = deferred[gid.x];
+    let width = params.image.x;
+    render_pixel(local % width, local / width);
+}
+
+// All samples of pixel (px, band row `row`): the mean radiance and the first sample's
+// AOVs into `out_pixels`. False (nothing written) when PASS_FIRST left it to PASS_MEDIUM.
+fn render_pixel(px: u32, row: u32) -> bool {
+    let width = params.image.x;
     let py = params.rows.x + row;
     let index = py * width + px;
     let spp = params.image.z;
@@ -35,6 +62,9 @@ fn render_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         let d = primary_ray(px, py, sx, sy);
         let path = trace_path(d, jitter, &rng);
+        if path.deferred {
+            return false;
+        }
         rgb += path.rgb;
         steps += f32(path.aov.steps);
         evals += f32(path.aov.evals);
@@ -58,4 +88,5 @@ fn render_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     out.status = f32(first.status);
     out.pad = 0.0;
     out_pixels[row * width + px] = out;
+    return true;
 }

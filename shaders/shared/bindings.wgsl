@@ -11,3 +11,6 @@
 // Equirectangular environment map, rgba32float (1x1 when the sky is a gradient).
 @group(0) @binding(5) var env_tex: texture_2d<f32>;
 @group(0) @binding(6) var<storage, read_write> out_pixels: array<PixelOut>;
+// Pixels (index within the band) left by PASS_FIRST for PASS_MEDIUM, and their count.
+@group(0) @binding(7) var<storage, read_write> deferred: array<u32>;
+@group(0) @binding(8) var<storage, read_write> deferred_pixels: DeferredPixels;

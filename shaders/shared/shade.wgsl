@@ -25,6 +25,14 @@ struct PrimaryAov {
 struct PathSample {
     rgb: vec3<f32>,
     aov: PrimaryAov,
+    // PASS_FIRST only: the path reached the medium and was left to PASS_MEDIUM.
+    deferred: bool,
+}
+
+// In PASS_FIRST a path that reaches the medium stops and the pixel is traced again,
+// whole, by PASS_MEDIUM; the march is compiled out of PASS_FIRST.
+fn defer_medium() -> bool {
+    return PASS == PASS_FIRST;
 }
 
 struct Event {
@@ -97,6 +105,9 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
         var hit = event.hit;
         var hit_dir = event.dir;
         if event.kind == EVENT_MEDIUM {
+            if defer_medium() {
+                return PathSample(radiance, aov, true);
+            }
             var stats = MarchStats(0u, 0u, 0.0, 0.0);
             let b = bounds_intersect(origin, dir);
             var straight = 0.0;
@@ -186,7 +197,19 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
                 // Glass: Fresnel chooses reflection or refraction at random.
                 let ior = obj.color_a.w;
                 let side = select(-1.0, 1.0, hit.front_face);
-                let n_outside = index_at(hit.point + hit.normal * (SURFACE_EPS * side));
+                let q = hit.point + hit.normal * (SURFACE_EPS * side);
+                var n_outside = 1.0;
+                if defer_medium() {
+                    // A glass surface inside the medium needs its n: left to PASS_MEDIUM.
+                    if has_medium() {
+                        if bounds_contains(q) {
+                            return PathSample(radiance, aov, true);
+                        }
+                        n_outside = ambient_index();
+                    }
+                } else {
+                    n_outside = index_at(q);
+                }
                 var n1 = ior;
                 var n2 = n_outside;
                 if hit.front_face {
@@ -214,7 +237,7 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
         dir = next;
         inside = has_medium() && bounds_signed_distance(origin) < 0.0;
     }
-    return PathSample(radiance, aov);
+    return PathSample(radiance, aov, false);
 }
 
 fn shade_diffuse(hit: Hit, albedo: vec3<f32>) -> vec3<f32> {
@@ -294,7 +317,8 @@ fn bent_shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec4<f32>
 }
 
 fn shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec3<f32> {
-    if field_flag(FLAG_BEND_SHADOWS) && has_medium() {
+    // (render.rs does not split a frame whose shadow rays bend: they march.)
+    if field_flag(FLAG_BEND_SHADOWS) && has_medium() && !defer_medium() {
         let t = bent_shadow_transmittance(p, l, dist);
         if t.w > 0.5 {
             return t.xyz;

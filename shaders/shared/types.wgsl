@@ -87,3 +87,20 @@ override STEP_POLICY: u32 = 0u;
 override FLAGS: u32 = 0u;
 override BOUNDS_BOX: bool = false;
 override SKY_MAP: bool = false;
+// Which pass of the frame this pipeline runs (render.rs): PASS_ALL, every pixel whole;
+// PASS_FIRST, every pixel whose paths never touch the medium, the others listed for
+// PASS_MEDIUM (render_deferred), which traces them whole. Splitting keeps the march out
+// of the pass most pixels take (lavapipe runs a kernel's every branch under a mask) and
+// packs the marching rays together.
+override PASS: u32 = 0u;
+const PASS_ALL: u32 = 0u;
+const PASS_FIRST: u32 = 1u;
+const PASS_MEDIUM: u32 = 2u;
+
+// The pixels PASS_FIRST left to PASS_MEDIUM, and the indirect dispatch of that pass.
+struct DeferredPixels {
+    workgroups: atomic<u32>,
+    y: u32,
+    z: u32,
+    count: atomic<u32>,
+}

@@ -36,6 +36,11 @@ pub const FLAG_MEDIUM_OBJECTS: u32 = 128;
 /// The scene has objects (else the kernel is compiled without its surface code).
 pub const FLAG_HAS_OBJECTS: u32 = 256;
 
+/// Passes of a frame (the `PASS` pipeline constant, shaders/shared/types.wgsl).
+pub const PASS_ALL: u32 = 0;
+pub const PASS_FIRST: u32 = 1;
+pub const PASS_MEDIUM: u32 = 2;
+
 /// Shape codes (`GpuObject::kinds[0]`).
 pub const SHAPE_SPHERE: u32 = 0;
 pub const SHAPE_PLANE: u32 = 1;

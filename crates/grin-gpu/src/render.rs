@@ -43,9 +43,16 @@ pub struct RenderTiming {
 pub struct GpuRenderer<'a> {
     ctx: &'a GpuContext,
     params: FrameParams,
+    /// PASS_ALL, or PASS_FIRST when the frame is split ([`Self::medium_pipeline`]).
     pipeline: wgpu::ComputePipeline,
+    /// PASS_MEDIUM (render_deferred) over the pixels PASS_FIRST listed, when split.
+    medium_pipeline: Option<wgpu::ComputePipeline>,
     bind_group: wgpu::BindGroup,
     params_buffer: wgpu::Buffer,
+    /// PASS_FIRST's count of listed pixels, [workgroups, 1, 1, pixels], and its first
+    /// three words copied as PASS_MEDIUM's indirect dispatch.
+    deferred_count: wgpu::Buffer,
+    deferred_dispatch: wgpu::Buffer,
     out_buffer: wgpu::Buffer,
     readback: wgpu::Buffer,
     rows_per_band: u32,
@@ -73,6 +80,43 @@ fn integrator_code(k: IntegratorKind) -> u32 {
         IntegratorKind::Rk4 => INTEGRATOR_RK4,
         IntegratorKind::Adaptive => INTEGRATOR_ADAPTIVE,
     }
+}
+
+/// The render kernels' bindings (shaders/shared/bindings.wgsl), one layout for both
+/// passes.
+fn render_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
+    let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let texture = |binding, view_dimension| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension,
+            multisampled: false,
+        },
+        count: None,
+    };
+    let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+    vec![
+        buffer(0, wgpu::BufferBindingType::Uniform),
+        buffer(1, storage(true)),
+        buffer(2, storage(true)),
+        texture(3, wgpu::TextureViewDimension::D3),
+        texture(4, wgpu::TextureViewDimension::D3),
+        texture(5, wgpu::TextureViewDimension::D2),
+        buffer(6, storage(false)),
+        buffer(7, storage(false)),
+        buffer(8, storage(false)),
+    ]
 }
 
 /// Relative margin of the ball around the medium's bounds within which objects are
@@ -345,24 +389,48 @@ impl<'a> GpuRenderer<'a> {
             lights
         };
 
-        let constants = pipeline_constants(&params);
+        // Split the frame in two passes when there is a medium (PASS_FIRST without the
+        // march, PASS_MEDIUM over the pixels whose paths reach it), unless shadow rays
+        // bend through the medium: then every diffuse surface's light needs the march.
+        let split = scene.medium.is_some() && !s.bend_shadow_rays;
         let built = ctx.scoped("creating the render pipeline", || {
             use wgpu::util::DeviceExt;
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("render.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(shaders::RENDER_WGSL.into()),
             });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("render_main"),
-                layout: None,
-                module: &module,
-                entry_point: Some("render_main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &constants,
-                    zero_initialize_workgroup_memory: false,
-                },
-                cache: None,
+            let layout_entries = render_layout_entries();
+            let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("render bindings"),
+                entries: &layout_entries,
             });
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("render"),
+                bind_group_layouts: &[Some(&bind_layout)],
+                immediate_size: 0,
+            });
+            let make = |pass: u32, entry: &str| {
+                let constants = pipeline_constants(&params, pass);
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&layout),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        zero_initialize_workgroup_memory: false,
+                    },
+                    cache: None,
+                })
+            };
+            let (pipeline, medium_pipeline) = if split {
+                (
+                    make(PASS_FIRST, "render_main"),
+                    Some(make(PASS_MEDIUM, "render_deferred")),
+                )
+            } else {
+                (make(PASS_ALL, "render_main"), None)
+            };
             let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("frame params"),
                 size: std::mem::size_of::<FrameParams>() as u64,
@@ -410,6 +478,28 @@ impl<'a> GpuRenderer<'a> {
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
+            let deferred = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("deferred pixels"),
+                size: (out_bytes / std::mem::size_of::<PixelOut>() as u64) * 4,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            let deferred_count = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("deferred pixel count"),
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            // The count's first three words, copied for the indirect dispatch (a buffer
+            // may not be bound for storage and read as indirect arguments at once).
+            let deferred_dispatch = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("deferred pass dispatch"),
+                size: 12,
+                usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             let field_view = field
                 .field
                 .create_view(&wgpu::TextureViewDescriptor::default());
@@ -419,7 +509,7 @@ impl<'a> GpuRenderer<'a> {
             let env_view = env_tex.create_view(&wgpu::TextureViewDescriptor::default());
             let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("render bindings"),
-                layout: &pipeline.get_bind_group_layout(0),
+                layout: &bind_layout,
                 entries: &[
                     wgpu::BindGroupEntry {
                         binding: 0,
@@ -449,17 +539,46 @@ impl<'a> GpuRenderer<'a> {
                         binding: 6,
                         resource: out_buffer.as_entire_binding(),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 7,
+                        resource: deferred.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 8,
+                        resource: deferred_count.as_entire_binding(),
+                    },
                 ],
             });
-            (pipeline, bind_group, params_buffer, out_buffer, readback)
+            (
+                pipeline,
+                medium_pipeline,
+                bind_group,
+                params_buffer,
+                out_buffer,
+                readback,
+                deferred_count,
+                deferred_dispatch,
+            )
         })?;
-        let (pipeline, bind_group, params_buffer, out_buffer, readback) = built;
+        let (
+            pipeline,
+            medium_pipeline,
+            bind_group,
+            params_buffer,
+            out_buffer,
+            readback,
+            deferred_count,
+            deferred_dispatch,
+        ) = built;
         Ok(GpuRenderer {
             ctx,
             params,
             pipeline,
+            medium_pipeline,
             bind_group,
             params_buffer,
+            deferred_count,
+            deferred_dispatch,
             out_buffer,
             readback,
             rows_per_band,
@@ -626,6 +745,13 @@ impl<'a> GpuRenderer<'a> {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("render band"),
                 });
+            if self.medium_pipeline.is_some() {
+                ctx.queue.write_buffer(
+                    &self.deferred_count,
+                    0,
+                    bytemuck::cast_slice(&[0u32, 1, 1, 0]),
+                );
+            }
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("render_main"),
@@ -634,6 +760,23 @@ impl<'a> GpuRenderer<'a> {
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.dispatch_workgroups(width.div_ceil(WORKGROUP), rows.div_ceil(WORKGROUP), 1);
+            }
+            if let Some(medium) = &self.medium_pipeline {
+                // A new pass: PASS_FIRST's list and count are complete when it starts.
+                encoder.copy_buffer_to_buffer(
+                    &self.deferred_count,
+                    0,
+                    &self.deferred_dispatch,
+                    0,
+                    12,
+                );
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("render_deferred"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(medium);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.dispatch_workgroups_indirect(&self.deferred_dispatch, 0);
             }
             encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
             ctx.queue.submit([encoder.finish()]);
@@ -644,8 +787,9 @@ impl<'a> GpuRenderer<'a> {
 
 /// The kernel's pipeline-overridable constants (shaders/shared/types.wgsl), from the
 /// filled-in `params`: the compiler then drops every unused integrator and feature.
-fn pipeline_constants(params: &FrameParams) -> Vec<(&'static str, f64)> {
+fn pipeline_constants(params: &FrameParams, pass: u32) -> Vec<(&'static str, f64)> {
     vec![
+        ("PASS", f64::from(pass)),
         ("INTEGRATOR", f64::from(params.march[0])),
         ("STEP_POLICY", f64::from(params.march[1])),
         ("FLAGS", f64::from(params.march[3])),

@@ -433,3 +433,21 @@ material = "mirror"
         "absorbed pixels CPU {a_cpu} vs GPU {a_gpu}"
     );
 }
+
+/// Several samples per pixel (sub-pixel positions and glass choices from the pixel's
+/// random stream, identical on both backends). A pixel any of whose samples reaches the
+/// medium is traced whole by the GPU's second pass.
+#[test]
+fn several_samples_per_pixel_match_cpu() {
+    let Some(ctx) = harness::context("several_samples_per_pixel_match_cpu") else {
+        return;
+    };
+    let mut scene = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    scene.render.spp = 3;
+    let baked = harness::baked(&scene, Path::new("."), 48);
+    let (cpu, gpu) = harness::render_both(&ctx, &scene, Path::new("."), baked);
+    harness::assert_images_agree("spp3", &cpu, &gpu, MEAN_TOL, P99_TOL);
+    let (sc, sg) = (cpu.mean_steps(), gpu.mean_steps());
+    assert!(sc > 0.5, "few rays met the medium: {sc}");
+    assert!((sc - sg).abs() <= 0.03 * sc, "mean steps CPU {sc} vs GPU {sg}");
+}
