@@ -174,7 +174,7 @@ fn macro_span(g: vec3<f32>, dg: vec3<f32>) -> f32 {
 
 // The cheap part of homogeneous_span: false where it certainly returns -1 (inside the
 // grid in a varying macro cell, or beyond the grid when that is not ambient). The
-// marcher's hot loop tests this and leaves the cell walk to its event code.
+// marcher walks the cells only where this is true.
 fn may_fly(p: vec3<f32>) -> bool {
     let g = grid_from_world_point(p);
     if beyond_grid(g) {
