@@ -449,5 +449,8 @@ fn several_samples_per_pixel_match_cpu() {
     harness::assert_images_agree("spp3", &cpu, &gpu, MEAN_TOL, P99_TOL);
     let (sc, sg) = (cpu.mean_steps(), gpu.mean_steps());
     assert!(sc > 0.5, "few rays met the medium: {sc}");
-    assert!((sc - sg).abs() <= 0.03 * sc, "mean steps CPU {sc} vs GPU {sg}");
+    assert!(
+        (sc - sg).abs() <= 0.03 * sc,
+        "mean steps CPU {sc} vs GPU {sg}"
+    );
 }
