@@ -393,7 +393,7 @@ impl<'a> GpuRenderer<'a> {
         // march, PASS_MEDIUM over the pixels whose paths reach it), unless shadow rays
         // bend through the medium: then every diffuse surface's light needs the march.
         let split = scene.medium.is_some() && !s.bend_shadow_rays;
-        let built = ctx.scoped("creating the render pipeline", || {
+        ctx.scoped("creating the render pipeline", || {
             use wgpu::util::DeviceExt;
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("render.wgsl"),
@@ -549,41 +549,21 @@ impl<'a> GpuRenderer<'a> {
                     },
                 ],
             });
-            (
+            GpuRenderer {
+                ctx,
+                params,
                 pipeline,
                 medium_pipeline,
                 bind_group,
                 params_buffer,
-                out_buffer,
-                readback,
                 deferred_count,
                 deferred_dispatch,
-            )
-        })?;
-        let (
-            pipeline,
-            medium_pipeline,
-            bind_group,
-            params_buffer,
-            out_buffer,
-            readback,
-            deferred_count,
-            deferred_dispatch,
-        ) = built;
-        Ok(GpuRenderer {
-            ctx,
-            params,
-            pipeline,
-            medium_pipeline,
-            bind_group,
-            params_buffer,
-            deferred_count,
-            deferred_dispatch,
-            out_buffer,
-            readback,
-            rows_per_band,
-            field,
-            warnings,
+                out_buffer,
+                readback,
+                rows_per_band,
+                field,
+                warnings,
+            }
         })
     }
 
