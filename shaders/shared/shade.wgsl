@@ -45,10 +45,14 @@ fn has_medium() -> bool {
     return field_flag(FLAG_HAS_MEDIUM);
 }
 
-// Index of the space at p: the medium's n inside the bounds, else ambient.
+// Index of the space at p: the medium's n inside the bounds, else ambient. -1 inside
+// the bounds in PASS_FIRST, which leaves such paths to PASS_MEDIUM.
 fn index_at(p: vec3<f32>) -> f32 {
     if has_medium() {
         if bounds_contains(p) {
+            if defer_medium() {
+                return -1.0;
+            }
             return sample_field(p).n;
         }
         return ambient_index();
@@ -197,18 +201,9 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
                 // Glass: Fresnel chooses reflection or refraction at random.
                 let ior = obj.color_a.w;
                 let side = select(-1.0, 1.0, hit.front_face);
-                let q = hit.point + hit.normal * (SURFACE_EPS * side);
-                var n_outside = 1.0;
-                if defer_medium() {
-                    // A glass surface inside the medium needs its n: left to PASS_MEDIUM.
-                    if has_medium() {
-                        if bounds_contains(q) {
-                            return PathSample(radiance, aov, true);
-                        }
-                        n_outside = ambient_index();
-                    }
-                } else {
-                    n_outside = index_at(q);
+                let n_outside = index_at(hit.point + hit.normal * (SURFACE_EPS * side));
+                if n_outside < 0.0 {
+                    return PathSample(radiance, aov, true);
                 }
                 var n1 = ior;
                 var n2 = n_outside;
