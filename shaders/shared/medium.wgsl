@@ -428,8 +428,8 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             return march_end(END_STOPPED, STATUS_ERROR, position, direction, transmittance);
         }
         if event == MARCH_EVENT_LEAVE {
-            // The step ended outside: cut it at the surface (a non-finite end is kept as
-            // is and stops the ray on the next pass).
+            // The step ended outside: cut it at the surface (an infinite end is kept as
+            // is, as the CPU's trace_ray keeps it).
             var h = taken.h;
             if finite3(next.r) {
                 let ex = exit_medium(state, s0, taken, exit_tol);
