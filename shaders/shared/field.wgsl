@@ -119,14 +119,19 @@ fn macro_homogeneous(c: vec3<i32>) -> bool {
     return textureLoad(macro_tex, c, 0).x <= params.grid_origin.w;
 }
 
+// The macro cell holding grid point g (clamped into the grid).
+fn macro_cell(g: vec3<f32>) -> vec3<i32> {
+    let gc = clamp(g, vec3<f32>(0.0), grid_max()) / f32(params.macro_dims.w);
+    return min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), vec3<i32>(params.macro_dims.xyz) - vec3<i32>(1));
+}
+
 // From grid point g along grid direction dg: world length to the end of the run of
 // homogeneous cells starting at g's cell; negative if that cell varies (MacroGrid::span).
 fn macro_span(g: vec3<f32>, dg: vec3<f32>) -> f32 {
     let cell = f32(params.macro_dims.w);
     let mdims = vec3<i32>(params.macro_dims.xyz);
     let gmax = grid_max();
-    let gc = clamp(g, vec3<f32>(0.0), gmax) / cell;
-    var c = min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), mdims - vec3<i32>(1));
+    var c = macro_cell(g);
     if !macro_homogeneous(c) {
         return -1.0;
     }
@@ -180,10 +185,7 @@ fn may_fly(p: vec3<f32>) -> bool {
     if beyond_grid(g) {
         return field_flag(FLAG_OUTSIDE_AMBIENT);
     }
-    let cell = f32(params.macro_dims.w);
-    let gc = clamp(g, vec3<f32>(0.0), grid_max()) / cell;
-    let c = min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), vec3<i32>(params.macro_dims.xyz) - vec3<i32>(1));
-    return macro_homogeneous(c);
+    return macro_homogeneous(macro_cell(g));
 }
 
 // BakedField::homogeneous_span: positive world length of a straight flight, or -1.

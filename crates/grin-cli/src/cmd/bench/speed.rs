@@ -264,9 +264,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (Some(c), Some(a)) => Some(c.ms_per_frame / a.ms_per_frame),
         _ => None,
     };
-    let noise_gpu = runs
-        .iter()
-        .find(|r| r.scene == MARCH_ONLY && r.backend == "gpu");
+    let noise_gpu = find(MARCH_ONLY, "gpu");
     let verlet_gpu = find(MARCH_ONLY_VERLET, "gpu");
     let report = Report {
         adapter,
