@@ -1,9 +1,17 @@
 //! Expression fields: a user formula n(x, y, z, t) in world coordinates (t = time in
 //! seconds, fixed per field) parsed with exmex, with its exact gradient from exmex's
 //! symbolic partial derivatives. Rejected at load: formulas that do not parse, unknown
-//! variables, and n <= 0 or non-finite anywhere on the check grid inside the medium.
+//! variables, formulas beyond the size limits below, and n <= 0 or non-finite anywhere on
+//! the check grid inside the medium.
+//!
+//! exmex differentiates recursively over its expression tree and its derivatives grow
+//! with nesting, so a formula's length, its nesting depth and the size of its derivatives
+//! are bounded ([`MAX_EXPR_CHARS`], [`MAX_EXPR_DEPTH`], [`MAX_DERIVATIVE_CHARS`]), and the
+//! parse runs on a thread with its own large stack: no formula can overflow grin's stack
+//! or keep it busy for minutes.
 
 use exmex::prelude::*;
+use exmex::{FloatOpsFactory, MatchLiteral, literal_matcher_from_pattern};
 use glam::DVec3;
 
 use crate::bounds::Bounds;
@@ -13,6 +21,37 @@ use crate::field::{FieldError, FieldSample, IndexField};
 /// The variables a formula may use: world coordinates x, y, z and time t (seconds).
 pub const VARIABLES: [&str; 4] = ["x", "y", "z", "t"];
 
+/// Longest formula accepted (characters).
+pub const MAX_EXPR_CHARS: usize = 4096;
+
+/// Most binary operators accepted. exmex's parse and derivative grow faster than linearly
+/// with the number of operators (measured in a test build: 450 operators 1.4 s to load,
+/// 1050 operators 11 s); at 256 the largest accepted formula loads in a fraction of that.
+pub const MAX_EXPR_OPERATORS: usize = 256;
+
+/// Deepest nesting of parentheses (each function call counts one level) accepted.
+pub const MAX_EXPR_DEPTH: usize = 32;
+
+/// Longest derivative accepted (characters of exmex's unparsed partial derivative): the
+/// chain rule multiplies the size of deeply composed formulas, and every evaluation of the
+/// field pays for each derivative.
+pub const MAX_DERIVATIVE_CHARS: usize = 1 << 17;
+
+/// Stack of the thread that parses and differentiates a formula: exmex recurses once per
+/// operator of a long sum, ~1 KiB a level; 256 MiB is virtual memory, touched only as deep
+/// as a formula goes.
+const PARSE_STACK_BYTES: usize = 256 << 20;
+
+// Numbers as people write them: 12, 1.5, .5, 3., and scientific notation 1e-5, 2.5E+3
+// (exmex's default literal matcher has no exponent).
+literal_matcher_from_pattern!(
+    NumberLiteral,
+    r"^([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?"
+);
+
+/// exmex's flat expression over f64 with grin's number literals.
+type Flat = FlatEx<f64, FloatOpsFactory<f64>, NumberLiteral>;
+
 /// Relative margin added to the sampled n range and max |grad n| (they are estimates
 /// from the check grid, not bounds: the grid can step over a narrow peak).
 const SAMPLED_MARGIN: f64 = 0.05;
@@ -20,13 +59,13 @@ const SAMPLED_MARGIN: f64 = 0.05;
 /// One compiled formula and, for each of its variables, where to find it in (x, y, z, t).
 #[derive(Debug, Clone)]
 struct Compiled {
-    ex: FlatEx<f64>,
+    ex: Flat,
     /// Index into (x, y, z, t) of each exmex variable (exmex orders them alphabetically).
     slots: Vec<usize>,
 }
 
 impl Compiled {
-    fn new(ex: FlatEx<f64>) -> Self {
+    fn new(ex: Flat) -> Self {
         let slots = ex
             .var_names()
             .iter()
@@ -63,8 +102,115 @@ pub struct ExprField {
 // IndexField requires Send + Sync: exmex's FlatEx<f64> holds plain data and fn pointers.
 const _: fn() = || {
     fn assert_send_sync<T: Send + Sync>() {}
-    assert_send_sync::<FlatEx<f64>>();
+    assert_send_sync::<Flat>();
 };
+
+/// Check the size limits that do not need a parse: length and nesting depth.
+fn check_size(text: &str) -> Result<(), String> {
+    let chars = text.chars().count();
+    if chars > MAX_EXPR_CHARS {
+        return Err(format!(
+            "is {chars} characters long; at most {MAX_EXPR_CHARS} are accepted"
+        ));
+    }
+    let mut depth = 0usize;
+    let mut deepest = 0usize;
+    let mut operators = 0usize;
+    let mut before = ['\0', '\0'];
+    for c in text.chars() {
+        // The sign of an exponent (1e-5) is part of a number, not an operator.
+        let exponent_sign = matches!(c, '+' | '-')
+            && matches!(before[1], 'e' | 'E')
+            && (before[0].is_ascii_digit() || before[0] == '.');
+        if matches!(c, '+' | '-' | '*' | '/' | '^') && !exponent_sign {
+            operators += 1;
+        }
+        if !c.is_whitespace() {
+            before = [before[1], c];
+        }
+        match c {
+            '(' => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+            ')' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    if operators > MAX_EXPR_OPERATORS {
+        return Err(format!(
+            "has {operators} operators; at most {MAX_EXPR_OPERATORS} are accepted (bake a \
+             larger formula with another tool and load it as a `baked` field)"
+        ));
+    }
+    if deepest > MAX_EXPR_DEPTH {
+        return Err(format!(
+            "nests parentheses {deepest} deep; at most {MAX_EXPR_DEPTH} levels are accepted"
+        ));
+    }
+    Ok(())
+}
+
+/// Parse `text` and differentiate it with respect to each coordinate it uses (on a thread
+/// with a [`PARSE_STACK_BYTES`] stack). Errors are sentences for the user.
+fn parse_with_gradient(text: &str) -> Result<(Flat, [Option<Flat>; 3]), String> {
+    check_size(text)?;
+    let owned = text.to_owned();
+    let worker = std::thread::Builder::new()
+        .name("grin-expr-parse".into())
+        .stack_size(PARSE_STACK_BYTES)
+        .spawn(move || parse_on_this_thread(&owned))
+        .map_err(|e| format!("cannot start the expression parser: {e}"))?;
+    worker
+        .join()
+        .unwrap_or_else(|_| Err("the expression parser failed".to_owned()))
+}
+
+fn parse_on_this_thread(text: &str) -> Result<(Flat, [Option<Flat>; 3]), String> {
+    let ex = Flat::parse(text).map_err(|e| format!("does not parse: {}", parse_reason(e.msg())))?;
+    if let Some(bad) = ex
+        .var_names()
+        .iter()
+        .find(|v| !VARIABLES.contains(&v.as_str()))
+    {
+        return Err(format!(
+            "unknown variable `{bad}` (allowed: x, y, z in world coordinates and t in seconds)"
+        ));
+    }
+    let mut grad = [None, None, None];
+    for (axis, g) in grad.iter_mut().enumerate() {
+        if let Some(idx) = ex.var_names().iter().position(|v| v == VARIABLES[axis]) {
+            let d = ex.clone().partial(idx).map_err(|e| {
+                format!(
+                    "cannot differentiate with respect to {}: {}",
+                    VARIABLES[axis],
+                    parse_reason(e.msg())
+                )
+            })?;
+            let len = d.unparse().len();
+            if len > MAX_DERIVATIVE_CHARS {
+                return Err(format!(
+                    "its derivative with respect to {} is {len} characters long (at most \
+                     {MAX_DERIVATIVE_CHARS}): nest fewer functions",
+                    VARIABLES[axis]
+                ));
+            }
+            *g = Some(d);
+        }
+    }
+    Ok((ex, grad))
+}
+
+/// exmex reports some syntax errors in terms of its own data structures ("we have 10 ops
+/// and 12 node"); say what that means to the person who wrote the formula.
+fn parse_reason(msg: &str) -> String {
+    if msg.contains(" ops and ") && msg.contains(" node") {
+        "an operator is missing an operand, or two operands have no operator between them"
+            .to_owned()
+    } else {
+        msg.to_owned()
+    }
+}
 
 impl ExprField {
     /// Parse `text`, differentiate it, and check n > 0 on the check grid inside `bounds`.
@@ -76,30 +222,8 @@ impl ExprField {
         if !t.is_finite() {
             return Err(err(format!("time t = {t} is not finite")));
         }
-        let ex =
-            FlatEx::<f64>::parse(text).map_err(|e| err(format!("does not parse: {}", e.msg())))?;
-        if let Some(bad) = ex
-            .var_names()
-            .iter()
-            .find(|v| !VARIABLES.contains(&v.as_str()))
-        {
-            return Err(err(format!(
-                "unknown variable `{bad}` (allowed: x, y, z in world coordinates and t in seconds)"
-            )));
-        }
-        let mut grad = [None, None, None];
-        for (axis, g) in grad.iter_mut().enumerate() {
-            if let Some(idx) = ex.var_names().iter().position(|v| v == VARIABLES[axis]) {
-                let d = ex.clone().partial(idx).map_err(|e| {
-                    err(format!(
-                        "cannot differentiate with respect to {}: {}",
-                        VARIABLES[axis],
-                        e.msg()
-                    ))
-                })?;
-                *g = Some(Compiled::new(d));
-            }
-        }
+        let (ex, grad) = parse_with_gradient(text).map_err(err)?;
+        let grad = grad.map(|g| g.map(Compiled::new));
         let mut field = ExprField {
             text: text.to_owned(),
             t,
@@ -313,5 +437,79 @@ mod tests {
         // Non-finite: sqrt of a negative number.
         let e = ExprField::new("sqrt(0.5 - x)", ball(), 1.0, 0.0).expect_err("NaN for x > 0.5");
         assert!(e.to_string().contains("n is not finite (NaN)"), "{e}");
+    }
+
+    #[test]
+    fn scientific_notation_parses() {
+        let f = ExprField::new(
+            "1.000293 - 5e-5*exp(-y/2.5E-1) + 1.5e+0*0",
+            ball(),
+            1.0,
+            0.0,
+        )
+        .expect("scientific notation");
+        let p = DVec3::new(0.0, 0.5, 0.0);
+        assert!((f.n(p) - (1.000293 - 5e-5 * (-2.0f64).exp())).abs() < 1e-15);
+        let g = f.sample(p).grad_n.y;
+        assert!((g - 5e-5 / 0.25 * (-2.0f64).exp()).abs() < 1e-15, "{g}");
+    }
+
+    #[test]
+    fn long_sums_parse_without_overflowing_the_stack() {
+        // ~150 terms overflowed the main thread's stack inside exmex's derivative.
+        let terms: Vec<String> = (0..60).map(|i| format!("1e-4*x^{}*y", i % 5)).collect();
+        let text = format!("1.1 + {}", terms.join(" + "));
+        let f = ExprField::new(&text, ball(), 1.0, 0.0).expect("60 terms, 240 operators");
+        let p = DVec3::new(0.1, 0.5, 0.0);
+        let want: f64 = 1.1
+            + (0..60)
+                .map(|i| 1e-4 * 0.1f64.powi(i % 5) * 0.5)
+                .sum::<f64>();
+        assert!((f.n(p) - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn oversized_and_overnested_formulas_are_refused_quickly() {
+        let start = std::time::Instant::now();
+        let long = format!("1.1 + 0.0001*({})", "x+".repeat(2100) + "x");
+        let e = ExprField::new(&long, ball(), 1.0, 0.0).expect_err("too long");
+        assert!(
+            e.to_string()
+                .contains("is 4216 characters long; at most 4096 are accepted"),
+            "{e}"
+        );
+        let sum = format!("1.1{}", " + 1e-5*x".repeat(300));
+        let e = ExprField::new(&sum, ball(), 1.0, 0.0).expect_err("too many operators");
+        assert!(
+            e.to_string()
+                .contains("has 600 operators; at most 256 are accepted"),
+            "{e}"
+        );
+        let nested = format!("1.5 + 0.1*{}x{}", "sin(".repeat(100), ")".repeat(100));
+        let e = ExprField::new(&nested, ball(), 1.0, 0.0).expect_err("too deep");
+        assert!(
+            e.to_string()
+                .contains("nests parentheses 100 deep; at most 32 levels are accepted"),
+            "{e}"
+        );
+        // The deepest accepted composition still parses and differentiates.
+        let deepest = format!("1.5 + 0.1*{}x{}", "sin(".repeat(31), ")".repeat(31));
+        ExprField::new(&deepest, ball(), 1.0, 0.0).expect("31 nested sines");
+        let widest = format!("1.1{}", " + 1e-5*x*y".repeat(85));
+        ExprField::new(&widest, ball(), 1.0, 0.0).expect("85 terms, 255 operators");
+        // Measured ~1 s in the test build; the old unbounded parse took minutes.
+        assert!(
+            start.elapsed().as_secs_f64() < 10.0,
+            "{:?}",
+            start.elapsed()
+        );
+    }
+
+    #[test]
+    fn parse_errors_are_in_the_user_s_terms() {
+        let e = ExprField::new("1 + 2 3", ball(), 1.0, 0.0).expect_err("missing operator");
+        let m = e.to_string();
+        assert!(!m.contains(" ops and "), "{m}");
+        assert!(m.contains("does not parse"), "{m}");
     }
 }
