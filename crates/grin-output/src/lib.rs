@@ -1,0 +1,330 @@
+//! Files grin writes. Every output is first written in full to a temporary file (beside
+//! its target, so the final rename stays on one filesystem), synced, and only then put in
+//! place; several outputs of one run (an EXR and its PNG preview) are put in place
+//! together ([`commit`]), so a failed or interrupted run leaves the previous files as
+//! they were and no temporary file behind.
+//!
+//! What a target path means ([`Destination::resolve`]):
+//! - a regular file, or a path that does not exist yet in an existing directory: replaced
+//!   atomically by a rename;
+//! - a symbolic link to a regular file: the file it points to is replaced, the link kept
+//!   (a rename over the link would turn `/dev/stdout` into a plain file);
+//! - `-`: standard output, where the caller allows a stream;
+//! - a character device, FIFO or socket (`/dev/stdout`, `/dev/null`, a named pipe): the
+//!   finished bytes are copied into it, nothing is created or replaced;
+//! - a directory, a dangling link, or a path in a missing directory: an error naming it.
+//!
+//! [`install_signal_cleanup`] makes SIGINT and SIGTERM remove the staged temporary files
+//! before the process exits; a commit in progress finishes first.
+
+use std::collections::BTreeSet;
+use std::fs::{self, File, OpenOptions};
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+use std::os::unix::fs::PermissionsExt;
+use std::sync::{Mutex, MutexGuard};
+
+/// Mode of a newly created output file (rw-r--r--).
+const NEW_FILE_MODE: u32 = 0o644;
+
+/// Exit status after SIGINT or SIGTERM cleaned up (128 + SIGINT, what a shell reports).
+pub const INTERRUPTED_EXIT_CODE: i32 = 130;
+
+/// Test hook: milliseconds to sleep after every output is staged and before any is put in
+/// place, so a test can interrupt a run exactly in its write phase.
+pub const PAUSE_BEFORE_COMMIT_ENV: &str = "GRIN_TEST_PAUSE_BEFORE_COMMIT_MS";
+
+/// Why an output could not be written; each names the target the user gave.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error("{}: cannot write: {reason}", path.display())]
+    Target { path: PathBuf, reason: String },
+    /// The io::Error is in the message, not a `source()`: `{:#}` would print it twice.
+    #[error("{}: cannot write: {}", path.display(), plain(err))]
+    Io { path: PathBuf, err: io::Error },
+    #[error("{}: {message}", path.display())]
+    Writer { path: PathBuf, message: String },
+}
+
+impl OutputError {
+    fn target(path: &Path, reason: impl Into<String>) -> Self {
+        OutputError::Target {
+            path: path.to_owned(),
+            reason: reason.into(),
+        }
+    }
+    fn io(path: &Path, source: io::Error) -> Self {
+        OutputError::Io {
+            path: path.to_owned(),
+            err: source,
+        }
+    }
+}
+
+/// Where the bytes of one output end up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Destination {
+    /// A regular file, replaced by a rename of a temporary file in `dir`.
+    Replace { file: PathBuf },
+    /// A device, FIFO or socket, written into as it is.
+    Stream { file: PathBuf },
+    /// Standard output (`-`).
+    Stdout,
+}
+
+impl Destination {
+    /// What writing to `path` means (see the module documentation).
+    pub fn resolve(path: &Path) -> Result<Self, OutputError> {
+        if path.as_os_str() == "-" {
+            return Ok(Destination::Stdout);
+        }
+        match fs::metadata(path) {
+            Ok(meta) if meta.is_file() => {
+                let file = fs::canonicalize(path).map_err(|e| OutputError::io(path, e))?;
+                Ok(Destination::Replace { file })
+            }
+            Ok(meta) if meta.is_dir() => Err(OutputError::target(path, "it is a directory")),
+            Ok(_) => Ok(Destination::Stream {
+                file: path.to_owned(),
+            }),
+            Err(e) if matches!(e.kind(), io::ErrorKind::NotFound | io::ErrorKind::NotADirectory) => {
+                if let Ok(link) = fs::read_link(path) {
+                    return Err(OutputError::target(
+                        path,
+                        format!(
+                            "it is a symbolic link to {}, which does not exist; the link is \
+                             not replaced",
+                            link.display()
+                        ),
+                    ));
+                }
+                let name = path
+                    .file_name()
+                    .ok_or_else(|| OutputError::target(path, "it does not name a file"))?;
+                let parent = match path.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => p,
+                    _ => Path::new("."),
+                };
+                match fs::metadata(parent) {
+                    Ok(m) if m.is_dir() => {}
+                    Ok(_) => {
+                        return Err(OutputError::target(
+                            path,
+                            format!("{} is not a directory", parent.display()),
+                        ));
+                    }
+                    Err(_) => {
+                        return Err(OutputError::target(
+                            path,
+                            format!("directory {} does not exist", parent.display()),
+                        ));
+                    }
+                }
+                let dir = fs::canonicalize(parent).map_err(|e| OutputError::io(path, e))?;
+                Ok(Destination::Replace {
+                    file: dir.join(name),
+                })
+            }
+            Err(e) => Err(OutputError::io(path, e)),
+        }
+    }
+
+    /// True where the output is written into an existing stream rather than a file.
+    pub fn is_stream(&self) -> bool {
+        !matches!(self, Destination::Replace { .. })
+    }
+}
+
+/// Temporary files staged and not yet put in place or removed, for the signal handler.
+static LIVE: Mutex<BTreeSet<PathBuf>> = Mutex::new(BTreeSet::new());
+
+fn live() -> MutexGuard<'static, BTreeSet<PathBuf>> {
+    LIVE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// One output written in full to a temporary file, waiting for [`commit`]. Dropped
+/// without a commit, its temporary file is removed.
+#[derive(Debug)]
+pub struct Staged {
+    /// The path as the user gave it (for messages).
+    target: PathBuf,
+    destination: Destination,
+    tmp: Option<tempfile::TempPath>,
+}
+
+impl Staged {
+    /// The path as the user gave it.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+    /// Where the bytes go.
+    pub fn destination(&self) -> &Destination {
+        &self.destination
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if let Some(tmp) = self.tmp.take() {
+            let path = tmp.to_path_buf();
+            drop(tmp);
+            live().remove(&path);
+        }
+    }
+}
+
+/// Stage `target` by letting `write` write the whole output to the temporary file whose
+/// path it is given (for writers that only take a path: EXR, OpenVDB). The file is synced
+/// before this returns, so a full disk fails here and not after a rename.
+pub fn stage_path(
+    target: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<Staged, OutputError> {
+    let destination = Destination::resolve(target)?;
+    let dir = match &destination {
+        Destination::Replace { file } => file
+            .parent()
+            .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
+        _ => std::env::temp_dir(),
+    };
+    let tmp = {
+        // Registered before the file exists, so a signal in between removes it too.
+        let mut guard = live();
+        let file = tempfile::Builder::new()
+            .prefix(".grin-")
+            .suffix(".tmp")
+            .tempfile_in(&dir)
+            .map_err(|e| {
+                OutputError::target(
+                    target,
+                    format!("cannot create a file in {}: {}", dir.display(), plain(&e)),
+                )
+            })?;
+        let tmp = file.into_temp_path();
+        guard.insert(tmp.to_path_buf());
+        tmp
+    };
+    let staged = Staged {
+        target: target.to_owned(),
+        destination,
+        tmp: Some(tmp),
+    };
+    let tmp_path = staged.tmp.as_ref().map(|t| t.to_path_buf()).unwrap_or_default();
+    write(&tmp_path).map_err(|message| OutputError::Writer {
+        path: target.to_owned(),
+        message: message.replace(&tmp_path.display().to_string(), &target.display().to_string()),
+    })?;
+    // tempfile creates its files 0600; an output gets the mode of the file it replaces,
+    // or the usual 0644.
+    let mode = match &staged.destination {
+        Destination::Replace { file } => fs::metadata(file)
+            .map(|m| m.permissions().mode() & 0o7777)
+            .unwrap_or(NEW_FILE_MODE),
+        _ => NEW_FILE_MODE,
+    };
+    fs::set_permissions(&tmp_path, fs::Permissions::from_mode(mode))
+        .and_then(|()| File::open(&tmp_path))
+        .and_then(|f| f.sync_all())
+        .map_err(|e| OutputError::io(target, e))?;
+    Ok(staged)
+}
+
+/// Stage `target` by letting `write` write into a buffered writer (flushed and synced
+/// here, so every write error surfaces).
+pub fn stage_writer(
+    target: &Path,
+    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> Result<Staged, OutputError> {
+    let mut failure = None;
+    let staged = stage_path(target, |tmp| {
+        let result = File::create(tmp).and_then(|file| {
+            let mut w = io::BufWriter::new(file);
+            write(&mut w)?;
+            w.flush()?;
+            w.into_inner().map_err(io::IntoInnerError::into_error)?.sync_all()
+        });
+        result.map_err(|e| {
+            let message = plain(&e);
+            failure = Some(e);
+            message
+        })
+    });
+    match (staged, failure) {
+        (Err(_), Some(source)) => Err(OutputError::io(target, source)),
+        (staged, _) => staged,
+    }
+}
+
+/// Put every staged output in place, in order. The signal handler waits while this runs.
+/// Where one fails, those not yet placed are removed and the error names it.
+pub fn commit(staged: Vec<Staged>) -> Result<(), OutputError> {
+    if let Some(ms) = std::env::var(PAUSE_BEFORE_COMMIT_ENV)
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        std::thread::sleep(std::time::Duration::from_millis(ms));
+    }
+    let mut guard = live();
+    for mut s in staged {
+        let Some(tmp) = s.tmp.take() else { continue };
+        let tmp_path = tmp.to_path_buf();
+        let result = match &s.destination {
+            Destination::Replace { file } => tmp
+                .persist(file)
+                .map(|_| ())
+                .map_err(|e| OutputError::io(&s.target, e.error)),
+            Destination::Stream { file } => OpenOptions::new()
+                .write(true)
+                .open(file)
+                .and_then(|mut out| copy_into(&tmp_path, &mut out))
+                .map_err(|e| OutputError::io(&s.target, e)),
+            Destination::Stdout => copy_into(&tmp_path, &mut io::stdout().lock())
+                .map_err(|e| OutputError::io(&s.target, e)),
+        };
+        let _ = fs::remove_file(&tmp_path);
+        guard.remove(&tmp_path);
+        result?;
+    }
+    Ok(())
+}
+
+fn copy_into(tmp: &Path, out: &mut dyn Write) -> io::Result<()> {
+    let mut file = File::open(tmp)?;
+    io::copy(&mut file, out)?;
+    out.flush()
+}
+
+/// Stage and commit one output written through a buffered writer.
+pub fn write_file(
+    target: &Path,
+    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> Result<(), OutputError> {
+    commit(vec![stage_writer(target, write)?])
+}
+
+/// An io::Error's text without Rust's " (os error N)" suffix, for one-line messages.
+pub fn plain(e: &io::Error) -> String {
+    let text = e.to_string();
+    match text.find(" (os error ") {
+        Some(i) => text[..i].to_owned(),
+        None => text,
+    }
+}
+
+/// On SIGINT or SIGTERM: wait for a commit in progress, remove every staged temporary
+/// file, and exit with [`INTERRUPTED_EXIT_CODE`]. Call once, early in `main`.
+pub fn install_signal_cleanup() -> Result<(), String> {
+    ctrlc::set_handler(|| {
+        let mut guard = live();
+        for path in guard.iter() {
+            let _ = fs::remove_file(path);
+        }
+        guard.clear();
+        eprintln!("grin: interrupted; no output was left half-written");
+        std::process::exit(INTERRUPTED_EXIT_CODE);
+    })
+    .map_err(|e| format!("cannot install the signal handler: {e}"))
+}
+
+#[cfg(test)]
+mod tests;
