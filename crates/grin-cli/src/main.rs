@@ -55,6 +55,9 @@ const SIGPIPE_EXIT_CODE: i32 = 141;
 
 fn main() -> ExitCode {
     quiet_on_closed_stdout();
+    if let Err(e) = grin_output::install_signal_cleanup() {
+        eprintln!("grin: warning: {e}");
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Trace(a) => cmd::trace::run(a),

@@ -2,7 +2,6 @@
 //! (transform, ambient index, storage, scale, bounds, source, measured error) followed by
 //! the voxels. The layout is documented in docs/grinf.md (with a numpy loader).
 
-use std::io::Write;
 use std::path::Path;
 
 use glam::DVec3;
@@ -27,11 +26,10 @@ const MAX_DESCRIPTION_BYTES: usize = 4096;
 /// Why a .grinf file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum GrinfError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    #[error("{path}: {}", grin_output::plain(err))]
+    Io { path: String, err: std::io::Error },
+    #[error(transparent)]
+    Write(#[from] grin_output::OutputError),
     #[error("{path}: not a .grinf file (bad magic {found:?}, expected {MAGIC:?})")]
     Magic { path: String, found: Vec<u8> },
     #[error("{path}: unsupported .grinf version {found} (this grin reads version {VERSION})")]
@@ -57,9 +55,9 @@ pub enum GrinfError {
 impl From<GrinfError> for FieldError {
     fn from(e: GrinfError) -> Self {
         match e {
-            GrinfError::Io { path, source } => FieldError::File {
+            GrinfError::Io { path, err } => FieldError::File {
                 path,
-                message: source.to_string(),
+                message: grin_output::plain(&err),
             },
             other => FieldError::Other(other.to_string()),
         }
@@ -155,45 +153,18 @@ pub fn to_bytes(field: &BakedField) -> Vec<u8> {
     b
 }
 
-/// Write `field` to `path` atomically: a temporary file in the same directory, renamed
-/// into place, so an interrupted write leaves no partial file.
+/// Write `field` to `path` through grin-output: staged, synced and renamed into place, so
+/// an interrupted or failed write leaves no partial file.
 pub fn save(field: &BakedField, path: &Path) -> Result<(), GrinfError> {
     let bytes = to_bytes(field);
-    write_atomic(path, &bytes)
-}
-
-/// Write bytes to `path` via a temporary file in the same directory and a rename.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), GrinfError> {
-    let io = |source| GrinfError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io)
+    Ok(grin_output::write_file(path, |w| w.write_all(&bytes))?)
 }
 
 /// Read a .grinf file.
 pub fn load(path: &Path) -> Result<BakedField, GrinfError> {
     let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
         path: path.display().to_string(),
-        source,
+        err: source,
     })?;
     from_bytes(&bytes, &path.display().to_string())
 }
@@ -234,7 +205,7 @@ pub fn load_for_medium(
 pub fn read_header(path: &Path) -> Result<GrinfHeader, GrinfError> {
     let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
         path: path.display().to_string(),
-        source,
+        err: source,
     })?;
     parse_header(&bytes, &path.display().to_string())
 }

@@ -8,6 +8,7 @@ pub mod baked;
 pub mod bounds;
 pub mod build;
 pub mod check;
+pub mod export;
 pub mod expr;
 pub mod field;
 pub mod grinf;

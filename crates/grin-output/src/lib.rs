@@ -20,8 +20,8 @@
 use std::collections::BTreeSet;
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, Write};
-use std::path::{Path, PathBuf};
 use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 
 /// Mode of a newly created output file (rw-r--r--).
@@ -87,7 +87,12 @@ impl Destination {
             Ok(_) => Ok(Destination::Stream {
                 file: path.to_owned(),
             }),
-            Err(e) if matches!(e.kind(), io::ErrorKind::NotFound | io::ErrorKind::NotADirectory) => {
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::NotFound | io::ErrorKind::NotADirectory
+                ) =>
+            {
                 if let Ok(link) = fs::read_link(path) {
                     return Err(OutputError::target(
                         path,
@@ -139,7 +144,8 @@ impl Destination {
 static LIVE: Mutex<BTreeSet<PathBuf>> = Mutex::new(BTreeSet::new());
 
 fn live() -> MutexGuard<'static, BTreeSet<PathBuf>> {
-    LIVE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    LIVE.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// One output written in full to a temporary file, waiting for [`commit`]. Dropped
@@ -209,10 +215,17 @@ pub fn stage_path(
         destination,
         tmp: Some(tmp),
     };
-    let tmp_path = staged.tmp.as_ref().map(|t| t.to_path_buf()).unwrap_or_default();
+    let tmp_path = staged
+        .tmp
+        .as_ref()
+        .map(|t| t.to_path_buf())
+        .unwrap_or_default();
     write(&tmp_path).map_err(|message| OutputError::Writer {
         path: target.to_owned(),
-        message: message.replace(&tmp_path.display().to_string(), &target.display().to_string()),
+        message: message.replace(
+            &tmp_path.display().to_string(),
+            &target.display().to_string(),
+        ),
     })?;
     // tempfile creates its files 0600; an output gets the mode of the file it replaces,
     // or the usual 0644.
@@ -241,7 +254,9 @@ pub fn stage_writer(
             let mut w = io::BufWriter::new(file);
             write(&mut w)?;
             w.flush()?;
-            w.into_inner().map_err(io::IntoInnerError::into_error)?.sync_all()
+            w.into_inner()
+                .map_err(io::IntoInnerError::into_error)?
+                .sync_all()
         });
         result.map_err(|e| {
             let message = plain(&e);

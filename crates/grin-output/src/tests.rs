@@ -3,9 +3,12 @@ use std::os::unix::fs::PermissionsExt;
 use super::*;
 
 fn no_temp_files(dir: &Path) -> bool {
-    fs::read_dir(dir)
-        .expect("dir")
-        .all(|e| !e.expect("entry").file_name().to_string_lossy().starts_with(".grin-"))
+    fs::read_dir(dir).expect("dir").all(|e| {
+        !e.expect("entry")
+            .file_name()
+            .to_string_lossy()
+            .starts_with(".grin-")
+    })
 }
 
 #[test]
@@ -14,11 +17,17 @@ fn new_and_replaced_files() {
     let out = dir.path().join("a.txt");
     write_file(&out, |w| w.write_all(b"first")).expect("new");
     assert_eq!(fs::read(&out).expect("read"), b"first");
-    assert_eq!(fs::metadata(&out).expect("meta").permissions().mode() & 0o777, 0o644);
+    assert_eq!(
+        fs::metadata(&out).expect("meta").permissions().mode() & 0o777,
+        0o644
+    );
     fs::set_permissions(&out, fs::Permissions::from_mode(0o640)).expect("chmod");
     write_file(&out, |w| w.write_all(b"second")).expect("replace");
     assert_eq!(fs::read(&out).expect("read"), b"second");
-    assert_eq!(fs::metadata(&out).expect("meta").permissions().mode() & 0o777, 0o640);
+    assert_eq!(
+        fs::metadata(&out).expect("meta").permissions().mode() & 0o777,
+        0o640
+    );
     assert!(no_temp_files(dir.path()));
 }
 
@@ -41,7 +50,10 @@ fn a_failed_writer_leaves_the_old_file_and_no_temp() {
         Err(io::Error::other("disk on fire"))
     })
     .expect_err("writer fails");
-    assert_eq!(e.to_string(), format!("{}: cannot write: disk on fire", out.display()));
+    assert_eq!(
+        e.to_string(),
+        format!("{}: cannot write: disk on fire", out.display())
+    );
     assert_eq!(fs::read(&out).expect("read"), b"good");
     assert!(no_temp_files(dir.path()));
 }
@@ -75,13 +87,27 @@ fn a_symlink_target_keeps_the_link() {
     fs::write(&real, b"old").expect("seed");
     std::os::unix::fs::symlink(&real, &link).expect("symlink");
     write_file(&link, |w| w.write_all(b"through the link")).expect("write");
-    assert!(fs::symlink_metadata(&link).expect("meta").file_type().is_symlink());
+    assert!(
+        fs::symlink_metadata(&link)
+            .expect("meta")
+            .file_type()
+            .is_symlink()
+    );
     assert_eq!(fs::read(&real).expect("read"), b"through the link");
     let dangling = dir.path().join("dangling.txt");
     std::os::unix::fs::symlink(dir.path().join("nowhere.txt"), &dangling).expect("symlink");
     let e = write_file(&dangling, |w| w.write_all(b"x")).expect_err("dangling");
-    assert!(e.to_string().contains("nowhere.txt, which does not exist; the link is not replaced"), "{e}");
-    assert!(fs::symlink_metadata(&dangling).expect("meta").file_type().is_symlink());
+    assert!(
+        e.to_string()
+            .contains("nowhere.txt, which does not exist; the link is not replaced"),
+        "{e}"
+    );
+    assert!(
+        fs::symlink_metadata(&dangling)
+            .expect("meta")
+            .file_type()
+            .is_symlink()
+    );
 }
 
 #[test]
@@ -91,7 +117,10 @@ fn devices_are_written_into_not_replaced() {
     let after = fs::symlink_metadata("/dev/null").expect("meta");
     assert!(!after.file_type().is_file());
     assert_eq!(before.file_type(), after.file_type());
-    assert_eq!(Destination::resolve(Path::new("-")).expect("-"), Destination::Stdout);
+    assert_eq!(
+        Destination::resolve(Path::new("-")).expect("-"),
+        Destination::Stdout
+    );
 }
 
 #[test]
@@ -108,7 +137,10 @@ fn missing_directories_and_directories_are_named() {
         )
     );
     let e = write_file(dir.path(), |w| w.write_all(b"x")).expect_err("a directory");
-    assert!(e.to_string().ends_with("cannot write: it is a directory"), "{e}");
+    assert!(
+        e.to_string().ends_with("cannot write: it is a directory"),
+        "{e}"
+    );
     let file = dir.path().join("plain");
     fs::write(&file, b"").expect("seed");
     let e = write_file(&file.join("out.csv"), |w| w.write_all(b"x")).expect_err("not a dir");

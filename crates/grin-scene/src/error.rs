@@ -5,12 +5,9 @@ use std::path::PathBuf;
 /// Why a scene could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{path}: cannot read scene file: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The io::Error is in the message only (as a `source()` too, `{:#}` printed it twice).
+    #[error("{}: cannot read scene file: {}", path.display(), grin_output::plain(err))]
+    Io { path: PathBuf, err: std::io::Error },
     /// TOML syntax or a value of the wrong shape (unknown key, unknown field kind, ...).
     #[error("{path}:{line}:{column}: {key}: {message}")]
     Parse {

@@ -9,9 +9,9 @@ use crate::{Scene, SceneError, Shape};
 
 /// Read and validate a scene file.
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+    let text = std::fs::read_to_string(path).map_err(|err| SceneError::Io {
         path: path.to_owned(),
-        source,
+        err,
     })?;
     parse_scene(&text, path)
 }

@@ -1,11 +1,13 @@
 //! Rendered frames and their files: linear HDR EXR with the beauty pass and AOV channels,
 //! a tonemapped sRGB PNG preview, and the per-pixel difference metric used to compare
-//! the GPU with the CPU. Files are written to a temporary file in the same directory and
-//! renamed, so an interrupted write never leaves a broken output file.
+//! the GPU with the CPU. Files are staged and committed through grin-output, so an
+//! interrupted write never leaves a broken output file and an EXR and its PNG are replaced
+//! together.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use exr::prelude::*;
+use grin_output::Staged;
 
 /// `exr::prelude` exports its own `Result`; this module means std's.
 type Result<T, E> = std::result::Result<T, E>;
@@ -58,37 +60,19 @@ fn output_err(path: &Path, message: impl ToString) -> RenderError {
     }
 }
 
-/// `dir/.name.tmp-<pid>`: a sibling of `path`, so the final rename stays on one filesystem.
-fn temp_sibling(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
-}
-
-/// Write with `write` to a temporary sibling of `path`, then rename it into place.
-fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), String>,
-) -> Result<(), RenderError> {
-    let tmp = temp_sibling(path);
-    if let Err(message) = write(&tmp) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(output_err(path, message));
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        output_err(path, e)
-    })
-}
-
 impl Frame {
     fn channel(&self, f: impl Fn(&PixelOut) -> f32) -> Vec<f32> {
         self.pixels.iter().map(f).collect()
     }
 
-    /// Linear HDR EXR: R, G, B and the `aov.*` channels, lossless ZIP compression.
+    /// Write the EXR alone (see [`Frame::stage_exr`]).
     pub fn write_exr(&self, path: &Path) -> Result<(), RenderError> {
+        Ok(grin_output::commit(vec![self.stage_exr(path)?])?)
+    }
+
+    /// Linear HDR EXR: R, G, B and the `aov.*` channels, lossless ZIP compression,
+    /// written in full to a temporary file; [`grin_output::commit`] puts it in place.
+    pub fn stage_exr(&self, path: &Path) -> Result<Staged, RenderError> {
         let size = (self.width as usize, self.height as usize);
         let named: Vec<(&str, Vec<f32>)> = vec![
             ("R", self.channel(|p| p.rgb[0])),
@@ -114,9 +98,9 @@ impl Frame {
             AnyChannels::sort(channels),
         );
         let image = Image::from_layer(layer);
-        write_atomically(path, |tmp| {
+        Ok(grin_output::stage_path(path, |tmp| {
             image.write().to_file(tmp).map_err(|e| e.to_string())
-        })
+        })?)
     }
 
     /// Read an EXR written by [`Frame::write_exr`] (beauty and AOVs).
@@ -169,10 +153,15 @@ impl Frame {
             .collect()
     }
 
-    /// Write the PNG preview.
+    /// Write the PNG preview alone.
     pub fn write_png(&self, path: &Path) -> Result<(), RenderError> {
+        Ok(grin_output::commit(vec![self.stage_png(path)?])?)
+    }
+
+    /// The PNG preview, staged like [`Frame::stage_exr`].
+    pub fn stage_png(&self, path: &Path) -> Result<Staged, RenderError> {
         let buf = self.preview_rgb8();
-        write_atomically(path, |tmp| {
+        Ok(grin_output::stage_path(path, |tmp| {
             image::save_buffer_with_format(
                 tmp,
                 &buf,
@@ -182,7 +171,7 @@ impl Frame {
                 image::ImageFormat::Png,
             )
             .map_err(|e| e.to_string())
-        })
+        })?)
     }
 
     /// Mean of primary-ray steps per pixel sample.
@@ -208,12 +197,27 @@ pub fn linear_to_srgb8(x: f32) -> u8 {
 }
 
 /// Per-pixel difference between two frames' beauty passes: the largest channel
-/// difference of each pixel, summarised.
+/// difference of each pixel, summarised. A pixel where either frame holds a NaN or an
+/// infinity (and the two are not the same infinity) differs by +inf, so one broken pixel
+/// makes `max` and `mean` infinite and no tolerance accepts it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DiffStats {
     pub mean: f64,
     pub p99: f64,
     pub max: f64,
+    /// Pixels whose difference is infinite (a NaN or an unmatched infinity).
+    pub nonfinite: usize,
+}
+
+/// |a - b| of one channel; +inf where either is NaN or the two are unequal infinities.
+fn channel_difference(a: f32, b: f32) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        return f64::INFINITY;
+    }
+    if a == b {
+        return 0.0;
+    }
+    f64::from((a - b).abs())
 }
 
 /// Compare beauty passes; `None` if the sizes differ.
@@ -227,8 +231,8 @@ pub fn diff_frames(a: &Frame, b: &Frame) -> Option<(DiffStats, Frame)> {
         .zip(&b.pixels)
         .map(|(p, q)| {
             (0..3)
-                .map(|c| f64::from((p.rgb[c] - q.rgb[c]).abs()))
-                .fold(0.0, f64::max)
+                .map(|c| channel_difference(p.rgb[c], q.rgb[c]))
+                .fold(0.0, |m: f64, x| if x > m { x } else { m })
         })
         .collect();
     let mut sorted = d.clone();
@@ -241,6 +245,7 @@ pub fn diff_frames(a: &Frame, b: &Frame) -> Option<(DiffStats, Frame)> {
             .copied()
             .unwrap_or(0.0),
         max: sorted.last().copied().unwrap_or(0.0),
+        nonfinite: d.iter().filter(|x| !x.is_finite()).count(),
     };
     let diff = Frame {
         width: a.width,
@@ -315,5 +320,23 @@ mod tests {
         let (s, diff) = diff_frames(&a, &b).expect("same size");
         assert!((s.max - 0.5).abs() < 1e-6 && (s.mean - 0.5 / 6.0).abs() < 1e-6);
         assert_eq!(diff.pixels[4].rgb[0], 0.5);
+        assert_eq!(s.nonfinite, 0);
+    }
+
+    #[test]
+    fn a_nan_or_infinite_pixel_fails_the_comparison() {
+        let a = frame();
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut b = a.clone();
+            b.pixels[2].rgb[1] = bad;
+            let (s, diff) = diff_frames(&a, &b).expect("same size");
+            assert_eq!((s.max, s.nonfinite), (f64::INFINITY, 1), "{bad}");
+            assert!(s.mean.is_infinite(), "{bad}");
+            assert!(diff.pixels[2].rgb[0].is_infinite());
+            // The same pixel broken in both frames is still a broken pixel (NaN), while
+            // the same infinity in both is equal.
+            let (s, _) = diff_frames(&b, &b).expect("same size");
+            assert_eq!(s.nonfinite, usize::from(bad.is_nan()), "{bad}");
+        }
     }
 }

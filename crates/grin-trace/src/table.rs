@@ -21,7 +21,7 @@ pub const OUTPUT_COLUMNS: [&str; 11] = [
 /// Why a ray table could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum TableError {
-    #[error("{path}: cannot read ray table: {err}")]
+    #[error("{}: cannot read ray table: {}", path.display(), grin_output::plain(err))]
     Read { path: PathBuf, err: io::Error },
     #[error("{path}: empty ray table: expected the header `ox,oy,oz,dx,dy,dz`")]
     Empty { path: PathBuf },
@@ -44,8 +44,6 @@ pub enum TableError {
         column: &'static str,
         value: String,
     },
-    #[error("{path}: cannot write ray table: {err}")]
-    Write { path: PathBuf, err: io::Error },
 }
 
 /// One input ray and the line it came from (1-based).
@@ -271,43 +269,15 @@ pub fn write_table(
     Ok(())
 }
 
-/// Write a traced table to `path` through a temporary file in the same directory, renamed
-/// into place: a failed write leaves no partial output.
+/// Write a traced table to `path` through grin-output: a failed write leaves no partial
+/// output, `-` is standard output, a device or FIFO is written into.
 pub fn write_table_file(
     path: &Path,
     format: TableFormat,
     rows: &[RayRow],
     results: &[RayResult],
-) -> Result<(), TableError> {
-    let err = |err| TableError::Write {
-        path: path.to_owned(),
-        err,
-    };
-    let name = path.file_name().ok_or_else(|| {
-        err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "not a file name",
-        ))
-    })?;
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = io::BufWriter::new(file);
-        write_table(&mut w, format, rows, results)?;
-        w.into_inner()
-            .map_err(io::IntoInnerError::into_error)?
-            .sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(err(e));
-    }
-    Ok(())
+) -> Result<(), grin_output::OutputError> {
+    grin_output::write_file(path, |w| write_table(w, format, rows, results))
 }
 
 #[cfg(test)]

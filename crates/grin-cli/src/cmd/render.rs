@@ -94,7 +94,8 @@ struct Summary {
     /// absorbed (stopped on an object inside), max_steps, error.
     status_counts: std::collections::BTreeMap<&'static str, usize>,
     exr: PathBuf,
-    png: PathBuf,
+    /// The PNG preview; none where the EXR went to a stream (`-`, a device).
+    png: Option<PathBuf>,
     /// Warnings also printed on stderr: an under-resolved GPU bake, pixels stopped in
     /// the medium.
     warnings: Vec<String>,
@@ -120,28 +121,24 @@ struct Comparison {
     mean: f64,
     p99: f64,
     max: f64,
-    difference_png: PathBuf,
+    /// Pixels whose difference is infinite (NaN or an unmatched infinity).
+    nonfinite: usize,
+    difference_png: Option<PathBuf>,
 }
 
-fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
+/// Where the EXR goes and the PNG preview beside it (`None` when the EXR goes to a
+/// stream: `-`, a device or a FIFO). Checked before any rendering.
+fn check_output(path: &Path) -> anyhow::Result<Option<PathBuf>> {
+    if grin_output::Destination::resolve(path)?.is_stream() {
+        return Ok(None);
+    }
     if !path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
     {
         bail!("{}: the output must be an .exr file", path.display());
     }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        bail!(
-            "{}: directory {} does not exist",
-            path.display(),
-            dir.display()
-        );
-    }
-    Ok(path.with_extension("png"))
+    Ok(Some(path.with_extension("png")))
 }
 
 fn progress_bar(rows: u32) -> ProgressBar {
@@ -230,8 +227,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let setup_seconds = setup_start.elapsed().as_secs_f64() - seconds;
     bar.finish_and_clear();
 
-    frame.write_exr(&args.output)?;
-    frame.write_png(&png)?;
+    // The EXR, its PNG preview and the --compare difference image are staged, then put
+    // in place together: a failure or a signal leaves the previous set as it was.
+    let exr_to_stream = png.is_none();
+    let mut staged = vec![frame.stage_exr(&args.output)?];
+    match &png {
+        Some(png) => staged.push(frame.stage_png(png)?),
+        None => eprintln!(
+            "grin: note: {} is not a file: the EXR goes there, no PNG preview is written",
+            args.output.display()
+        ),
+    }
     let comparison = match &reference {
         Some(r) => {
             let (stats, diff) = diff_frames(&frame, r).context("--compare: sizes differ")?;
@@ -241,16 +247,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     .file_stem()
                     .map_or_else(|| "out".into(), |s| s.to_string_lossy())
             ));
-            diff.write_png(&diff_png)?;
+            if !exr_to_stream {
+                staged.push(diff.stage_png(&diff_png)?);
+            }
             Some(Comparison {
                 mean: stats.mean,
                 p99: stats.p99,
                 max: stats.max,
-                difference_png: diff_png,
+                nonfinite: stats.nonfinite,
+                difference_png: (!exr_to_stream).then_some(diff_png),
             })
         }
         None => None,
     };
+    grin_output::commit(staged)?;
 
     let n_pixels = f64::from(frame.width) * f64::from(frame.height);
     let rays = n_pixels * f64::from(scene.render.spp);
@@ -284,11 +294,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("grin: warning: {w}");
         summary.warnings.push(w);
     }
+    // Where the EXR itself went to a stream (it may be stdout), the summary goes to stderr.
+    let report = |text: String| {
+        if exr_to_stream {
+            eprintln!("{text}");
+        } else {
+            println!("{text}");
+        }
+    };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        report(serde_json::to_string_pretty(&summary)?);
     } else {
-        println!(
-            "rendered {}x{} x {} spp on {} ({}) in {:.3} s (+ {:.3} s setup): {:.3} Mrays/s, {:.1} steps/ray, {:.1} field evals/ray\nwrote {} and {}",
+        let wrote = match &summary.png {
+            Some(png) => format!("{} and {}", summary.exr.display(), png.display()),
+            None => summary.exr.display().to_string(),
+        };
+        report(format!(
+            "rendered {}x{} x {} spp on {} ({}) in {:.3} s (+ {:.3} s setup): {:.3} Mrays/s, {:.1} steps/ray, {:.1} field evals/ray\nwrote {}",
             summary.width,
             summary.height,
             summary.spp,
@@ -299,17 +321,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             summary.rays_per_second * 1e-6,
             summary.steps_per_ray,
             summary.evals_per_ray,
-            summary.exr.display(),
-            summary.png.display(),
-        );
+            wrote,
+        ));
         if let Some(c) = &summary.comparison {
-            println!(
-                "difference vs reference: mean {:.3e}, p99 {:.3e}, max {:.3e}; wrote {}",
-                c.mean,
-                c.p99,
-                c.max,
-                c.difference_png.display()
-            );
+            let wrote = c
+                .difference_png
+                .as_ref()
+                .map_or_else(String::new, |p| format!("; wrote {}", p.display()));
+            report(format!(
+                "difference vs reference: mean {:.3e}, p99 {:.3e}, max {:.3e}, {} non-finite pixels{wrote}",
+                c.mean, c.p99, c.max, c.nonfinite
+            ));
         }
     }
     Ok(())

@@ -51,6 +51,8 @@ pub enum RenderError {
     EnvMap { path: PathBuf, message: String },
     #[error("{}: {message}", path.display())]
     Output { path: PathBuf, message: String },
+    #[error(transparent)]
+    Write(#[from] grin_output::OutputError),
     #[error("render cancelled")]
     Cancelled,
 }

@@ -154,7 +154,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
         let path = dir.join("bench-bake.json");
-        grin_field::grinf::write_atomic(&path, serde_json::to_string_pretty(&summary)?.as_bytes())?;
+        let text = serde_json::to_string_pretty(&summary)?;
+        grin_output::write_file(&path, |w| w.write_all(text.as_bytes()))?;
         eprintln!("wrote {}", path.display());
     }
     if args.json {
