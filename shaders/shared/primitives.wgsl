@@ -25,13 +25,21 @@ fn intersect_sphere(c: vec3<f32>, r: f32, o: vec3<f32>, d: vec3<f32>, t_min: f32
     let oc = o - c;
     let b = dot(oc, d);
     let cc = dot(oc, oc) - r * r;
-    let disc = b * b - cc;
+    // Twin of intersect_sphere in primitives.rs: the perpendicular-offset discriminant
+    // and the stable q form of the roots.
+    let perp = oc - d * b;
+    let disc = r * r - dot(perp, perp);
     if disc < 0.0 {
         return no_prim_hit();
     }
     let sq = sqrt(disc);
-    let t0 = -b - sq;
-    let t1 = -b + sq;
+    let q = -b - select(-sq, sq, b >= 0.0);
+    var t0 = 0.0;
+    var t1 = 0.0;
+    if q != 0.0 {
+        t0 = min(q, cc / q);
+        t1 = max(q, cc / q);
+    }
     var t: f32;
     if t0 > t_min && t0 < t_max {
         t = t0;
@@ -211,10 +219,15 @@ fn bounds_intersect(o: vec3<f32>, d: vec3<f32>) -> Interval {
     let oc = o - params.bounds_sphere.xyz;
     let r = params.bounds_sphere.w;
     let a = dot(d, d);
+    if a == 0.0 {
+        return Interval(false, 0.0, 0.0);
+    }
     let b = dot(oc, d);
     let c = dot(oc, oc) - r * r;
-    let disc = b * b - a * c;
-    if disc < 0.0 || a == 0.0 {
+    // Twin of Bounds::intersect: the perpendicular-offset discriminant.
+    let perp = oc - d * (b / a);
+    let disc = a * (r * r - dot(perp, perp));
+    if disc < 0.0 {
         return Interval(false, 0.0, 0.0);
     }
     let sq = sqrt(disc);

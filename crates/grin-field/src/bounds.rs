@@ -111,10 +111,17 @@ impl Bounds {
             Bounds::Sphere { center, radius } => {
                 let oc = o - center;
                 let a = d.length_squared();
+                if a == 0.0 {
+                    return None;
+                }
                 let b = oc.dot(d);
                 let c = oc.length_squared() - radius * radius;
-                let disc = b * b - a * c;
-                if disc < 0.0 || a == 0.0 {
+                // b^2 - a c from the ray's offset perpendicular to d (Ray Tracing Gems,
+                // ch. 7): the plain form cancels catastrophically for a ray from far away
+                // (a ray from 1e8 missed a unit sphere it points at).
+                let perp = oc - d * (b / a);
+                let disc = a * (radius * radius - perp.length_squared());
+                if disc < 0.0 {
                     return None;
                 }
                 let sq = disc.sqrt();
@@ -134,6 +141,41 @@ impl Bounds {
                 let s_out = t0.max(t1).min_element();
                 (s_out >= s_in.max(0.0) && s_out.is_finite()).then_some((s_in, s_out))
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rays from far away still meet the sphere they point at, at the right distance
+    /// (the plain b^2 - a c form lost all of the discriminant at 1e8).
+    #[test]
+    fn far_rays_meet_the_sphere() {
+        let ball = Bounds::Sphere {
+            center: DVec3::new(0.0, 0.5, 0.0),
+            radius: 1.0,
+        };
+        for far in [1e4, 1e6, 1e8, 1e10] {
+            for (y, d) in [(0.5, DVec3::Z), (1.2, DVec3::Z * 3.0)] {
+                let o = DVec3::new(0.0, y, -far);
+                let (s0, s1) = ball.intersect(o, d).expect("meets");
+                let half = (1.0 - (y - 0.5f64).powi(2)).sqrt();
+                let len = d.length();
+                assert!(
+                    ((s0 * len) - (far - half)).abs() <= 1e-15 * far + 1e-12,
+                    "{far} {y}"
+                );
+                assert!(
+                    ((s1 * len) - (far + half)).abs() <= 1e-15 * far + 1e-12,
+                    "{far} {y}"
+                );
+            }
+            assert!(
+                ball.intersect(DVec3::new(0.0, 1.6, -far), DVec3::Z)
+                    .is_none()
+            );
         }
     }
 }

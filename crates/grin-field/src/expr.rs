@@ -105,6 +105,19 @@ const _: fn() = || {
     assert_send_sync::<Flat>();
 };
 
+/// Longest formula quoted whole in an error message.
+const SHOWN_CHARS: usize = 120;
+
+/// The formula as an error message quotes it: whole, or its start and length.
+fn shown(text: &str) -> String {
+    if text.chars().count() <= SHOWN_CHARS {
+        text.to_owned()
+    } else {
+        let head: String = text.chars().take(SHOWN_CHARS).collect();
+        format!("{head}... ({} characters)", text.chars().count())
+    }
+}
+
 /// Check the size limits that do not need a parse: length and nesting depth.
 fn check_size(text: &str) -> Result<(), String> {
     let chars = text.chars().count();
@@ -216,7 +229,7 @@ impl ExprField {
     /// Parse `text`, differentiate it, and check n > 0 on the check grid inside `bounds`.
     pub fn new(text: &str, bounds: Bounds, ambient: f64, t: f64) -> Result<Self, FieldError> {
         let err = |message: String| FieldError::Expr {
-            expr: text.to_owned(),
+            expr: shown(text),
             message,
         };
         if !t.is_finite() {

@@ -13,4 +13,6 @@ mod validate;
 pub use error::SceneError;
 pub use load::{load_scene, locate_key, parse_scene};
 pub use types::*;
-pub use validate::{MAX_IMAGE_SIDE, MAX_NOISE_OCTAVES};
+pub use validate::{
+    MAX_IMAGE_SIDE, MAX_NOISE_OCTAVES, MAX_OBJECTS, MAX_STEPS, MAX_WORLD_COORDINATE,
+};

@@ -353,7 +353,7 @@ fn render_errors() {
         (
             "height = 36",
             "height = 36\nmax_steps = 0",
-            "scene.toml:25:1: render.max_steps: must be >= 1, got 0",
+            "scene.toml:25:1: render.max_steps: must be in 1..=1073741824 (2^30), got 0",
         ),
         (
             "step = { heuristic = { min = 0.002, max = 0.05 } }",
@@ -434,4 +434,46 @@ fn locate_key_finds_field_parameters() {
     assert_eq!(crate::locate_key(BASE, "medium.field.kind"), Some((17, 11)));
     assert_eq!(crate::locate_key(BASE, "light[0].point"), Some((20, 1)));
     assert_eq!(crate::locate_key(BASE, "nothing.here"), None);
+}
+
+/// Numbers no backend can represent: coordinates past 1e7, max_steps past 2^30 (the GPU's
+/// u32 loop bound), more objects than every-ray-tests-every-object allows.
+#[test]
+fn out_of_range_numbers_are_refused() {
+    let e = error_of("radius = 0.6", "radius = 1e300");
+    assert!(
+        e.ends_with("medium.bounds.sphere.radius: must be at most 1e7 world units, got 1e300"),
+        "{e}"
+    );
+    let e = error_of("center = [0.0, 0.5, 0.0]", "center = [0.0, 5e8, 0.0]");
+    assert!(
+        e.contains("medium.bounds.sphere.center: components must lie within ±1e7"),
+        "{e}"
+    );
+    let e = error_of("position = [0.0, 1.0, -4.0]", "position = [0.0, 1.0, -4e9]");
+    assert!(
+        e.contains("camera.position: components must lie within ±1e7"),
+        "{e}"
+    );
+    let e = error_of("height = 36", "height = 36\nmax_steps = 2147483647");
+    assert!(
+        e.ends_with("must be in 1..=1073741824 (2^30), got 2147483647"),
+        "{e}"
+    );
+    let many = "[[object]]\nshape = { sphere = { center = [0.0, 0.0, 9.0], radius = 0.1 } }\nmaterial = \"glass\"\n"
+        .repeat(crate::MAX_OBJECTS);
+    let text = BASE.replacen("[medium]", &format!("{many}[medium]"), 1);
+    let e = parse_scene(&text, Path::new("scene.toml"))
+        .expect_err("1026 objects")
+        .to_string();
+    assert!(
+        e.contains("the scene has 1026 objects; at most 1024 are supported"),
+        "{e}"
+    );
+    let text = BASE.replacen(
+        "[medium]",
+        &format!("{}[medium]", &many[..many.len() / 1024 * 1022]),
+        1,
+    );
+    parse_scene(&text, Path::new("scene.toml")).expect("1024 objects");
 }

@@ -10,6 +10,17 @@ use crate::{
 /// Largest image side accepted (16K): bigger is almost certainly a typo, and the frame
 /// buffers of a 16384^2 image already take ~4 GB.
 pub const MAX_IMAGE_SIDE: u32 = 16_384;
+/// Largest world coordinate or size accepted (world units). Earth's radius in metres
+/// (6.4e6) fits; beyond, the GPU's f32 positions resolve less than one world unit, and a
+/// medium at 1e300 made the bake's grid arithmetic overflow and spin.
+pub const MAX_WORLD_COORDINATE: f64 = 1e7;
+/// Largest `render.max_steps` accepted: the GPU bounds its march loop by 2 * max_steps + 2
+/// in u32 arithmetic, which 2^31 would overflow (every medium pixel then stopped at once).
+pub const MAX_STEPS: u32 = 1 << 30;
+/// Most objects accepted: both backends test every object on every ray (no acceleration
+/// structure), and on the GPU tens of thousands of objects ended every medium pixel in
+/// `error`. A thousand keeps a frame interactive on lavapipe.
+pub const MAX_OBJECTS: usize = 1024;
 /// Noise octaves accepted: beyond 16 the octaves are finer than f64 noise lattices resolve.
 pub const MAX_NOISE_OCTAVES: u32 = 16;
 
@@ -54,11 +65,28 @@ fn non_negative(key: &str, v: f64) -> Check {
 }
 
 fn finite3(key: &str, v: [f64; 3]) -> Check {
-    if v.iter().all(|c| c.is_finite()) {
-        Ok(())
-    } else {
-        fail(key, format!("all components must be finite, got {v:?}"))
+    if !v.iter().all(|c| c.is_finite()) {
+        return fail(key, format!("all components must be finite, got {v:?}"));
     }
+    if v.iter().any(|c| c.abs() > MAX_WORLD_COORDINATE) {
+        return fail(
+            key,
+            format!("components must lie within ±{MAX_WORLD_COORDINATE:e} world units, got {v:?}"),
+        );
+    }
+    Ok(())
+}
+
+/// A radius or other world size: positive, finite, at most [`MAX_WORLD_COORDINATE`].
+fn size(key: &str, v: f64) -> Check {
+    positive(key, v)?;
+    if v > MAX_WORLD_COORDINATE {
+        return fail(
+            key,
+            format!("must be at most {MAX_WORLD_COORDINATE:e} world units, got {v:?}"),
+        );
+    }
+    Ok(())
 }
 
 fn nonzero3(key: &str, v: [f64; 3]) -> Check {
@@ -105,6 +133,16 @@ fn non_empty(key: &str, s: &str) -> Check {
 /// Check the whole scene; the first problem found.
 pub(crate) fn validate(scene: &Scene) -> Check {
     camera(&scene.camera)?;
+    if scene.objects.len() > MAX_OBJECTS {
+        return fail(
+            format!("object[{MAX_OBJECTS}]"),
+            format!(
+                "the scene has {} objects; at most {MAX_OBJECTS} are supported (every ray \
+                 tests every object)",
+                scene.objects.len()
+            ),
+        );
+    }
     for (i, o) in scene.objects.iter().enumerate() {
         object(&format!("object[{i}]"), o)?;
     }
@@ -157,7 +195,7 @@ fn object(key: &str, o: &Object) -> Check {
     match &o.shape {
         Shape::Sphere { center, radius } => {
             finite3(&format!("{key}.shape.sphere.center"), *center)?;
-            positive(&format!("{key}.shape.sphere.radius"), *radius)?;
+            size(&format!("{key}.shape.sphere.radius"), *radius)?;
         }
         Shape::Plane { point, normal } => {
             finite3(&format!("{key}.shape.plane.point"), *point)?;
@@ -193,7 +231,7 @@ fn medium(m: &MediumSpec) -> Check {
     match m.bounds {
         BoundsSpec::Sphere { center, radius } => {
             finite3("medium.bounds.sphere.center", center)?;
-            positive("medium.bounds.sphere.radius", radius)?;
+            size("medium.bounds.sphere.radius", radius)?;
         }
         BoundsSpec::Box { min, max } => min_max("medium.bounds.box", min, max)?,
     }
@@ -359,8 +397,11 @@ fn render(r: &RenderSettings) -> Check {
     if r.spp < 1 {
         return fail("render.spp", "must be >= 1, got 0");
     }
-    if r.max_steps < 1 {
-        return fail("render.max_steps", "must be >= 1, got 0");
+    if !(1..=MAX_STEPS).contains(&r.max_steps) {
+        return fail(
+            "render.max_steps",
+            format!("must be in 1..={MAX_STEPS} (2^30), got {}", r.max_steps),
+        );
     }
     match r.step {
         StepSpec::Fixed(s) => positive("render.step.fixed", s),

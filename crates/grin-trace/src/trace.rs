@@ -70,9 +70,14 @@ pub struct TraceSettings {
 pub enum TraceError {
     #[error("step: {0}")]
     Step(String),
-    #[error("max_steps must be at least 1")]
-    MaxSteps,
+    #[error("max_steps must be in 1..=1073741824 (2^30), got {0}")]
+    MaxSteps(u32),
 }
+
+/// Smallest step accepted, as a fraction of the medium's radius: a smaller step needs
+/// more than 10^9 steps (beyond [`grin_scene::MAX_STEPS`]) to cross the medium, and near
+/// 1e-16 of the coordinates it no longer moves the ray at all in f64.
+pub const MIN_STEP_FRACTION: f64 = 1e-9;
 
 impl TraceSettings {
     pub fn from_render(render: &RenderSettings) -> Self {
@@ -128,8 +133,30 @@ impl TraceSettings {
             }
             StepSpec::Fixed(_) => {}
         }
-        if self.max_steps == 0 {
-            return Err(TraceError::MaxSteps);
+        if !(1..=grin_scene::MAX_STEPS).contains(&self.max_steps) {
+            return Err(TraceError::MaxSteps(self.max_steps));
+        }
+        Ok(())
+    }
+
+    /// [`TraceSettings::validate`], and no step shorter than [`MIN_STEP_FRACTION`] of
+    /// the medium's radius.
+    pub fn validate_for(&self, bounds: &Bounds) -> Result<(), TraceError> {
+        self.validate()?;
+        let floor = MIN_STEP_FRACTION * bounds.radius();
+        let shortest = match self.step {
+            StepSpec::Fixed(ds) => Some(("fixed step", ds)),
+            StepSpec::Heuristic { min, .. } => Some(("heuristic min step", min)),
+            StepSpec::Adaptive { initial, .. } => initial.map(|i| ("adaptive initial step", i)),
+        };
+        if let Some((what, ds)) = shortest
+            && ds < floor
+        {
+            return Err(TraceError::Step(format!(
+                "{what} {ds:e} is shorter than {MIN_STEP_FRACTION:e} of the medium's radius \
+                 ({:e}): a ray would need more than 10^9 steps to cross it",
+                bounds.radius()
+            )));
         }
         Ok(())
     }
@@ -493,5 +520,30 @@ pub fn exit_medium<R: Real>(
             state.r = R::V3::from_dvec3(project_to_surface(bounds, state.r.to_dvec3()));
             (state, hm, st.evals)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn steps_below_the_medium_s_resolution_are_refused() {
+        let ball = Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius: 2.0,
+        };
+        let mut s = TraceSettings::from_render(&RenderSettings::default());
+        s.step = StepSpec::Fixed(1e-17);
+        let e = s.validate_for(&ball).expect_err("1e-17").to_string();
+        assert_eq!(
+            e,
+            "step: fixed step 1e-17 is shorter than 1e-9 of the medium's radius (2e0): a ray \
+             would need more than 10^9 steps to cross it"
+        );
+        s.step = StepSpec::Fixed(2.1e-9);
+        s.validate_for(&ball).expect("just above the floor");
+        s.max_steps = u32::MAX;
+        assert_eq!(s.validate_for(&ball), Err(TraceError::MaxSteps(u32::MAX)));
     }
 }

@@ -154,7 +154,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
     }
     settings
-        .validate()
+        .validate_for(&field.bounds())
         .with_context(|| format!("{}: [render]", args.scene.display()))?;
 
     let rows = table::read_rays(&args.rays)?;

@@ -249,6 +249,10 @@ pub struct BakedField {
     sampled: Voxels,
 }
 
+/// Largest |n - n_ambient| a baked voxel may hold: no physical medium comes near it (the
+/// Eaton lens's baked core is far below); larger values are a corrupt or crafted file.
+pub const MAX_BAKED_DELTA_N: f64 = 1e3;
+
 impl BakedField {
     /// Assemble a baked field; checks that the voxel count matches the dims.
     pub fn new(
@@ -283,6 +287,28 @@ impl BakedField {
                 geometry.spacing, geometry.origin
             )));
         }
+        let (_, far) = geometry.world_box();
+        let limit = grin_scene::MAX_WORLD_COORDINATE;
+        if geometry.origin.abs().max_element() > limit || far.abs().max_element() > limit {
+            return Err(FieldError::Other(format!(
+                "baked grid {} .. {far} reaches beyond ±{limit:e} world units",
+                geometry.origin
+            )));
+        }
+        let (blo, bhi) = bounds.aabb();
+        if !(blo.is_finite() && bhi.is_finite() && blo.cmplt(bhi).all())
+            || blo.abs().max_element() > limit
+            || bhi.abs().max_element() > limit
+        {
+            return Err(FieldError::Other(format!(
+                "baked field bounds {blo} .. {bhi} are empty, not finite or beyond ±{limit:e}"
+            )));
+        }
+        if !(ambient.is_finite() && ambient > 0.0) {
+            return Err(FieldError::Other(format!(
+                "baked field ambient index {ambient} must be positive"
+            )));
+        }
         let (mut lo, mut hi, mut g2) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
         for i in 0..voxels.len() {
             let v = voxels.get(i);
@@ -291,9 +317,23 @@ impl BakedField {
                     "baked voxel {i} is not finite: {v:?}"
                 )));
             }
+            let n = ambient + f64::from(v[0]);
+            if !(n > 0.0 && f64::from(v[0]).abs() <= MAX_BAKED_DELTA_N) {
+                return Err(FieldError::Other(format!(
+                    "baked voxel {i} has n = {n} (delta_n {}): n must be positive and \
+                     |delta_n| at most {MAX_BAKED_DELTA_N}",
+                    v[0]
+                )));
+            }
+            let gi = v[1] * v[1] + v[2] * v[2] + v[3] * v[3];
+            if !gi.is_finite() {
+                return Err(FieldError::Other(format!(
+                    "baked voxel {i} has a gradient too large for f32: {v:?}"
+                )));
+            }
             lo = lo.min(v[0]);
             hi = hi.max(v[0]);
-            g2 = g2.max(v[1] * v[1] + v[2] * v[2] + v[3] * v[3]);
+            g2 = g2.max(gi);
         }
         if outside == Outside::Ambient {
             lo = lo.min(0.0);

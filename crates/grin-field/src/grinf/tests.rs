@@ -153,3 +153,38 @@ fn layout_matches_the_documentation() {
     assert!((f64::from(f32_at(off + 4)) - want.grad_n.x).abs() < 1e-8);
     assert_eq!(u32_at(b.len() - 4), crc32fast::hash(&b[..b.len() - 4]));
 }
+
+/// Files with a valid checksum whose numbers cannot be a medium: each a clear error.
+#[test]
+fn crafted_files_with_valid_checksums_are_refused() {
+    let f = baked(Storage::F32, Interp::Trilinear);
+    let good = to_bytes(&f);
+    let data = u32::from_le_bytes([good[12], good[13], good[14], good[15]]) as usize;
+    let resealed = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = good.clone();
+        edit(&mut b);
+        let n = b.len() - 4;
+        let crc = crc32fast::hash(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+        from_bytes(&b, "crafted.grinf")
+            .expect_err("crafted")
+            .to_string()
+    };
+    // Origin at 1e300.
+    let e = resealed(&|b| b[48..56].copy_from_slice(&1e300f64.to_le_bytes()));
+    assert!(e.starts_with("crafted.grinf: "), "{e}");
+    assert!(e.contains("reaches beyond ±1e7 world units"), "{e}");
+    // A voxel delta_n of 3e38 (finite in f32, but n and its gradient are not a medium).
+    let e = resealed(&|b| b[data..data + 4].copy_from_slice(&3e38f32.to_le_bytes()));
+    assert!(e.contains("baked voxel 0 has n = "), "{e}");
+    // A voxel with n <= 0 (delta_n = -2 around ambient 1).
+    let e = resealed(&|b| b[data + 16..data + 20].copy_from_slice(&(-2.0f32).to_le_bytes()));
+    assert!(e.contains("baked voxel 1 has n = -1"), "{e}");
+    // A gradient whose square overflows f32.
+    let e = resealed(&|b| b[data + 4..data + 8].copy_from_slice(&3e30f32.to_le_bytes()));
+    assert!(
+        e.contains("baked voxel 0 has a gradient too large for f32"),
+        "{e}"
+    );
+    assert!(from_bytes(&good, "good.grinf").is_ok());
+}

@@ -70,7 +70,7 @@ impl SceneMedium {
     pub fn new(field: Arc<dyn IndexField>, settings: &RenderSettings) -> Result<Self, RenderError> {
         let trace = TraceSettings::from_render(settings);
         trace
-            .validate()
+            .validate_for(&field.bounds())
             .map_err(|e| RenderError::Settings(e.to_string()))?;
         Ok(SceneMedium {
             bounds: field.bounds(),

@@ -98,13 +98,21 @@ pub fn intersect_sphere(
     let oc = o - c;
     let b = oc.dot(d);
     let cc = oc.length_squared() - r * r;
-    let disc = b * b - cc;
+    // b^2 - cc from the offset perpendicular to the (unit) ray: no cancellation for far
+    // rays (Ray Tracing Gems, ch. 7); roots in the stable q form.
+    let perp = oc - d * b;
+    let disc = r * r - perp.length_squared();
     if disc < 0.0 {
         return None;
     }
     let sq = disc.sqrt();
-    let t0 = -b - sq;
-    let t1 = -b + sq;
+    let q = -b - if b >= 0.0 { sq } else { -sq };
+    let (t0, t1) = if q == 0.0 {
+        (0.0, 0.0)
+    } else {
+        let (x, y) = (q, cc / q);
+        (x.min(y), x.max(y))
+    };
     let t = if t0 > t_min && t0 < t_max {
         t0
     } else if t1 > t_min && t1 < t_max {
@@ -299,5 +307,24 @@ mod tests {
         assert!(h.normal.dot(DVec3::Z) < 0.0);
         assert!(occluded(&objs, DVec3::ZERO, DVec3::Z, 1e-6, 1.6));
         assert!(!occluded(&objs, DVec3::ZERO, DVec3::Z, 1e-6, 1.4));
+    }
+
+    #[test]
+    fn far_rays_hit_small_spheres() {
+        let c = DVec3::new(0.3, 0.0, 0.0);
+        for far in [1e3, 1e6, 1e8] {
+            let o = DVec3::new(0.3, 0.005, -far);
+            let (t, n) = intersect_sphere(c, 0.01, o, DVec3::Z, 0.0, f64::INFINITY)
+                .expect("hit from far away");
+            let want = far - (1e-4f64 - 0.005f64.powi(2)).sqrt();
+            assert!(
+                (t - want).abs() <= 1e-15 * far + 1e-12,
+                "{far}: {t} vs {want}"
+            );
+            assert!(
+                (n.length() - 1.0).abs() < 1e-6 * far.max(1.0).sqrt(),
+                "{far}: {n}"
+            );
+        }
     }
 }
