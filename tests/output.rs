@@ -305,3 +305,45 @@ fn render_to_dash_streams_the_exr_and_reports_on_stderr() {
     );
     assert_eq!(std::fs::read_dir(dir.path()).expect("ls").count(), 0);
 }
+
+/// Under an address-space limit, a frame or a bake grid that does not fit is a one-line
+/// error naming what it was for (it used to abort: "memory allocation of ... failed").
+#[test]
+fn buffers_that_do_not_fit_are_errors_not_aborts() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let run = |args: &str| {
+        let script = format!(
+            "ulimit -v 3000000; exec {} {args}",
+            env!("CARGO_BIN_EXE_grin")
+        );
+        let out = Command::new("sh")
+            .args(["-c", &script])
+            .current_dir(dir.path())
+            .output()
+            .expect("sh");
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let scene = data("scenes/paper-a.toml");
+    let (code, err) = run(&format!(
+        "render {} -o big.exr --backend cpu --size 8192x8192 --spp 1",
+        scene.display()
+    ));
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("grin: error: not enough memory for a 8192x8192 frame: 2952790016 bytes"),
+        "{err}"
+    );
+    let (code, err) = run(&format!(
+        "bake {} --resolution 1500 --max-memory 100G -o b.grinf",
+        data("scenes/luneburg.toml").display()
+    ));
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("not enough memory for a 1504x1504x1504 baked grid"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).expect("ls").count(), 0);
+}

@@ -107,6 +107,26 @@ pub enum VdbError {
     },
     #[error("{path}: cannot write: {message}")]
     Write { path: String, message: String },
+    #[error(
+        "{path}: not enough memory to read grid `{grid}`: {bytes} bytes could not be allocated"
+    )]
+    Memory {
+        path: String,
+        grid: String,
+        bytes: u64,
+    },
+}
+
+/// `len` zeros, or [`VdbError::Memory`] where the allocation fails (no abort).
+fn try_zeros(len: usize, path: &Path, grid: &str) -> Result<Vec<f32>, VdbError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len).map_err(|_| VdbError::Memory {
+        path: path.display().to_string(),
+        grid: grid.to_owned(),
+        bytes: len as u64 * BYTES_PER_SCALAR_VOXEL,
+    })?;
+    v.resize(len, 0f32);
+    Ok(v)
 }
 
 /// An inclusive box of index coordinates (voxel centres are integer coordinates).
@@ -626,7 +646,7 @@ impl VdbFile {
             });
         }
         let len = self.dense_len(grid, bbox, 1, max_bytes)?;
-        let mut values = vec![0f32; len];
+        let mut values = try_zeros(len, &self.path, name)?;
         let mut err = [0 as c_char; ERR_LEN];
         // SAFETY: live handle; bbox arrays of 3; `values` has exactly `len` floats.
         let status = unsafe {
@@ -673,7 +693,7 @@ impl VdbFile {
             });
         }
         let len = self.dense_len(grid, bbox, 3, max_bytes)?;
-        let mut flat = vec![0f32; len];
+        let mut flat = try_zeros(len, &self.path, name)?;
         let mut err = [0 as c_char; ERR_LEN];
         // SAFETY: live handle; bbox arrays of 3; `flat` has exactly `len` floats.
         let status = unsafe {

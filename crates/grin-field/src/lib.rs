@@ -2,6 +2,7 @@
 //! medium, and the scalar/vector abstraction ([`Real`]) that lets the integrators run in
 //! f64 (the reference) and f32 (what the GPU does).
 
+pub mod alloc;
 pub mod analytic;
 pub mod bake;
 pub mod baked;

@@ -30,6 +30,8 @@ pub enum GpuError {
     /// The scene uses something the GPU marcher does not do yet.
     #[error("the GPU backend does not support {0} yet; use --backend cpu")]
     Unsupported(String),
+    #[error("{0}")]
+    Memory(String),
     #[error("GPU render not ready: {0}")]
     NotReady(String),
     #[error("render cancelled")]

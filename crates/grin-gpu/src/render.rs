@@ -593,7 +593,11 @@ impl<'a> GpuRenderer<'a> {
     /// setting `cancel` stops between bands with [`GpuError::Cancelled`].
     pub fn render(&self, progress: &dyn Fn(u32), cancel: &AtomicBool) -> Result<Frame, GpuError> {
         let [width, height, ..] = self.params.image;
-        let mut pixels = Vec::with_capacity(width as usize * height as usize);
+        let mut pixels = grin_field::alloc::try_with_capacity(
+            width as usize * height as usize,
+            &format!("a {width}x{height} frame"),
+        )
+        .map_err(|e| GpuError::Memory(e.to_string()))?;
         let mut row = 0;
         while row < height {
             if cancel.load(Ordering::Relaxed) {

@@ -61,8 +61,14 @@ fn output_err(path: &Path, message: impl ToString) -> RenderError {
 }
 
 impl Frame {
-    fn channel(&self, f: impl Fn(&PixelOut) -> f32) -> Vec<f32> {
-        self.pixels.iter().map(f).collect()
+    fn channel(&self, f: impl Fn(&PixelOut) -> f32) -> Result<Vec<f32>, RenderError> {
+        let mut out = grin_field::alloc::try_with_capacity(
+            self.pixels.len(),
+            &format!("the EXR channels of a {}x{} frame", self.width, self.height),
+        )
+        .map_err(|e| RenderError::Memory(e.to_string()))?;
+        out.extend(self.pixels.iter().map(f));
+        Ok(out)
     }
 
     /// Write the EXR alone (see [`Frame::stage_exr`]).
@@ -75,17 +81,17 @@ impl Frame {
     pub fn stage_exr(&self, path: &Path) -> Result<Staged, RenderError> {
         let size = (self.width as usize, self.height as usize);
         let named: Vec<(&str, Vec<f32>)> = vec![
-            ("R", self.channel(|p| p.rgb[0])),
-            ("G", self.channel(|p| p.rgb[1])),
-            ("B", self.channel(|p| p.rgb[2])),
-            (AOV_CHANNELS[0], self.channel(|p| p.deflection_deg)),
-            (AOV_CHANNELS[1], self.channel(|p| p.exit_dir[0])),
-            (AOV_CHANNELS[2], self.channel(|p| p.exit_dir[1])),
-            (AOV_CHANNELS[3], self.channel(|p| p.exit_dir[2])),
-            (AOV_CHANNELS[4], self.channel(|p| p.opd)),
-            (AOV_CHANNELS[5], self.channel(|p| p.steps)),
-            (AOV_CHANNELS[6], self.channel(|p| p.evals)),
-            (AOV_CHANNELS[7], self.channel(|p| p.status)),
+            ("R", self.channel(|p| p.rgb[0])?),
+            ("G", self.channel(|p| p.rgb[1])?),
+            ("B", self.channel(|p| p.rgb[2])?),
+            (AOV_CHANNELS[0], self.channel(|p| p.deflection_deg)?),
+            (AOV_CHANNELS[1], self.channel(|p| p.exit_dir[0])?),
+            (AOV_CHANNELS[2], self.channel(|p| p.exit_dir[1])?),
+            (AOV_CHANNELS[3], self.channel(|p| p.exit_dir[2])?),
+            (AOV_CHANNELS[4], self.channel(|p| p.opd)?),
+            (AOV_CHANNELS[5], self.channel(|p| p.steps)?),
+            (AOV_CHANNELS[6], self.channel(|p| p.evals)?),
+            (AOV_CHANNELS[7], self.channel(|p| p.status)?),
         ];
         let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = named
             .into_iter()

@@ -124,6 +124,8 @@ pub enum BakeError {
     },
     #[error("invalid bake option: {0}")]
     Option(String),
+    #[error(transparent)]
+    Memory(#[from] crate::alloc::AllocError),
     #[error("source field `{field}`: n = {n} at ({x}, {y}, {z}) is not finite")]
     NonFinite {
         field: String,
@@ -466,7 +468,11 @@ fn sample_grid(
     let ambient = source.ambient_index();
     let bounds = source.bounds();
     let h_cd = CD_STEP_VOXELS * geometry.spacing.min_element();
-    let mut data = vec![[0.0f32; 4]; geometry.voxel_count()];
+    let mut data = crate::alloc::try_filled(
+        geometry.voxel_count(),
+        [0.0f32; 4],
+        &format!("a {nx}x{ny}x{nz} baked grid"),
+    )?;
     let done = AtomicU64::new(0);
     let total = nz as u64;
     progress(stage, 0, total);

@@ -55,6 +55,8 @@ pub enum RenderError {
     Write(#[from] grin_output::OutputError),
     #[error("render cancelled")]
     Cancelled,
+    #[error("{0}")]
+    Memory(String),
 }
 
 /// The medium as the renderer holds it: the field and the tracer settings.
@@ -278,7 +280,12 @@ pub fn render_cpu(
     cancel: &AtomicBool,
 ) -> Result<Frame, RenderError> {
     let (w, h) = (scene.settings.width, scene.settings.height);
-    let mut pixels = vec![PixelOut::default(); w as usize * h as usize];
+    let mut pixels = grin_field::alloc::try_filled(
+        w as usize * h as usize,
+        PixelOut::default(),
+        &format!("a {w}x{h} frame"),
+    )
+    .map_err(|e| RenderError::Memory(e.to_string()))?;
     pixels
         .par_chunks_mut(w as usize)
         .enumerate()
