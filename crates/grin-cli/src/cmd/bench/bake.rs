@@ -21,9 +21,9 @@ pub struct Args {
     /// Fewer resolutions and rays.
     #[arg(long)]
     pub quick: bool,
-    /// Rays per frame (a square grid of parallel rays across the medium).
-    #[arg(long)]
-    pub rays: Option<usize>,
+    /// Rays per frame (a square grid of parallel rays across the medium), at least 1.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=(1u64 << 24)))]
+    pub rays: Option<u64>,
     /// Directory for bench-bake.json.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -80,10 +80,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
     let source = grin_field::build_field(medium, scene_dir)?;
     let settings = TraceSettings::from_render(&scene.render);
-    settings.validate()?;
-    let rays = args
-        .rays
-        .unwrap_or(if args.quick { QUICK_RAYS } else { DEFAULT_RAYS });
+    settings.validate_for(&source.bounds())?;
+    let rays = args.rays.map_or(
+        if args.quick { QUICK_RAYS } else { DEFAULT_RAYS },
+        |r| r as usize,
+    );
     let resolutions: &[usize] = if args.quick {
         &QUICK_RESOLUTIONS
     } else {
