@@ -704,3 +704,34 @@ step = {{ fixed = 0.01 }}
         n - 1.0
     );
 }
+
+/// A file that makes OpenVDB abort (a bit flip found by fuzzing, data/vdb/test/
+/// crash_abort.vdb) is read in a child process: grin itself re-run as the checker. A copy
+/// of grin outside its build tree (an installed grin) keeps that isolation.
+#[test]
+fn an_installed_grin_still_isolates_a_crashing_vdb() {
+    let crash = data("test/crash_abort.vdb");
+    // The file really aborts OpenVDB in-process: the checker entry dies by a signal.
+    let out = grin()
+        .args([vdb_sys::CHECK_ARG, crash.to_str().expect("utf-8"), "268435456"])
+        .output()
+        .expect("run the checker");
+    assert_eq!(out.status.code(), None, "the fixture no longer crashes OpenVDB");
+    let dir = tempfile::tempdir().expect("tmp");
+    let installed = dir.path().join("grin");
+    std::fs::copy(env!("CARGO_BIN_EXE_grin"), &installed).expect("install");
+    for args in [vec!["info"], vec!["info", "--json"]] {
+        let out = Command::new(&installed)
+            .args(&args)
+            .arg(&crash)
+            .output()
+            .expect("run installed grin");
+        fails_cleanly(&out, "OpenVDB crashed while reading it (signal 6)", None);
+    }
+    let out = Command::new(&installed)
+        .args(["info"])
+        .arg(data("test/aniso.vdb"))
+        .output()
+        .expect("run installed grin");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

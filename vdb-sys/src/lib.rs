@@ -23,30 +23,105 @@ const ERR_LEN: usize = 1024;
 /// Bytes per voxel of a dense scalar read (f32).
 pub const BYTES_PER_SCALAR_VOXEL: u64 = 4;
 
-/// The checker executable build.rs links beside the shim (shim/grin_vdb_check.cpp).
-const CHECKER: &str = env!("GRIN_VDB_CHECK");
+/// The checker executable build.rs links beside the shim (shim/grin_vdb_check.cpp): the
+/// fallback for library users and tests, which have no checker entry of their own.
+const BUILD_TREE_CHECKER: &str = env!("GRIN_VDB_CHECK");
 /// The checker's dense reads are capped here (bigger grids are only opened, not copied).
 const CHECK_DENSE_CAP_BYTES: u64 = 256 << 20;
+/// First argument that turns a program calling [`checker_entry`] into the checker.
+pub const CHECK_ARG: &str = "__grin-vdb-check";
+
+/// The executable that checks files in a child process, registered by a binary with
+/// [`use_current_exe_as_checker`]; else [`BUILD_TREE_CHECKER`].
+static CHECKER: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Make this program its own VDB checker: files are tried by re-running it as
+/// `<exe> __grin-vdb-check FILE CAP`. The binary must call [`checker_entry`] first thing
+/// in `main`. An installed grin, moved away from its build tree, keeps its isolation.
+pub fn use_current_exe_as_checker() -> Result<(), VdbError> {
+    let exe = std::env::current_exe().map_err(|e| VdbError::Open {
+        path: String::new(),
+        message: format!("cannot find grin's own executable to check VDB files with: {e}"),
+    })?;
+    let _ = CHECKER.set(exe);
+    Ok(())
+}
+
+/// Where this process was started as the checker (`args[1] == CHECK_ARG`): run the check
+/// and return the exit status (0 readable, 1 a reported error on stderr, 2 usage). A
+/// crash while reading is what the parent sees as a signal.
+pub fn checker_entry() -> Option<i32> {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    if args.get(1).is_none_or(|a| a != CHECK_ARG) {
+        return None;
+    }
+    let (Some(path), Some(cap)) = (args.get(2), args.get(3).and_then(|c| c.to_str()?.parse().ok()))
+    else {
+        eprintln!("usage: {CHECK_ARG} FILE MAX_DENSE_BYTES");
+        return Some(2);
+    };
+    Some(match check_here(Path::new(path), cap) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("{}", e.reason());
+            1
+        }
+    })
+}
+
+/// Open `path` in this process and read every grid up to `cap` bytes: what the checker
+/// does (the same reads as shim/grin_vdb_check.cpp).
+fn check_here(path: &Path, cap: u64) -> Result<(), VdbError> {
+    let file = VdbFile::open_in_process(path)?;
+    for grid in file.grids() {
+        let Some(bbox) = grid.active_bbox else {
+            continue;
+        };
+        let components = if grid.kind.is_vec3() { 3 } else { 1 };
+        let bytes = bbox.voxel_count()
+            * components
+            * u128::from(BYTES_PER_SCALAR_VOXEL);
+        if bytes > u128::from(cap) {
+            continue;
+        }
+        if grid.kind.is_scalar() {
+            file.read_scalar(&grid.name, bbox, cap)?;
+        } else if grid.kind.is_vec3() {
+            file.read_vec3(&grid.name, bbox, cap)?;
+        }
+    }
+    Ok(())
+}
 
 /// Try the file in a child process first: OpenVDB can corrupt its heap and abort on some
 /// malformed files (found by tests/fuzz.rs), which no exception handler can catch. In a
-/// child that is an exit status. If the checker is not present (the binary was moved away
-/// from its build tree) the file is read in-process only.
+/// child that is an exit status. Without a checker the file is not read at all: the
+/// isolation cannot switch itself off.
 fn check_in_child(path: &Path) -> Result<(), VdbError> {
-    let exe = Path::new(CHECKER);
-    if !exe.is_file() {
-        return Ok(());
+    let shown = path.display().to_string();
+    let (exe, self_exec) = match CHECKER.get() {
+        Some(exe) => (exe.clone(), true),
+        None => (PathBuf::from(BUILD_TREE_CHECKER), false),
+    };
+    let mut command = std::process::Command::new(&exe);
+    if self_exec {
+        command.arg(CHECK_ARG);
     }
-    let output = std::process::Command::new(exe)
+    let output = command
         .arg(path)
         .arg(CHECK_DENSE_CAP_BYTES.to_string())
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
-        .output();
-    let Ok(output) = output else {
-        return Ok(());
-    };
+        .output()
+        .map_err(|e| VdbError::Open {
+            path: shown.clone(),
+            message: format!(
+                "cannot start the VDB checker {} to read the file safely ({e}); the file \
+                 was not read",
+                exe.display()
+            ),
+        })?;
     if output.status.success() {
         return Ok(());
     }
@@ -63,7 +138,7 @@ fn check_in_child(path: &Path) -> Result<(), VdbError> {
         }
     };
     Err(VdbError::Open {
-        path: path.display().to_string(),
+        path: shown,
         message,
     })
 }
@@ -127,6 +202,16 @@ fn try_zeros(len: usize, path: &Path, grid: &str) -> Result<Vec<f32>, VdbError> 
     })?;
     v.resize(len, 0f32);
     Ok(v)
+}
+
+impl VdbError {
+    /// The message without the file's path (the checker's parent adds it back).
+    fn reason(&self) -> String {
+        match self {
+            VdbError::Open { message, .. } => message.clone(),
+            other => other.to_string(),
+        }
+    }
 }
 
 /// An inclusive box of index coordinates (voxel centres are integer coordinates).
@@ -380,9 +465,18 @@ impl Drop for VdbFile {
 }
 
 impl VdbFile {
-    /// Open a `.vdb` file and read its grids and metadata.
+    /// Open a `.vdb` file and read its grids and metadata, after the checker has read it
+    /// in a child process.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, VdbError> {
-        let path = path.as_ref();
+        Self::open_checked(path.as_ref(), true)
+    }
+
+    /// Open in this process without the child-process check (the checker itself).
+    fn open_in_process(path: &Path) -> Result<Self, VdbError> {
+        Self::open_checked(path, false)
+    }
+
+    fn open_checked(path: &Path, check: bool) -> Result<Self, VdbError> {
         let shown = path.display().to_string();
         if !path.exists() {
             return Err(VdbError::Missing { path: shown });
@@ -394,7 +488,9 @@ impl VdbFile {
             });
         }
         let c = c_path(path)?;
-        check_in_child(path)?;
+        if check {
+            check_in_child(path)?;
+        }
         let mut err = [0 as c_char; ERR_LEN];
         let mut raw: *mut ffi::GrinVdbFile = std::ptr::null_mut();
         // SAFETY: valid C string, out-pointer and error buffer of the stated length.

@@ -54,6 +54,13 @@ fn quiet_on_closed_stdout() {
 const SIGPIPE_EXIT_CODE: i32 = 141;
 
 fn main() -> ExitCode {
+    // Started by ourselves to try a VDB file in a child process (crash isolation).
+    if let Some(code) = vdb_sys::checker_entry() {
+        std::process::exit(code);
+    }
+    if let Err(e) = vdb_sys::use_current_exe_as_checker() {
+        eprintln!("grin: warning: {e}");
+    }
     quiet_on_closed_stdout();
     if let Err(e) = grin_output::install_signal_cleanup() {
         eprintln!("grin: warning: {e}");
