@@ -44,14 +44,20 @@ fn closed_stdout_is_not_a_crash() {
 /// `bench bake --rays 0` used to print speedups computed from zero evaluations.
 #[test]
 fn bench_bake_refuses_zero_rays() {
-    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/scenes/paper-c.toml");
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/scenes/paper-c.toml"
+    );
     let out = grin()
         .args(["bench", "bake", "--scene", scene, "--rays", "0"])
         .output()
         .expect("run grin");
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("invalid value '0' for '--rays <RAYS>'"), "{err}");
+    assert!(
+        err.contains("invalid value '0' for '--rays <RAYS>'"),
+        "{err}"
+    );
     assert!(err.contains("1..=16777216"), "{err}");
     assert!(out.stdout.is_empty());
 }

@@ -713,10 +713,18 @@ fn an_installed_grin_still_isolates_a_crashing_vdb() {
     let crash = data("test/crash_abort.vdb");
     // The file really aborts OpenVDB in-process: the checker entry dies by a signal.
     let out = grin()
-        .args([vdb_sys::CHECK_ARG, crash.to_str().expect("utf-8"), "268435456"])
+        .args([
+            vdb_sys::CHECK_ARG,
+            crash.to_str().expect("utf-8"),
+            "268435456",
+        ])
         .output()
         .expect("run the checker");
-    assert_eq!(out.status.code(), None, "the fixture no longer crashes OpenVDB");
+    assert_eq!(
+        out.status.code(),
+        None,
+        "the fixture no longer crashes OpenVDB"
+    );
     let dir = tempfile::tempdir().expect("tmp");
     let installed = dir.path().join("grin");
     std::fs::copy(env!("CARGO_BIN_EXE_grin"), &installed).expect("install");
@@ -733,5 +741,9 @@ fn an_installed_grin_still_isolates_a_crashing_vdb() {
         .arg(data("test/aniso.vdb"))
         .output()
         .expect("run installed grin");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

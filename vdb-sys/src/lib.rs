@@ -55,8 +55,10 @@ pub fn checker_entry() -> Option<i32> {
     if args.get(1).is_none_or(|a| a != CHECK_ARG) {
         return None;
     }
-    let (Some(path), Some(cap)) = (args.get(2), args.get(3).and_then(|c| c.to_str()?.parse().ok()))
-    else {
+    let (Some(path), Some(cap)) = (
+        args.get(2),
+        args.get(3).and_then(|c| c.to_str()?.parse().ok()),
+    ) else {
         eprintln!("usage: {CHECK_ARG} FILE MAX_DENSE_BYTES");
         return Some(2);
     };
@@ -78,9 +80,7 @@ fn check_here(path: &Path, cap: u64) -> Result<(), VdbError> {
             continue;
         };
         let components = if grid.kind.is_vec3() { 3 } else { 1 };
-        let bytes = bbox.voxel_count()
-            * components
-            * u128::from(BYTES_PER_SCALAR_VOXEL);
+        let bytes = bbox.voxel_count() * components * u128::from(BYTES_PER_SCALAR_VOXEL);
         if bytes > u128::from(cap) {
             continue;
         }

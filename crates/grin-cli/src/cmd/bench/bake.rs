@@ -81,10 +81,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let source = grin_field::build_field(medium, scene_dir)?;
     let settings = TraceSettings::from_render(&scene.render);
     settings.validate_for(&source.bounds())?;
-    let rays = args.rays.map_or(
-        if args.quick { QUICK_RAYS } else { DEFAULT_RAYS },
-        |r| r as usize,
-    );
+    let rays = args
+        .rays
+        .map_or(if args.quick { QUICK_RAYS } else { DEFAULT_RAYS }, |r| {
+            r as usize
+        });
     let resolutions: &[usize] = if args.quick {
         &QUICK_RESOLUTIONS
     } else {
