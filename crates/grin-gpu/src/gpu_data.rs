@@ -141,7 +141,7 @@ pub struct GpuLight {
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 2 * 16);
 
-/// One output pixel: the same 12 floats as `grin_trace::image::PixelOut`.
+/// One output pixel: the same 12 floats as `grin_render::image::PixelOut`.
 /// Keep in sync with `PixelOut` in shaders/shared/types.wgsl.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
@@ -159,8 +159,8 @@ const _: () = assert!(std::mem::size_of::<PixelOut>() == 12 * 4);
 
 impl PixelOut {
     /// The CPU renderer's pixel type.
-    pub fn to_cpu(self) -> grin_trace::image::PixelOut {
-        grin_trace::image::PixelOut {
+    pub fn to_cpu(self) -> grin_render::image::PixelOut {
+        grin_render::image::PixelOut {
             rgb: self.rgb,
             deflection_deg: self.deflection_deg,
             exit_dir: self.exit_dir,

@@ -1,15 +1,15 @@
 //! GPU rendering with wgpu: device, textures, the WGSL RK marcher, readback.
 //!
-//! The entry point is [`GpuRenderer`]: build a [`grin_trace::render::RenderScene`] (every
+//! The entry point is [`GpuRenderer`]: build a [`grin_render::scene::RenderScene`] (every
 //! scene check happens there, before any GPU work), a [`GpuContext`], and call
 //!
 //! ```ignore
 //! let ctx = GpuContext::new_headless()?;
 //! let gpu = GpuRenderer::new(&ctx, &render_scene, baked.as_ref())?; // Option<&BakedField>
-//! let frame = gpu.render(&|rows| bar.inc(rows.into()), &cancel)?;   // grin_trace::image::Frame
+//! let frame = gpu.render(&|rows| bar.inc(rows.into()), &cancel)?;   // grin_render::image::Frame
 //! ```
 //!
-//! The frame has exactly the CPU renderer's layout ([`grin_trace::image::PixelOut`]), so
+//! The frame has exactly the CPU renderer's layout ([`grin_render::image::PixelOut`]), so
 //! `grin render --backend gpu` writes it with the same EXR/PNG code. Media are marched
 //! through a baked grid (a 3D texture): pass the scene's [`BakedField`] if it has one,
 //! or `None` and the analytic field is baked here (see [`field::bake_for_gpu`]).

@@ -8,11 +8,11 @@ use std::time::Instant;
 use glam::DVec3;
 use grin_field::Bounds;
 use grin_field::baked::BakedField;
+use grin_render::image::Frame;
+use grin_render::primitives::Primitive;
+use grin_render::scene::RenderScene;
+use grin_render::sky::SkyModel;
 use grin_scene::{ExitMethod, IntegratorKind, Light, Material, StepSpec};
-use grin_trace::image::Frame;
-use grin_trace::render::RenderScene;
-use grin_trace::render::primitives::Primitive;
-use grin_trace::render::sky::SkyModel;
 
 use crate::field::{
     DEFAULT_GPU_BAKE_RESOLUTION, FieldTextures, bake_for_gpu_auto, empty_field, fits_device,

@@ -12,5 +12,5 @@ pub use trace::{
     Control, RayResult, RayStatus, TraceError, TraceSettings, trace_ray, trace_ray_observed,
 };
 
-pub mod image;
+pub use grin_render::image;
 pub mod render;

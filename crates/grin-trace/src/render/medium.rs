@@ -61,7 +61,18 @@ pub fn chord_hit(objects: &[Primitive], seg: &Segment) -> Option<(Hit, DVec3)> {
     intersect_scene(objects, seg.r0, dir, 0.0, len).map(|hit| (hit, dir))
 }
 
-impl SceneMedium {
+/// The CPU's view of a [`SceneMedium`]: the march (the medium itself is grin-render's).
+#[derive(Debug, Clone, Copy)]
+pub struct CpuMedium<'a>(pub &'a SceneMedium);
+
+impl std::ops::Deref for CpuMedium<'_> {
+    type Target = SceneMedium;
+    fn deref(&self) -> &SceneMedium {
+        self.0
+    }
+}
+
+impl CpuMedium<'_> {
     /// Trace from `origin` (outside: the tracer finds the entry and refracts; inside:
     /// it starts marching) along unit `dir` until the ray leaves the medium, meets an
     /// object, or stops. `jitter` in (0, 1] scales the first step (1: none).

@@ -1,274 +1,63 @@
-//! The CPU renderer: the scene around a GRIN medium (camera, primitives, materials,
-//! lights, sky), one pixel sample at a time with rayon. The reference the GPU marcher is
-//! tested against: every function here has a WGSL twin of the same name in shaders/.
+//! The CPU renderer: the path loop around a GRIN medium over the render description of
+//! grin-render (camera, primitives, materials, lights, sky), one pixel sample at a time
+//! with rayon. The reference the GPU marcher is tested against: every function here has a
+//! WGSL twin of the same name in shaders/.
 
-pub mod camera;
-pub mod materials;
 pub mod medium;
-pub mod primitives;
-pub mod rng;
 pub mod shade;
-pub mod sky;
 #[cfg(test)]
 mod tests;
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::DVec3;
-use grin_field::{Bounds, IndexField};
-use grin_scene::{Light, Material, RenderSettings, Scene, Shape};
 use rayon::prelude::*;
 
 use crate::image::{Frame, PixelOut};
-use crate::trace::TraceSettings;
-use camera::PinholeCamera;
-use primitives::Primitive;
 use rng::Rng;
-use sky::SkyModel;
 
-/// Shortest jittered first step, as a fraction of the nominal step: keeps a jittered
-/// step from being vanishingly small (GPU twin: MIN_JITTER_FRACTION in step.wgsl).
-pub const MIN_JITTER_FRACTION: f32 = 1e-3;
+pub use grin_render::scene::{
+    MAX_PIXELS, MIN_JITTER_FRACTION, RenderError, RenderScene, SceneMedium,
+};
+pub use grin_render::{camera, materials, primitives, rng, sky};
 
-/// Largest image rendered in one frame: 2^26 pixels (8192^2) keep the frame buffer
-/// plus the EXR's channel copies under ~6 GB.
-pub const MAX_PIXELS: u64 = 1 << 26;
-
-/// Why a scene cannot be rendered or written.
-#[derive(Debug, thiserror::Error)]
-pub enum RenderError {
-    #[error("camera: {0}")]
-    Camera(String),
-    #[error("object {index}: {message}")]
-    Object { index: usize, message: String },
-    #[error("light {index}: {message}")]
-    Light { index: usize, message: String },
-    #[error("[render]: {0}")]
-    Settings(String),
-    #[error("environment map {}: {message}", path.display())]
-    EnvMap { path: PathBuf, message: String },
-    #[error("{}: {message}", path.display())]
-    Output { path: PathBuf, message: String },
-    #[error(transparent)]
-    Write(#[from] grin_output::OutputError),
-    #[error("render cancelled")]
-    Cancelled,
-    #[error("{0}")]
-    Memory(String),
-}
-
-/// The medium as the renderer holds it: the field and the tracer settings.
-#[derive(Debug, Clone)]
-pub struct SceneMedium {
-    pub field: Arc<dyn IndexField>,
-    pub bounds: Bounds,
-    pub ambient: f64,
-    pub trace: TraceSettings,
-}
-
-impl SceneMedium {
-    pub fn new(field: Arc<dyn IndexField>, settings: &RenderSettings) -> Result<Self, RenderError> {
-        let trace = TraceSettings::from_render(settings);
-        trace
-            .validate_for(&field.bounds())
-            .map_err(|e| RenderError::Settings(e.to_string()))?;
-        Ok(SceneMedium {
-            bounds: field.bounds(),
-            ambient: field.ambient_index(),
-            field,
-            trace,
-        })
-    }
-}
-
-/// Everything the renderer needs, resolved from a [`Scene`].
-#[derive(Debug, Clone)]
-pub struct RenderScene {
-    pub camera: PinholeCamera,
-    pub objects: Vec<Primitive>,
-    pub materials: Vec<Material>,
-    pub lights: Vec<Light>,
-    pub sky: SkyModel,
-    pub medium: Option<SceneMedium>,
-    pub settings: RenderSettings,
-}
-
-fn finite3(v: [f64; 3]) -> bool {
-    v.iter().all(|x| x.is_finite())
-}
-
-impl RenderScene {
-    /// Resolve `scene` (size and spp from its `[render]`) with the medium's `field`, built
-    /// by the caller with `grin_field::build_field`. Environment maps are read relative to
-    /// `scene_dir`. Every check happens here, before any pixel is traced.
-    pub fn new(
-        scene: &Scene,
-        scene_dir: &Path,
-        field: Option<Arc<dyn IndexField>>,
-    ) -> Result<Self, RenderError> {
-        let s = &scene.render;
-        if s.width == 0 || s.height == 0 {
-            return Err(RenderError::Settings(format!(
-                "image size {}x{} is empty",
-                s.width, s.height
-            )));
-        }
-        if u64::from(s.width) * u64::from(s.height) > MAX_PIXELS {
-            return Err(RenderError::Settings(format!(
-                "image size {}x{} exceeds {MAX_PIXELS} pixels (the frame and its EXR channels would need ~{} GB)",
-                s.width,
-                s.height,
-                u64::from(s.width)
-                    * u64::from(s.height)
-                    * 2
-                    * std::mem::size_of::<PixelOut>() as u64
-                    / 1_000_000_000
-            )));
-        }
-        if s.spp == 0 {
-            return Err(RenderError::Settings("spp must be at least 1".into()));
-        }
-        let c = &scene.camera;
-        if !(finite3(c.position) && finite3(c.look_at) && finite3(c.up)) {
-            return Err(RenderError::Camera(
-                "position, look_at and up must be finite".into(),
-            ));
-        }
-        if !(c.fov_y_deg > 0.0 && c.fov_y_deg < 180.0) {
-            return Err(RenderError::Camera(format!(
-                "fov_y_deg = {} must be in (0, 180)",
-                c.fov_y_deg
-            )));
-        }
-        let camera = PinholeCamera::new(c, s.width, s.height).ok_or_else(|| {
-            RenderError::Camera(
-                "look_at must differ from position and the view must not be parallel to up".into(),
-            )
-        })?;
-        for (index, o) in scene.objects.iter().enumerate() {
-            let bad = |message: &str| RenderError::Object {
-                index,
-                message: message.into(),
-            };
-            match o.shape {
-                Shape::Sphere { center, radius } => {
-                    if !(finite3(center) && radius > 0.0 && radius.is_finite()) {
-                        return Err(bad("sphere needs a finite center and a positive radius"));
-                    }
-                }
-                Shape::Plane { point, normal } => {
-                    if !finite3(point)
-                        || !finite3(normal)
-                        || DVec3::from_array(normal).length() == 0.0
-                    {
-                        return Err(bad("plane needs a finite point and a non-zero normal"));
-                    }
-                }
-                Shape::Box { min, max } => {
-                    if !finite3(min) || !finite3(max) || (0..3).any(|i| min[i] >= max[i]) {
-                        return Err(bad("box needs finite min < max on every axis"));
-                    }
-                }
-            }
-            if let Material::Glass { ior, .. } = o.material
-                && !(ior > 0.0 && ior.is_finite())
-            {
-                return Err(bad("glass ior must be positive"));
-            }
-            if let Material::Checker { scale, .. } = o.material
-                && !(scale > 0.0 && scale.is_finite())
-            {
-                return Err(bad("checker scale must be positive"));
-            }
-        }
-        for (index, light) in scene.lights.iter().enumerate() {
-            let ok = match *light {
-                Light::Point {
-                    position,
-                    intensity,
-                } => finite3(position) && finite3(intensity),
-                Light::Directional {
-                    direction,
-                    intensity,
-                } => {
-                    finite3(direction)
-                        && finite3(intensity)
-                        && DVec3::from_array(direction).length() > 0.0
-                }
-            };
-            if !ok {
-                return Err(RenderError::Light {
-                    index,
-                    message: "position/direction and intensity must be finite (direction non-zero)"
-                        .into(),
-                });
-            }
-        }
-        Ok(RenderScene {
-            camera,
-            objects: scene
-                .objects
-                .iter()
-                .map(|o| Primitive::from_shape(&o.shape))
-                .collect(),
-            materials: scene.objects.iter().map(|o| o.material.clone()).collect(),
-            lights: scene.lights.clone(),
-            sky: SkyModel::from_scene(&scene.sky, scene_dir)?,
-            medium: field.map(|f| SceneMedium::new(f, s)).transpose()?,
-            settings: s.clone(),
-        })
-    }
-
-    /// The sub-pixel position of sample `sample`: the pixel centre for one sample per
-    /// pixel, uniformly random otherwise.
-    pub fn subpixel(&self, rng: &mut Rng) -> (f64, f64) {
-        if self.settings.spp == 1 {
-            (0.5, 0.5)
+/// All samples of pixel (px, py): mean radiance; AOVs of sample 0, steps and field
+/// evaluations averaged over the samples.
+pub fn render_pixel(scene: &RenderScene, px: u32, py: u32) -> PixelOut {
+    let index = py * scene.settings.width + px;
+    let mut rgb = DVec3::ZERO;
+    let mut steps = 0u64;
+    let mut evals = 0u64;
+    let mut first = None;
+    let seed = scene.settings.seed as u32;
+    for sample in 0..scene.settings.spp {
+        let mut rng = Rng::for_pixel(index, sample, seed);
+        let (sx, sy) = scene.subpixel(&mut rng);
+        // Drawn after the sub-pixel position, so the stream is unchanged when it is off.
+        let jitter = if scene.settings.jitter {
+            rng.next_f32().max(MIN_JITTER_FRACTION)
         } else {
-            (f64::from(rng.next_f32()), f64::from(rng.next_f32()))
-        }
-    }
-
-    /// All samples of pixel (px, py): mean radiance; AOVs of sample 0, steps and field
-    /// evaluations averaged over the samples.
-    pub fn render_pixel(&self, px: u32, py: u32) -> PixelOut {
-        let index = py * self.settings.width + px;
-        let mut rgb = DVec3::ZERO;
-        let mut steps = 0u64;
-        let mut evals = 0u64;
-        let mut first = None;
-        let seed = self.settings.seed as u32;
-        for sample in 0..self.settings.spp {
-            let mut rng = Rng::for_pixel(index, sample, seed);
-            let (sx, sy) = self.subpixel(&mut rng);
-            // Drawn after the sub-pixel position, so the stream is unchanged when it is off.
-            let jitter = if self.settings.jitter {
-                rng.next_f32().max(MIN_JITTER_FRACTION)
-            } else {
-                1.0
-            };
-            let d = self.camera.primary_ray(px, py, sx, sy);
-            let path = self.trace_path(d, f64::from(jitter), &mut rng);
-            rgb += path.rgb;
-            steps += u64::from(path.aov.steps);
-            evals += path.aov.evals;
-            first.get_or_insert(path.aov);
-        }
-        let spp = f64::from(self.settings.spp);
-        let Some(aov) = first else {
-            return PixelOut::default();
+            1.0
         };
-        PixelOut {
-            rgb: (rgb / spp).as_vec3().to_array(),
-            deflection_deg: aov.deflection_deg as f32,
-            exit_dir: aov.exit_dir.as_vec3().to_array(),
-            opd: aov.opd as f32,
-            steps: (steps as f64 / spp) as f32,
-            evals: (evals as f64 / spp) as f32,
-            status: f32::from(shade::status_code(aov.status)),
-        }
+        let d = scene.camera.primary_ray(px, py, sx, sy);
+        let path = shade::CpuScene(scene).trace_path(d, f64::from(jitter), &mut rng);
+        rgb += path.rgb;
+        steps += u64::from(path.aov.steps);
+        evals += path.aov.evals;
+        first.get_or_insert(path.aov);
+    }
+    let spp = f64::from(scene.settings.spp);
+    let Some(aov) = first else {
+        return PixelOut::default();
+    };
+    PixelOut {
+        rgb: (rgb / spp).as_vec3().to_array(),
+        deflection_deg: aov.deflection_deg as f32,
+        exit_dir: aov.exit_dir.as_vec3().to_array(),
+        opd: aov.opd as f32,
+        steps: (steps as f64 / spp) as f32,
+        evals: (evals as f64 / spp) as f32,
+        status: f32::from(shade::status_code(aov.status)),
     }
 }
 
@@ -294,7 +83,7 @@ pub fn render_cpu(
                 return Err(RenderError::Cancelled);
             }
             for (px, out) in row.iter_mut().enumerate() {
-                *out = scene.render_pixel(px as u32, py as u32);
+                *out = render_pixel(scene, px as u32, py as u32);
             }
             progress(1);
             Ok(())

@@ -8,7 +8,7 @@ use grin_scene::{Light, Material};
 use super::materials::{
     checker_is_a, fresnel_dielectric, fresnel_schlick, reflect_dir, refract_dir,
 };
-use super::medium::{MarchEnd, MarchStats, SURFACE_EPS};
+use super::medium::{CpuMedium, MarchEnd, MarchStats, SURFACE_EPS};
 use super::primitives::{Hit, intersect_scene};
 use super::rng::Rng;
 use super::{RenderScene, SceneMedium};
@@ -68,7 +68,19 @@ enum Event {
     Medium,
 }
 
-impl RenderScene {
+/// The CPU's view of a [`RenderScene`]: the path loop's methods (the scene itself is
+/// grin-render's, shared with the GPU).
+#[derive(Debug, Clone, Copy)]
+pub struct CpuScene<'a>(pub &'a RenderScene);
+
+impl std::ops::Deref for CpuScene<'_> {
+    type Target = RenderScene;
+    fn deref(&self) -> &RenderScene {
+        self.0
+    }
+}
+
+impl CpuScene<'_> {
     /// Index of the space at `p`: the medium's n inside the bounds, else ambient.
     fn index_at(&self, p: DVec3) -> f64 {
         match &self.medium {
@@ -136,7 +148,7 @@ impl RenderScene {
                         .intersect(origin, dir)
                         .map_or(0.0, |(s_in, s_out)| (s_out - s_in.max(0.0)).max(0.0));
                     let entry_dir = dir;
-                    let end = m.march_medium(
+                    let end = CpuMedium(m).march_medium(
                         &self.objects,
                         origin,
                         dir,
@@ -351,7 +363,7 @@ impl RenderScene {
             return Some(DVec3::ZERO);
         };
         let mut stats = MarchStats::default();
-        match m.march_medium(&self.objects, p, l, 1.0, &mut stats) {
+        match CpuMedium(m).march_medium(&self.objects, p, l, 1.0, &mut stats) {
             MarchEnd::Exited {
                 point,
                 dir,

@@ -12,7 +12,7 @@ use grin_output::Staged;
 /// `exr::prelude` exports its own `Result`; this module means std's.
 type Result<T, E> = std::result::Result<T, E>;
 
-use crate::render::RenderError;
+use crate::scene::RenderError;
 
 /// One output pixel: linear radiance and the AOVs. Plain f32s so the GPU can write the
 /// same layout (keep in sync with grin-gpu's `gpu_data::PixelOut`).

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::RenderError;
+use crate::scene::RenderError;
 
 /// An equirectangular map, linear RGB, row 0 at the zenith.
 #[derive(Debug, Clone, PartialEq)]
