@@ -20,10 +20,13 @@
 //!
 //! [`BakedField`]: grin_field::baked::BakedField
 
+mod bench;
 pub mod device;
 pub mod error;
 pub mod field;
 pub mod gpu_data;
+mod pack;
+mod pipelines;
 pub mod render;
 pub mod shaders;
 

@@ -666,5 +666,6 @@ pub fn measure_error_at(
     st
 }
 
+pub mod device;
 #[cfg(test)]
 mod tests;

@@ -1,0 +1,172 @@
+//! How a field is baked for the GPU marcher: trilinear f32 grids, no finer than the
+//! error budget needs ([`bake_for_gpu_auto`]), with a warning where even the default
+//! resolution under-resolves the field. The policy lives with the baker; grin-gpu only
+//! uploads what it is given or what this chooses.
+
+use super::{
+    BUDGET_SAFETY, BakeError, BakeOptions, BakeReport, CANDIDATE_RESOLUTIONS, DEFAULT_ERROR_BUDGET,
+    bake,
+};
+use crate::IndexField;
+use crate::baked::{BakedField, Interp};
+
+/// Grid resolution (nodes along the longest axis) used to bake an analytic field for the
+/// GPU when the caller has no baked field: 128 keeps a unit sphere within ~1e-4 of the
+/// analytic index for the paper's profiles (bake helper's DEFAULT_RESOLUTION).
+pub const DEFAULT_GPU_BAKE_RESOLUTION: usize = super::DEFAULT_RESOLUTION;
+
+/// Bake `field` on a grid for the GPU (trilinear, f32 voxels, fixed resolution).
+///
+/// A fixed resolution can under-resolve a thin layer (a 128-node grid along a long, flat
+/// box): when the bake's measured error is over [`DEFAULT_ERROR_BUDGET`] this prints
+/// [`bake_warning`] to stderr, so an under-resolved field never renders silently wrong.
+/// Use [`bake_for_gpu_with_report`] to get the report (and the warning) instead.
+pub fn bake_for_gpu(field: &dyn IndexField, resolution: usize) -> Result<BakedField, BakeError> {
+    let (baked, report) = bake_for_gpu_with_report(field, resolution)?;
+    if let Some(w) = bake_warning(&report) {
+        eprintln!("grin: warning: {w}");
+    }
+    Ok(baked)
+}
+
+/// [`bake_for_gpu`] without the stderr warning: the baked field and the baker's report
+/// (measured max error relative to the field's delta_n range).
+pub fn bake_for_gpu_with_report(
+    field: &dyn IndexField,
+    resolution: usize,
+) -> Result<(BakedField, BakeReport), BakeError> {
+    let opts = BakeOptions {
+        resolution: Some(resolution),
+        interp: Interp::Trilinear,
+        storage: Some(crate::baked::Storage::F32),
+        ..BakeOptions::default()
+    };
+    bake(field, &opts, &|_, _, _| {})
+}
+
+/// Bake `field` for the GPU with no more nodes than it needs: first at
+/// [`DEFAULT_GPU_BAKE_RESOLUTION`]; if that meets the default error budget
+/// ([`DEFAULT_ERROR_BUDGET`], with the bake's [`BUDGET_SAFETY`] margin), trilinear error
+/// falling as h^2 predicts the coarsest candidate resolution that still meets it, which
+/// is baked and kept if its measured error confirms it. Over budget at the full
+/// resolution, that bake is used and [`bake_warning`] of the report says so. Two bakes
+/// at most (the automatic search of `grin bake` would try every coarser candidate first).
+pub fn bake_for_gpu_auto(field: &dyn IndexField) -> Result<(BakedField, BakeReport), BakeError> {
+    let full = bake_for_gpu_with_report(field, DEFAULT_GPU_BAKE_RESOLUTION)?;
+    let goal = DEFAULT_ERROR_BUDGET * BUDGET_SAFETY;
+    let rel = full.1.relative_error;
+    if rel > goal {
+        return Ok(full);
+    }
+    let predicted = if rel > 0.0 {
+        DEFAULT_GPU_BAKE_RESOLUTION as f64 * (rel / goal).sqrt()
+    } else {
+        0.0
+    };
+    let Some(&coarse) = CANDIDATE_RESOLUTIONS
+        .iter()
+        .find(|&&r| r as f64 >= predicted && r < DEFAULT_GPU_BAKE_RESOLUTION)
+    else {
+        return Ok(full);
+    };
+    let small = bake_for_gpu_with_report(field, coarse)?;
+    Ok(if small.1.relative_error <= goal {
+        small
+    } else {
+        full
+    })
+}
+
+/// A one-line warning when a GPU bake's measured error is over the default budget
+/// ([`DEFAULT_ERROR_BUDGET`] of the delta_n range), naming the grid, its spacing and the
+/// error; `None` when the bake meets the budget.
+pub fn bake_warning(report: &BakeReport) -> Option<String> {
+    if report.relative_error <= DEFAULT_ERROR_BUDGET {
+        return None;
+    }
+    let [nx, ny, nz] = report.dims;
+    let spacing = (report.grid_max.x - report.grid_min.x) / (nx.max(2) - 1) as f64;
+    Some(format!(
+        "the GPU field bake ({nx}x{ny}x{nz} nodes, spacing {spacing:.3}) has max |n error| {:.3e} = {:.2}% of the delta_n range {:.3e} ({:.0}x the budget of {}%): the field is under-resolved and the GPU image will differ from the CPU's; shrink the medium's bounds to where the field matters or pass a finer baked field",
+        report.errors.max_err_n,
+        report.relative_error * 100.0,
+        report.delta_n_range,
+        report.relative_error / DEFAULT_ERROR_BUDGET,
+        DEFAULT_ERROR_BUDGET * 100.0,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Bounds;
+    use crate::analytic::ExponentialAtmosphere;
+    use glam::DVec3;
+    use grin_scene::Axis;
+
+    /// An exponential hot layer (scale height `h`) over a box `len` long and 1.6 tall.
+    fn layer(len: f64, h: f64) -> ExponentialAtmosphere {
+        let bounds = Bounds::Box {
+            min: DVec3::new(-len / 2.0, -0.1, 0.0),
+            max: DVec3::new(len / 2.0, 1.5, len),
+        };
+        ExponentialAtmosphere::new(bounds, 1.0, -6e-4, h, 0.0, Axis::Y).expect("valid layer")
+    }
+
+    #[test]
+    fn thin_layer_in_long_box_is_reported_under_resolved() {
+        // The old mirage scene: a 120-unit box at 128 nodes (spacing ~0.95) against a
+        // 0.15 scale height; its n error is hundreds of times the budget.
+        let (_, report) =
+            bake_for_gpu_with_report(&layer(120.0, 0.15), DEFAULT_GPU_BAKE_RESOLUTION)
+                .expect("bake");
+        assert!(
+            report.relative_error > 100.0 * DEFAULT_ERROR_BUDGET,
+            "{report:?}"
+        );
+        let w = bake_warning(&report).expect("a warning");
+        assert!(
+            w.contains("under-resolved") && w.contains("spacing 0.94"),
+            "{w}"
+        );
+    }
+
+    #[test]
+    fn resolved_layer_has_no_warning() {
+        // 11.5 nodes per scale height: trilinear error (h/H)^2/8 ~ 1e-3 of the range.
+        let (_, report) =
+            bake_for_gpu_with_report(&layer(1.5, 0.15), DEFAULT_GPU_BAKE_RESOLUTION).expect("bake");
+        assert!(report.relative_error <= DEFAULT_ERROR_BUDGET, "{report:?}");
+        assert_eq!(bake_warning(&report), None);
+    }
+
+    /// The GPU bakes no more than the field needs: a smooth lens meets the budget on a
+    /// coarser grid than 128 nodes (and the coarse grid's measured error says so); a
+    /// field no grid up to 128 resolves keeps 128 nodes and its warning.
+    #[test]
+    fn automatic_gpu_bake_is_as_coarse_as_the_budget_allows() {
+        let lens = crate::analytic::Luneburg::new(
+            Bounds::Sphere {
+                center: DVec3::ZERO,
+                radius: 1.0,
+            },
+            1.0,
+            None,
+        )
+        .expect("lens");
+        let (_, full) = bake_for_gpu_with_report(&lens, DEFAULT_GPU_BAKE_RESOLUTION).expect("bake");
+        let (_, auto) = bake_for_gpu_auto(&lens).expect("bake");
+        assert!(auto.resolution < DEFAULT_GPU_BAKE_RESOLUTION, "{auto:?}");
+        assert!(auto.relative_error <= DEFAULT_ERROR_BUDGET * BUDGET_SAFETY);
+        assert!(
+            auto.bytes * 2 < full.bytes,
+            "{} vs {}",
+            auto.bytes,
+            full.bytes
+        );
+
+        let (_, thin) = bake_for_gpu_auto(&layer(120.0, 0.15)).expect("bake");
+        assert_eq!(thin.resolution, DEFAULT_GPU_BAKE_RESOLUTION);
+        assert!(bake_warning(&thin).is_some());
+    }
+}
