@@ -8,6 +8,10 @@
 const ADAPTIVE_MAX_DS_REL: f32 = 0.25;
 const ADAPTIVE_MIN_DS_REL: f32 = 1e-12;
 const ADAPTIVE_INITIAL_DS_REL: f32 = 0.01;
+// step::ADAPTIVE_MIN_DS_EPS and ADAPTIVE_TOL_FLOOR_EPS: the f32 floors of the smallest step
+// and the tolerance (units of roundoff times the radius), as the CPU's f32 path has them.
+const ADAPTIVE_MIN_DS_EPS: f32 = 1e3;
+const ADAPTIVE_TOL_FLOOR_EPS: f32 = 2.0;
 // Controller safety factor and growth limits (Hairer, Norsett & Wanner II.4).
 const SAFETY: f32 = 0.9;
 const MAX_GROWTH: f32 = 5.0;
@@ -83,12 +87,13 @@ fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32
     return Taken(second, h, 0u);
 }
 
-fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample, tol: f32) -> Taken {
+fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample, tol_asked: f32) -> Taken {
     let n0 = s0.n;
     let d0 = s0.grad_n * s0.n;
     let kind = INTEGRATOR;
     let exponent = 1.0 / f32(integrator_order(kind));
-    let ds_min = ADAPTIVE_MIN_DS_REL * (*ctrl).len_scale;
+    let ds_min = max(ADAPTIVE_MIN_DS_REL, ADAPTIVE_MIN_DS_EPS * F32_EPSILON) * (*ctrl).len_scale;
+    let tol = max(tol_asked, ADAPTIVE_TOL_FLOOR_EPS * F32_EPSILON * (*ctrl).len_scale);
     let ds_max = ADAPTIVE_MAX_DS_REL * (*ctrl).len_scale;
     var evals = 0u;
     var rejections = 0u;

@@ -23,11 +23,11 @@ pub const ADAPTIVE_TOL_FLOOR_EPS: f64 = 2.0;
 /// Default first error-controlled step, as a fraction of the bounds' radius.
 pub const ADAPTIVE_INITIAL_DS_REL: f64 = 0.01;
 /// Safety factor and growth limits of the step-size controller (Hairer, Norsett & Wanner, II.4).
-const SAFETY: f64 = 0.9;
-const MAX_GROWTH: f64 = 5.0;
-const MIN_SHRINK: f64 = 0.2;
+pub const SAFETY: f64 = 0.9;
+pub const MAX_GROWTH: f64 = 5.0;
+pub const MIN_SHRINK: f64 = 0.2;
 /// Rejections allowed for one step before it is taken at the smallest size.
-const MAX_REJECTIONS: u32 = 60;
+pub const MAX_REJECTIONS: u32 = 60;
 
 /// Chooses step lengths along one ray (error control keeps its state between steps).
 #[derive(Debug, Clone)]

@@ -20,7 +20,7 @@ pub const AMBIENT_SKY_WEIGHT: f64 = 0.2;
 
 /// Loop iterations allowed per unit of max_depth: each bounce may also pass through the
 /// medium without counting as a bounce.
-const EVENTS_PER_DEPTH: u32 = 3;
+pub const EVENTS_PER_DEPTH: u32 = 3;
 
 /// The `status` AOV value of a ray status (the order of `RayStatus::ALL`: missed 0,
 /// exited 1, absorbed 2, max_steps 3, error 4).
