@@ -347,3 +347,37 @@ fn buffers_that_do_not_fit_are_errors_not_aborts() {
     );
     assert_eq!(std::fs::read_dir(dir.path()).expect("ls").count(), 0);
 }
+
+/// A ray table from stdin (`--rays -`) with an `id` column, traced to stdout as JSON: the
+/// id comes through, the JSON is valid and the summary (`--json`) goes to stderr.
+#[test]
+fn ray_tables_stream_through_with_extra_columns() {
+    use std::io::Write;
+    let mut child = grin()
+        .arg("trace")
+        .arg(data("scenes/luneburg.toml"))
+        .args(["--rays", "-", "-o", "-", "--format", "json", "--json"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(b"id,ox,oy,oz,dx,dy,dz\nray-a,0,0.2,-3,0,0,1\nray-b,0,5,-3,0,0,1\n")
+        .expect("write rays");
+    let out = child.wait_with_output().expect("wait");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let rows: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
+    assert_eq!(rows[0]["id"], "ray-a");
+    assert_eq!(rows[0]["status"], "exited");
+    assert_eq!(rows[1]["id"], "ray-b");
+    assert_eq!(rows[1]["status"], "missed");
+    let summary = err.lines().find(|l| l.starts_with('{')).expect("summary on stderr");
+    let summary: serde_json::Value = serde_json::from_str(summary).expect("summary JSON");
+    assert_eq!(summary["rays"], 2);
+    assert!(summary["step"].is_object(), "step as the scene writes it: {summary}");
+}

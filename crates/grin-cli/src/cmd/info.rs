@@ -77,10 +77,10 @@ fn info_grinf(path: &Path, json: bool) -> anyhow::Result<()> {
             "world_max": hi.to_array(),
             "storage": h.storage.name(),
             "interp": h.interp.name(),
-            "outside": format!("{:?}", h.outside).to_lowercase(),
+            "outside": outside_name(h.outside),
             "ambient_index": h.ambient,
             "scale": h.scale,
-            "bounds": format!("{:?}", h.bounds),
+            "bounds": bounds_json(&h.bounds),
             "source": h.provenance.source,
             "max_err_n": h.provenance.max_err_n,
             "rms_err_n": h.provenance.rms_err_n,
@@ -144,4 +144,25 @@ fn info_grinf(path: &Path, json: bool) -> anyhow::Result<()> {
         h.crc32
     );
     Ok(())
+}
+
+/// Bounds as the scene file writes them: `{"sphere": {"center": .., "radius": ..}}` or
+/// `{"box": {"min": .., "max": ..}}`.
+pub fn bounds_json(b: &grin_field::Bounds) -> serde_json::Value {
+    match *b {
+        grin_field::Bounds::Sphere { center, radius } => {
+            serde_json::json!({"sphere": {"center": center.to_array(), "radius": radius}})
+        }
+        grin_field::Bounds::Box { min, max } => {
+            serde_json::json!({"box": {"min": min.to_array(), "max": max.to_array()}})
+        }
+    }
+}
+
+/// The stable name of what a baked grid gives outside its nodes.
+fn outside_name(o: grin_field::baked::Outside) -> &'static str {
+    match o {
+        grin_field::baked::Outside::Ambient => "ambient",
+        grin_field::baked::Outside::Clamp => "clamp",
+    }
 }

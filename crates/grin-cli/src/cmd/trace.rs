@@ -111,7 +111,8 @@ struct Summary<'a> {
     output: &'a Path,
     field: String,
     integrator: &'static str,
-    step: String,
+    /// As in the scene file: `{"fixed": 0.01}`, `{"adaptive": {"tolerance": 1e-8, ...}}`.
+    step: grin_scene::StepSpec,
     precision: &'static str,
     rays: usize,
     exited: usize,
@@ -157,7 +158,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .validate_for(&field.bounds())
         .with_context(|| format!("{}: [render]", args.scene.display()))?;
 
-    let rows = table::read_rays(&args.rays)?;
+    let rays = table::read_rays(&args.rays)?;
+    let rows = &rays.rows;
     let format = match args.format {
         Some(Format::Json) => TableFormat::Json,
         Some(Format::Csv) => TableFormat::Csv,
@@ -183,13 +185,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let start = Instant::now();
     let tick = || bar.inc(1);
     let results = if args.f32 {
-        table::trace_rows::<f32>(field.as_ref(), &settings, &rows, &tick)
+        table::trace_rows::<f32>(field.as_ref(), &settings, rows, &tick)
     } else {
-        table::trace_rows::<f64>(field.as_ref(), &settings, &rows, &tick)
+        table::trace_rows::<f64>(field.as_ref(), &settings, rows, &tick)
     };
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
-    table::write_table_file(&args.output, format, &rows, &results)?;
+    table::write_table_file(&args.output, format, &rays, &results)?;
 
     let s = TableSummary::of(&results);
     let precision = if args.f32 { "f32" } else { "f64" };
@@ -212,7 +214,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             output: &args.output,
             field: field.describe(),
             integrator: settings.integrator.name(),
-            step: format!("{:?}", settings.step),
+            step: settings.step,
             precision,
             rays: s.rays,
             exited: s.exited,
@@ -229,7 +231,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 0.0
             },
         };
-        println!("{}", serde_json::to_string(&summary)?);
+        // With the table itself on stdout (`-o -`), the summary goes to stderr.
+        let text = serde_json::to_string(&summary)?;
+        if args.output.as_os_str() == "-" {
+            eprintln!("{text}");
+        } else {
+            println!("{text}");
+        }
     }
     Ok(())
 }
