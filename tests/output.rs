@@ -376,8 +376,14 @@ fn ray_tables_stream_through_with_extra_columns() {
     assert_eq!(rows[0]["status"], "exited");
     assert_eq!(rows[1]["id"], "ray-b");
     assert_eq!(rows[1]["status"], "missed");
-    let summary = err.lines().find(|l| l.starts_with('{')).expect("summary on stderr");
+    let summary = err
+        .lines()
+        .find(|l| l.starts_with('{'))
+        .expect("summary on stderr");
     let summary: serde_json::Value = serde_json::from_str(summary).expect("summary JSON");
     assert_eq!(summary["rays"], 2);
-    assert!(summary["step"].is_object(), "step as the scene writes it: {summary}");
+    assert!(
+        summary["step"].is_object(),
+        "step as the scene writes it: {summary}"
+    );
 }
