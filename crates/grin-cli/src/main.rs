@@ -4,8 +4,6 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-mod cmd;
-
 /// Gradient-index renderer: trace, bake, render and inspect GRIN media.
 #[derive(Debug, Parser)]
 #[command(name = "grin", version, about)]
@@ -32,26 +30,35 @@ enum Command {
     Bench(cmd::bench::Args),
 }
 
-/// `grin info x.vdb | head` closes stdout early; `println!` then panics. Treat that as the
-/// reader being done (as a SIGPIPE would), not as a crash.
-fn quiet_on_closed_stdout() {
-    let default_hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        let payload = info.payload();
-        let message = payload
-            .downcast_ref::<String>()
-            .map(String::as_str)
-            .or_else(|| payload.downcast_ref::<&str>().copied())
-            .unwrap_or("");
-        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
-            std::process::exit(SIGPIPE_EXIT_CODE);
-        }
-        default_hook(info);
-    }));
-}
-
 /// 128 + SIGPIPE, what a shell reports for a process killed by a closed pipe.
 const SIGPIPE_EXIT_CODE: i32 = 141;
+
+/// Print a line on stdout. `grin info x.vdb | head` closes stdout early: that is the reader
+/// being done (as a SIGPIPE would end a C program, exit 141), not a crash; any other
+/// write error ends grin with a one-line error. (`println!` panics on both.)
+fn write_stdout(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(args).and_then(|()| out.write_all(b"\n")) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(SIGPIPE_EXIT_CODE);
+        }
+        eprintln!(
+            "grin: error: cannot write to stdout: {}",
+            grin_output::plain(&e)
+        );
+        std::process::exit(1);
+    }
+}
+
+/// `println!` for the binary's results: see [`write_stdout`].
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::write_stdout(format_args!($($arg)*))
+    };
+}
+
+mod cmd;
 
 fn main() -> ExitCode {
     // Started by ourselves to try a VDB file in a child process (crash isolation).
@@ -61,7 +68,6 @@ fn main() -> ExitCode {
     if let Err(e) = vdb_sys::use_current_exe_as_checker() {
         eprintln!("grin: warning: {e}");
     }
-    quiet_on_closed_stdout();
     if let Err(e) = grin_output::install_signal_cleanup() {
         eprintln!("grin: warning: {e}");
     }

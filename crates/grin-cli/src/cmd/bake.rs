@@ -131,7 +131,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         result.with_context(|| format!("{}: bake failed", args.scene.display()))?;
     grin_field::grinf::save(&baked, &args.output)?;
     if args.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&summary_json(&args.output, &field.describe(), &report))?
         );
@@ -151,9 +151,9 @@ fn gradient_mode(spec: &FieldSpec) -> GradientMode {
 
 fn print_summary(out: &Path, source: &str, r: &BakeReport) {
     let [nx, ny, nz] = r.dims;
-    println!("baked     {source}");
-    println!("to        {}", out.display());
-    println!(
+    outln!("baked     {source}");
+    outln!("to        {}", out.display());
+    outln!(
         "grid      {nx}x{ny}x{nz} ({} nodes on the longest axis, {} choice), {} {}",
         r.resolution,
         if r.trials.len() > 1 {
@@ -164,14 +164,14 @@ fn print_summary(out: &Path, source: &str, r: &BakeReport) {
         r.interp.name(),
         r.storage.name()
     );
-    println!(
+    outln!(
         "region    {:?} .. {:?}{}",
         r.grid_min.to_array(),
         r.grid_max.to_array(),
         if r.cropped { " (cropped)" } else { "" }
     );
-    println!("bytes     {}", r.bytes);
-    println!(
+    outln!("bytes     {}", r.bytes);
+    outln!(
         "error     n: max {:.3e} rms {:.3e} ({:.3e} of the delta_n range {:.3e}; budget {:.1e}{})",
         r.errors.max_err_n,
         r.errors.rms_err_n,
@@ -180,17 +180,20 @@ fn print_summary(out: &Path, source: &str, r: &BakeReport) {
         r.budget,
         if r.meets_budget { ", met" } else { ", NOT met" }
     );
-    println!(
+    outln!(
         "          grad n: max {:.3e} rms {:.3e} ({} random points)",
-        r.errors.max_err_grad, r.errors.rms_err_grad, r.errors.points
+        r.errors.max_err_grad,
+        r.errors.rms_err_grad,
+        r.errors.points
     );
-    println!(
+    outln!(
         "macro     {:.1}% of cells homogeneous",
         100.0 * r.homogeneous_cells
     );
-    println!(
+    outln!(
         "time      {:.2} s ({} source evaluations)",
-        r.seconds, r.source_evals
+        r.seconds,
+        r.source_evals
     );
 }
 

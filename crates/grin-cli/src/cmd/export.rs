@@ -41,9 +41,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "half_float": args.half,
             "bytes": size,
         });
-        println!("{summary}");
+        outln!("{summary}");
     } else {
-        println!(
+        outln!(
             "exported {} -> {}: grids delta_n, grad_n ({}x{}x{} voxels, voxel {:.4}x{:.4}x{:.4}, {} bytes)",
             args.input.display(),
             args.output.display(),

@@ -95,49 +95,49 @@ fn info_grinf(path: &Path, json: bool) -> anyhow::Result<()> {
             "data_bytes": field.data_bytes(),
             "crc32": format!("{:08x}", h.crc32),
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
     let [nx, ny, nz] = g.dims;
-    println!(
+    outln!(
         "{}: grin baked field, format version {}",
         path.display(),
         h.version
     );
-    println!("  source        {}", h.provenance.source);
-    println!(
+    outln!("  source        {}", h.provenance.source);
+    outln!(
         "  grid          {nx}x{ny}x{nz}, {} storage, {} sampling, {:?} outside",
         h.storage.name(),
         h.interp.name(),
         h.outside
     );
-    println!(
+    outln!(
         "  world_from_grid  origin {:?} + spacing {:?} * (i, j, k)",
         g.origin.to_array(),
         g.spacing.to_array()
     );
-    println!("  world box     {:?} .. {:?}", lo.to_array(), hi.to_array());
-    println!("  bounds        {:?}", h.bounds);
-    println!("  ambient n     {}", h.ambient);
-    println!("  scale         {:?}", h.scale);
-    println!(
+    outln!("  world box     {:?} .. {:?}", lo.to_array(), hi.to_array());
+    outln!("  bounds        {:?}", h.bounds);
+    outln!("  ambient n     {}", h.ambient);
+    outln!("  scale         {:?}", h.scale);
+    outln!(
         "  n range       {n_min} .. {n_max}, max |grad n| {:.4e}",
         field.max_grad_n()
     );
-    println!(
+    outln!(
         "  bake error    n: max {:.3e} rms {:.3e}; grad n: max {:.3e} rms {:.3e}",
         h.provenance.max_err_n,
         h.provenance.rms_err_n,
         h.provenance.max_err_grad,
         h.provenance.rms_err_grad
     );
-    println!(
+    outln!(
         "  macro cells   {:?} of {} voxels, {:.1}% homogeneous",
         macro_grid.dims,
         macro_grid.cell,
         100.0 * macro_grid.homogeneous_fraction()
     );
-    println!(
+    outln!(
         "  size          {} bytes ({} of voxels), crc32 {:08x}",
         h.file_bytes,
         field.data_bytes(),

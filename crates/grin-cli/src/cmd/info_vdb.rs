@@ -9,16 +9,16 @@ use vdb_sys::{GridInfo, Meta, MetaValue, VdbFile};
 pub fn run(path: &Path, json: bool) -> anyhow::Result<()> {
     let file = VdbFile::open(path)?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&to_json(&file))?);
+        outln!("{}", serde_json::to_string_pretty(&to_json(&file))?);
         return Ok(());
     }
-    println!(
+    outln!(
         "{}: OpenVDB file, {} grid(s)",
         path.display(),
         file.grids().len()
     );
     for m in file.metadata() {
-        println!("  file metadata: {} = {}", m.key, m.value);
+        outln!("  file metadata: {} = {}", m.key, m.value);
     }
     for g in file.grids() {
         print_grid(g);
@@ -27,7 +27,7 @@ pub fn run(path: &Path, json: bool) -> anyhow::Result<()> {
 }
 
 fn print_grid(g: &GridInfo) {
-    println!(
+    outln!(
         "grid `{}`: {}, class {}{}",
         g.name,
         g.value_type,
@@ -39,7 +39,7 @@ fn print_grid(g: &GridInfo) {
         }
     );
     let v = g.voxel_size;
-    println!(
+    outln!(
         "  transform: {}{}, voxel size {} x {} x {}",
         g.map_type,
         if g.is_linear {
@@ -55,39 +55,52 @@ fn print_grid(g: &GridInfo) {
         .iter()
         .zip(g.transform.world_from_index.iter())
     {
-        println!(
+        outln!(
             "    world {axis} = {} i + {} j + {} k + {}",
-            row[0], row[1], row[2], row[3]
+            row[0],
+            row[1],
+            row[2],
+            row[3]
         );
     }
     match g.active_bbox {
         Some(b) => {
             let d = b.dims();
             let (lo, hi) = world_box(g);
-            println!(
+            outln!(
                 "  active voxels: {} in index box {:?}..={:?} ({}x{}x{})",
-                g.active_voxel_count, b.min, b.max, d[0], d[1], d[2]
+                g.active_voxel_count,
+                b.min,
+                b.max,
+                d[0],
+                d[1],
+                d[2]
             );
-            println!(
+            outln!(
                 "  world box of voxel centres: ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})",
-                lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+                lo[0],
+                lo[1],
+                lo[2],
+                hi[0],
+                hi[1],
+                hi[2]
             );
         }
-        None => println!("  active voxels: 0 (empty grid)"),
+        None => outln!("  active voxels: 0 (empty grid)"),
     }
     match g.value_range {
-        Some((lo, hi)) => println!(
+        Some((lo, hi)) => outln!(
             "  values: {lo:.6e} .. {hi:.6e}{} (background {})",
             if g.kind.is_vec3() { " (magnitude)" } else { "" },
             g.background
         ),
-        None => println!("  values: none finite (background {})", g.background),
+        None => outln!("  values: none finite (background {})", g.background),
     }
     if g.non_finite_count > 0 {
-        println!("  NaN/Inf voxels: {}", g.non_finite_count);
+        outln!("  NaN/Inf voxels: {}", g.non_finite_count);
     }
     for m in &g.metadata {
-        println!("  metadata: {} = {}", m.key, m.value);
+        outln!("  metadata: {} = {}", m.key, m.value);
     }
 }
 

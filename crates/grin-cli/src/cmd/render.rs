@@ -299,7 +299,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if exr_to_stream {
             eprintln!("{text}");
         } else {
-            println!("{text}");
+            outln!("{text}");
         }
     };
     if args.json {

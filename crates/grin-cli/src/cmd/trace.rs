@@ -236,7 +236,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if args.output.as_os_str() == "-" {
             eprintln!("{text}");
         } else {
-            println!("{text}");
+            outln!("{text}");
         }
     }
     Ok(())

@@ -99,7 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         settings.step
     );
     let (t_proc, e_proc) = frame(source.as_ref(), &settings, rays);
-    println!(
+    outln!(
         "{:<34} {:>10.1} ms/frame {:>12} evals {:>8.0} ns/eval",
         "procedural (paper)",
         1e3 * t_proc,
@@ -119,7 +119,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let (baked, report) = bake(source.as_ref(), &opts, &|_: &str, _: u64, _: u64| {})?;
             let (t, e) = frame(&baked, &settings, rays);
             let label = format!("baked {res} {} i16", interp.name());
-            println!(
+            outln!(
                 "{label:<34} {:>10.1} ms/frame {:>12} evals {:>8.0} ns/eval  speedup {:>6.1}x  bake {:.2} s  {} bytes  max|dn err| {:.2e}",
                 1e3 * t,
                 e,
@@ -161,7 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("wrote {}", path.display());
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        outln!("{}", serde_json::to_string_pretty(&summary)?);
     }
     Ok(())
 }

@@ -282,19 +282,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         runs,
     };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
-    println!(
+    outln!(
         "adapter: {} | cpu: {} threads | bakes {}^3-class, both backends",
-        report.adapter, report.cpu_threads, report.bake_resolution
+        report.adapter,
+        report.cpu_threads,
+        report.bake_resolution
     );
-    println!(
+    outln!(
         "{:<20} {:<4} {:>9} {:>10} {:>11} {:>9} {:>9} {:>12}",
-        "scene", "", "size", "ms/frame", "Mrays/s", "steps/ray", "evals/ray", "Msteps/s"
+        "scene",
+        "",
+        "size",
+        "ms/frame",
+        "Mrays/s",
+        "steps/ray",
+        "evals/ray",
+        "Msteps/s"
     );
     for r in &report.runs {
-        println!(
+        outln!(
             "{:<20} {:<4} {:>9} {:>10.1} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
             r.scene,
             r.backend,
@@ -306,7 +315,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r.ray_steps_per_second / 1e6
         );
     }
-    println!(
+    outln!(
         "noise / analytic frame time: gpu {:.2}{} (paper: 2.0; aim <= 1.2)",
         report.noise_over_analytic_gpu,
         report
@@ -314,7 +323,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map(|c| format!(", cpu {c:.2}"))
             .unwrap_or_default()
     );
-    println!(
+    outln!(
         "raw trilinear field samples: {:.1} M/s; marcher ((c) medium only, sharma: 3 evaluations per step): field evals {:.1}% and ray-steps {:.1}% of it; verlet (1 per step): ray-steps {:.1}% (aim >= 60%)",
         report.raw_field_samples_per_second / 1e6,
         report.field_evals_fraction_of_raw * 100.0,
