@@ -5,6 +5,9 @@
 //! This crate is the only place in grin with `unsafe` code; all of it is in this file and
 //! the raw declarations in [`ffi`]. Every shim call returns a status code and message (the
 //! shim catches every C++ exception), so errors come back as [`VdbError`].
+//!
+//! Why one file of ~1000 lines: it is grin's only `unsafe` code; every FFI call and its
+//! safety argument stays in one place to be read (and reviewed) together.
 
 #![expect(
     unsafe_code,
