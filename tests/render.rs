@@ -314,8 +314,15 @@ fn interrupted_render_leaves_no_output_file() {
         child.try_wait().expect("status").is_none(),
         "render finished too soon to interrupt"
     );
-    child.kill().expect("kill");
-    child.wait().expect("reaped");
+    // SIGTERM mid-render: grin's handler exits 130 having written nothing (the write
+    // phase itself is interrupted in tests/output.rs).
+    let killed = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(killed.success());
+    let status = child.wait().expect("reaped");
+    assert_eq!(status.code(), Some(130), "{status:?}");
     let left: Vec<_> = std::fs::read_dir(dir.path())
         .expect("ls")
         .map(|e| e.expect("entry").file_name())
