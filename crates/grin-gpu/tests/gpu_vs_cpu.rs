@@ -100,7 +100,23 @@ fn compare_scene_file(ctx: &grin_gpu::GpuContext, path: &Path) {
         "{name}: mean steps CPU {sc} vs GPU {sg}"
     );
     harness::assert_images_agree(&name, &cpu, &gpu, MEAN_TOL, P99_TOL);
+    // The AOVs agree too (measured on every example scene: no status differs; p99 exit
+    // direction <= 1.4e-5 rad, p99 |OPD difference| <= 5.2e-5 (grin-rod), a NaN counting
+    // as infinite).
+    let aov = harness::aov_diff(&cpu, &gpu);
+    eprintln!("{name}: AOVs {aov:?}");
+    assert!(aov.exited > 0, "{name}: no pixel exited the medium");
+    assert!(aov.status_mismatch <= AOV_STATUS_TOL, "{name}: {aov:?}");
+    assert!(aov.dir_p99 <= AOV_DIR_P99_TOL, "{name}: {aov:?}");
+    assert!(aov.opd_p99 <= AOV_OPD_P99_TOL, "{name}: {aov:?}");
 }
+
+/// Fraction of pixels whose status may differ between backends (none did).
+const AOV_STATUS_TOL: f64 = 2e-3;
+/// 99th percentile of the exit-direction angle between backends (rad).
+const AOV_DIR_P99_TOL: f64 = 1e-4;
+/// 99th percentile of |OPD_cpu - OPD_gpu| (world units).
+const AOV_OPD_P99_TOL: f64 = 2e-4;
 
 /// Steps per pixel over the pixels whose ray met the medium: the median and the mean
 /// without the top 5%.

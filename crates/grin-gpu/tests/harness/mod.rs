@@ -127,3 +127,65 @@ pub fn assert_images_agree(
         dir.display()
     );
 }
+
+/// The AOVs of two frames compared pixel by pixel: the fraction of pixels whose status
+/// differs, and over the pixels both backends report `exited`, the 99th percentile and
+/// the max of the exit-direction angle (rad) and of |OPD difference| (world units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AovDiff {
+    pub status_mismatch: f64,
+    pub exited: usize,
+    pub dir_p99: f64,
+    pub dir_max: f64,
+    pub opd_p99: f64,
+    pub opd_max: f64,
+}
+
+pub fn aov_diff(expected: &Frame, actual: &Frame) -> AovDiff {
+    assert_eq!(
+        (expected.width, expected.height),
+        (actual.width, actual.height)
+    );
+    let n = expected.pixels.len().max(1);
+    let mismatched = expected
+        .pixels
+        .iter()
+        .zip(&actual.pixels)
+        .filter(|(p, q)| p.status != q.status)
+        .count();
+    let (mut dirs, mut opds) = (Vec::new(), Vec::new());
+    for (p, q) in expected.pixels.iter().zip(&actual.pixels) {
+        if p.status == 1.0 && q.status == 1.0 {
+            let a = glam::Vec3::from(p.exit_dir).as_dvec3();
+            let b = glam::Vec3::from(q.exit_dir).as_dvec3();
+            // NaN compares as the largest difference.
+            dirs.push(if a.is_finite() && b.is_finite() {
+                a.angle_between(b)
+            } else {
+                f64::INFINITY
+            });
+            let d = f64::from(p.opd - q.opd).abs();
+            opds.push(if d.is_nan() { f64::INFINITY } else { d });
+        }
+    }
+    let p99 = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let p = v
+            .get((v.len() as f64 * 0.99) as usize)
+            .or(v.last())
+            .copied()
+            .unwrap_or(0.0);
+        (p, v.last().copied().unwrap_or(0.0))
+    };
+    let exited = dirs.len();
+    let (dir_p99, dir_max) = p99(&mut dirs);
+    let (opd_p99, opd_max) = p99(&mut opds);
+    AovDiff {
+        status_mismatch: mismatched as f64 / n as f64,
+        exited,
+        dir_p99,
+        dir_max,
+        opd_p99,
+        opd_max,
+    }
+}
