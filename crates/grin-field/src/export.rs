@@ -91,7 +91,7 @@ pub fn export_vdb(
     };
     let mut writer = VdbWriter::new()?;
     writer.add_float(
-        "delta_n",
+        EXPORT_GRIDS[0],
         &DenseGrid {
             bbox,
             world_from_index,
@@ -100,7 +100,7 @@ pub fn export_vdb(
         &scalar_opts,
     )?;
     writer.add_vec3(
-        "grad_n",
+        EXPORT_GRIDS[1],
         &DenseGrid {
             bbox,
             world_from_index,
@@ -110,20 +110,16 @@ pub fn export_vdb(
     )?;
     writer.add_file_meta("creator", "grin export")?;
     writer.add_file_meta("grin_input", &input.display().to_string())?;
-    let mut vdb_error = None;
-    let staged = grin_output::stage_path(output, |tmp| {
-        let verified = writer.write(tmp).and_then(|()| verify(tmp));
-        verified.map_err(|e| {
-            let e = rename_path(e, output);
-            let message = e.to_string();
-            vdb_error = Some(e);
-            message
-        })
-    });
-    let staged = match (staged, vdb_error) {
-        (Err(_), Some(e)) => return Err(ExportError::Vdb(e)),
-        (staged, _) => staged?,
-    };
+    let staged = grin_output::stage_with(output, |tmp| {
+        writer
+            .write(tmp)
+            .and_then(|()| verify(tmp))
+            .map_err(|e| rename_path(e, output))
+    })
+    .map_err(|e| match e {
+        grin_output::StageError::Output(e) => ExportError::Write(e),
+        grin_output::StageError::Writer(e) => ExportError::Vdb(e),
+    })?;
     grin_output::commit(vec![staged])?;
     Ok(())
 }

@@ -158,17 +158,6 @@ pub struct Staged {
     tmp: Option<tempfile::TempPath>,
 }
 
-impl Staged {
-    /// The path as the user gave it.
-    pub fn target(&self) -> &Path {
-        &self.target
-    }
-    /// Where the bytes go.
-    pub fn destination(&self) -> &Destination {
-        &self.destination
-    }
-}
-
 impl Drop for Staged {
     fn drop(&mut self) {
         if let Some(tmp) = self.tmp.take() {
@@ -179,13 +168,28 @@ impl Drop for Staged {
     }
 }
 
+/// Why [`stage_with`] failed: the target could not be staged, or the caller's writer
+/// failed with its own error.
+#[derive(Debug)]
+pub enum StageError<E> {
+    Output(OutputError),
+    Writer(E),
+}
+
+impl<E> From<OutputError> for StageError<E> {
+    fn from(e: OutputError) -> Self {
+        StageError::Output(e)
+    }
+}
+
 /// Stage `target` by letting `write` write the whole output to the temporary file whose
-/// path it is given (for writers that only take a path: EXR, OpenVDB). The file is synced
-/// before this returns, so a full disk fails here and not after a rename.
-pub fn stage_path(
+/// path it is given (for writers that only take a path: EXR, OpenVDB), keeping the
+/// writer's own error type. The file is synced before this returns, so a full disk fails
+/// here and not after a rename.
+pub fn stage_with<E>(
     target: &Path,
-    write: impl FnOnce(&Path) -> Result<(), String>,
-) -> Result<Staged, OutputError> {
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<Staged, StageError<E>> {
     let destination = Destination::resolve(target)?;
     let dir = match &destination {
         Destination::Replace { file } => file
@@ -210,23 +214,13 @@ pub fn stage_path(
         guard.insert(tmp.to_path_buf());
         tmp
     };
+    let tmp_path = tmp.to_path_buf();
     let staged = Staged {
         target: target.to_owned(),
         destination,
         tmp: Some(tmp),
     };
-    let tmp_path = staged
-        .tmp
-        .as_ref()
-        .map(|t| t.to_path_buf())
-        .unwrap_or_default();
-    write(&tmp_path).map_err(|message| OutputError::Writer {
-        path: target.to_owned(),
-        message: message.replace(
-            &tmp_path.display().to_string(),
-            &target.display().to_string(),
-        ),
-    })?;
+    write(&tmp_path).map_err(StageError::Writer)?;
     // tempfile creates its files 0600; an output gets the mode of the file it replaces,
     // or the usual 0644.
     let mode = match &staged.destination {
@@ -242,32 +236,41 @@ pub fn stage_path(
     Ok(staged)
 }
 
-/// Stage `target` by letting `write` write into a buffered writer (flushed and synced
-/// here, so every write error surfaces).
+/// [`stage_with`] for writers whose errors are text; a message naming the temporary file
+/// names the target instead.
+pub fn stage_path(
+    target: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<Staged, OutputError> {
+    let mut tmp_shown = String::new();
+    stage_with(target, |tmp| {
+        tmp_shown = tmp.display().to_string();
+        write(tmp)
+    })
+    .map_err(|e| match e {
+        StageError::Output(e) => e,
+        StageError::Writer(message) => OutputError::Writer {
+            path: target.to_owned(),
+            message: message.replace(&tmp_shown, &target.display().to_string()),
+        },
+    })
+}
+
+/// Stage `target` by letting `write` write into a buffered writer (flushed here; synced
+/// by [`stage_with`], so every write error surfaces).
 pub fn stage_writer(
     target: &Path,
     write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<Staged, OutputError> {
-    let mut failure = None;
-    let staged = stage_path(target, |tmp| {
-        let result = File::create(tmp).and_then(|file| {
-            let mut w = io::BufWriter::new(file);
-            write(&mut w)?;
-            w.flush()?;
-            w.into_inner()
-                .map_err(io::IntoInnerError::into_error)?
-                .sync_all()
-        });
-        result.map_err(|e| {
-            let message = plain(&e);
-            failure = Some(e);
-            message
-        })
-    });
-    match (staged, failure) {
-        (Err(_), Some(source)) => Err(OutputError::io(target, source)),
-        (staged, _) => staged,
-    }
+    stage_with(target, |tmp| {
+        let mut w = io::BufWriter::new(File::create(tmp)?);
+        write(&mut w)?;
+        w.flush()
+    })
+    .map_err(|e| match e {
+        StageError::Output(e) => e,
+        StageError::Writer(err) => OutputError::io(target, err),
+    })
 }
 
 /// Put every staged output in place, in order. The signal handler waits while this runs.

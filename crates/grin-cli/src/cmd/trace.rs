@@ -231,9 +231,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 0.0
             },
         };
-        // With the table itself on stdout (`-o -`), the summary goes to stderr.
+        // Where the table itself went to a stream (`-o -`, a device: it may be stdout), the
+        // summary goes to stderr, as `grin render` does.
         let text = serde_json::to_string(&summary)?;
-        if args.output.as_os_str() == "-" {
+        if grin_output::Destination::resolve(&args.output).is_ok_and(|d| d.is_stream()) {
             eprintln!("{text}");
         } else {
             outln!("{text}");
