@@ -4,7 +4,7 @@
 # Idempotent: does nothing when everything is present.
 set -euo pipefail
 pkgs=(libopenvdb-dev libboost-dev libtbb-dev libopenvdb-tools python3-openvdb
-      mesa-vulkan-drivers libvulkan1 g++ pkg-config)
+      mesa-vulkan-drivers libvulkan1 g++ pkg-config fonts-dejavu-core)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

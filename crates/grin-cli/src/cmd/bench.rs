@@ -1,5 +1,6 @@
 //! `grin bench`: one module per mode (`grin bench <mode>`).
 
+mod accuracy;
 mod bake;
 mod speed;
 
@@ -20,11 +21,16 @@ pub enum Mode {
     /// Procedural noise (the paper: fBm + gradient at every stage) vs the baked field on
     /// the CPU: frame cost and speedup; bake time and bytes per resolution.
     Bake(bake::Args),
+    /// Error against cost for every integrator, step policy, exit method and precision
+    /// on reference fields (exact solutions where known): CSV, charts, the Pareto front,
+    /// measured convergence orders.
+    Accuracy(accuracy::Args),
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.mode {
         Mode::Speed(a) => speed::run(a),
         Mode::Bake(a) => bake::run(a),
+        Mode::Accuracy(a) => accuracy::run(a),
     }
 }

@@ -1,0 +1,373 @@
+//! The reference cases of `grin bench accuracy`: a field, a bundle of rays through it and,
+//! where one is known, the exact way each ray leaves.
+//!
+//! Exact solutions (derivations in docs/accuracy.md):
+//! - **Luneburg** (n^2 = 2 - (r/R)^2, ambient 1): a ray parallel to +z at impact parameter
+//!   p leaves at the antipode (0, 0, R) of its entry direction, with |d x z| = p / R (angular
+//!   momentum), and the optical path inside is pi R / 2 + sqrt(R^2 - p^2) (Fermat: every ray
+//!   of the parallel beam has the same optical path to the focus).
+//! - **Maxwell fish-eye** (n = n0 / (1 + (r/a)^2), bounds r < a, ambient n0 / 2): rays are
+//!   circles through a point r0 and its conjugate -a^2 r0 / |r0|^2; the exit point and
+//!   direction are where that circle meets the sphere (the optical path is measured against
+//!   the numerical reference).
+//! - **GRIN rod** (n^2 = n0^2 (1 - a^2 rho^2), axis z, box bounds): in the t parameter the
+//!   transverse motion is harmonic, x(t) = x_e cos(w t) + (T_x / w) sin(w t) with w = n0 a,
+//!   and T_z is constant; the exit face, point, direction (Snell at the face) and optical
+//!   path (the integral of n^2 dt) are closed forms.
+//!
+//! The other fields (Gaussian plume, an `expr` formula, fBm noise, and baked grids of the
+//! analytic ones) have no closed form: their reference is the Dormand-Prince pair at a
+//! tolerance of 1e-12 R in f64 with the bisection exit on the *unbaked* source, so a baked
+//! case's error includes what the bake itself lost.
+
+use std::f64::consts::PI;
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::DVec3;
+use grin_field::IndexField;
+use grin_field::bake::{self, BakeOptions};
+use grin_field::baked::{Interp, Storage};
+use grin_scene::MediumSpec;
+
+/// How a ray leaves the medium (what every method is measured on).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Exit {
+    pub position: DVec3,
+    pub direction: DVec3,
+    /// Optical path inside the medium; `None` where the exact solution gives none.
+    pub opl: Option<f64>,
+}
+
+/// One reference case.
+#[derive(Debug, Clone)]
+pub struct Case {
+    /// Short name used in file names, CSV and charts (`luneburg`, `plume-baked-tricubic-f32`).
+    pub name: String,
+    /// The field traced.
+    pub field: Arc<dyn IndexField>,
+    /// The field the reference is computed on (the unbaked source of a baked case).
+    pub source: Arc<dyn IndexField>,
+    /// Rays (origin, unit direction).
+    pub rays: Vec<(DVec3, DVec3)>,
+    /// Exact exits, one per ray, where known.
+    pub exact: Option<Vec<Exit>>,
+    /// The field is smooth (C2 at least) inside and has no error floor of its own (not
+    /// baked): convergence orders are measured on it.
+    pub smooth: bool,
+    /// Length scale errors are divided by (the bounds' radius).
+    pub scale: f64,
+}
+
+/// Which cases a run includes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Suite {
+    /// A few cases, few rays: CI's smoke test.
+    Quick,
+    /// Every case.
+    Full,
+}
+
+fn medium(toml_text: &str) -> anyhow::Result<Arc<dyn IndexField>> {
+    let spec: MediumSpec = toml::from_str(toml_text)?;
+    Ok(grin_field::build_field(&spec, Path::new("."))?)
+}
+
+/// Rays parallel to +z from z = -2R through a disc of impact parameters up to 0.85 R, at
+/// several azimuths (3D, not one plane).
+fn parallel_beam(count: usize, radius: f64) -> (Vec<(DVec3, DVec3)>, Vec<f64>) {
+    let mut rays = Vec::with_capacity(count);
+    let mut impacts = Vec::with_capacity(count);
+    for i in 0..count {
+        let p = radius * (0.05 + 0.8 * (i as f64 + 0.5) / count as f64);
+        let phi = 2.399_963 * i as f64; // golden angle
+        let o = DVec3::new(p * phi.cos(), p * phi.sin(), -2.0 * radius);
+        rays.push((o, DVec3::Z));
+        impacts.push(p);
+    }
+    (rays, impacts)
+}
+
+/// The Luneburg lens of radius `r` centred at the origin, with its exact exits.
+pub fn luneburg(count: usize) -> anyhow::Result<Case> {
+    let r = 1.0;
+    let field = medium(
+        "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"luneburg\" }",
+    )?;
+    let (rays, impacts) = parallel_beam(count, r);
+    let exact = rays
+        .iter()
+        .zip(&impacts)
+        .map(|((o, _), &p)| {
+            let e = DVec3::new(o.x, o.y, 0.0) / p;
+            let s = p / r;
+            Exit {
+                position: DVec3::new(0.0, 0.0, r),
+                direction: -e * s + DVec3::Z * (1.0 - s * s).sqrt(),
+                opl: Some(PI * r / 2.0 + (r * r - p * p).sqrt()),
+            }
+        })
+        .collect();
+    Ok(Case {
+        name: "luneburg".into(),
+        source: field.clone(),
+        field,
+        rays,
+        exact: Some(exact),
+        smooth: true,
+        scale: r,
+    })
+}
+
+/// Maxwell's fish-eye (n0 = 2, a = 1): rays start inside, at points off the centre, in
+/// assorted directions; exact exits from the circle through each start and its conjugate.
+pub fn fish_eye(count: usize) -> anyhow::Result<Case> {
+    let a = 1.0;
+    let field = medium(
+        "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nambient_index = 1.0\nfield = { kind = \"maxwell-fish-eye\", n0 = 2.0, a = 1.0 }",
+    )?;
+    let mut rays = Vec::with_capacity(count);
+    let mut exact = Vec::with_capacity(count);
+    for i in 0..count {
+        let f = (i as f64 + 0.5) / count as f64;
+        let phi = 2.399_963 * i as f64;
+        let r0 = DVec3::new(0.2 + 0.4 * f, 0.15 * phi.sin(), 0.1 * phi.cos());
+        // Directions spread over a cone around +y (never radial).
+        let d0 = DVec3::new(0.3 * phi.cos(), 1.0, 0.4 * phi.sin()).normalize();
+        rays.push((r0, d0));
+        exact.push(fish_eye_exit(r0, d0, a));
+    }
+    Ok(Case {
+        name: "fish-eye".into(),
+        source: field.clone(),
+        field,
+        rays,
+        exact: Some(exact),
+        smooth: true,
+        scale: a,
+    })
+}
+
+/// Where the fish-eye ray from `r0` (|r0| < a) along unit `d0` leaves the sphere r = a.
+pub fn fish_eye_exit(r0: DVec3, d0: DVec3, a: f64) -> Exit {
+    let conj = -r0 * (a * a / r0.length_squared());
+    // Unit normal to d0 in the plane of r0 and d0 (that plane holds the conjugate point).
+    let m = (r0 - d0 * r0.dot(d0)).normalize();
+    let q = r0 - conj;
+    // Centre c = r0 + rho m with |c - conj| = |rho|.
+    let rho = -q.length_squared() / (2.0 * m.dot(q));
+    let c = r0 + m * rho;
+    let radius = rho.abs();
+    // Orthonormal in-plane frame at the centre: u towards r0, v along the travel at r0.
+    let u = (r0 - c) / radius;
+    let v = d0;
+    // Points c + radius (cos s u + sin s v): first s > 0 where |x| = a.
+    // |x|^2 = |c|^2 + radius^2 + 2 radius (cos s (c.u) + sin s (c.v)) = a^2.
+    let (cu, cv) = (c.dot(u), c.dot(v));
+    let k = (a * a - c.length_squared() - radius * radius) / (2.0 * radius);
+    let amp = (cu * cu + cv * cv).sqrt();
+    let base = cv.atan2(cu);
+    let delta = (k / amp).clamp(-1.0, 1.0).acos();
+    let wrap = |s: f64| {
+        let t = s.rem_euclid(2.0 * PI);
+        if t < 1e-12 { t + 2.0 * PI } else { t }
+    };
+    let s = wrap(base + delta).min(wrap(base - delta));
+    let position = c + (u * s.cos() + v * s.sin()) * radius;
+    let direction = (-u * s.sin() + v * s.cos()).normalize();
+    Exit {
+        position,
+        direction,
+        opl: None,
+    }
+}
+
+/// A GRIN rod (n0 = 1.5, a = 0.8, axis z) in the box [-0.5, 0.5]^2 x [-1, 1] in air, rays
+/// entering the z = -1 face slightly tilted; all of them leave through z = +1.
+pub fn grin_rod(count: usize) -> anyhow::Result<Case> {
+    let (n0, a) = (1.5, 0.8);
+    let field = medium(
+        "bounds = { box = { min = [-0.5, -0.5, -1.0], max = [0.5, 0.5, 1.0] } }\nfield = { kind = \"grin-rod\", n0 = 1.5, a = 0.8, axis = \"z\" }",
+    )?;
+    let mut rays = Vec::with_capacity(count);
+    let mut exact = Vec::with_capacity(count);
+    for i in 0..count {
+        let f = (i as f64 + 0.5) / count as f64;
+        let phi = 2.399_963 * i as f64;
+        let e = DVec3::new(0.25 * f * phi.cos(), 0.25 * f * phi.sin(), -1.0);
+        let d = DVec3::new(0.1 * phi.sin(), -0.08 * phi.cos(), 1.0).normalize();
+        let origin = e - d * (0.5 / d.z);
+        rays.push((origin, d));
+        exact.push(rod_exit(e, d, n0, a, 1.0));
+    }
+    Ok(Case {
+        name: "grin-rod".into(),
+        source: field.clone(),
+        field,
+        rays,
+        exact: Some(exact),
+        smooth: true,
+        scale: DVec3::new(0.5, 0.5, 1.0).length(),
+    })
+}
+
+/// The rod ray entering at `e` (on z = -z_half) along unit `d` from air: exact exit
+/// through z = +z_half (the caller keeps the transverse amplitude inside the box).
+pub fn rod_exit(e: DVec3, d: DVec3, n0: f64, a: f64, z_half: f64) -> Exit {
+    let w = n0 * a;
+    let n2 = |x: f64, y: f64| n0 * n0 * (1.0 - a * a * (x * x + y * y));
+    // Snell at the entry face: T's tangential part is the incoming one (ambient 1).
+    let (tx, ty) = (d.x, d.y);
+    let tz = (n2(e.x, e.y) - tx * tx - ty * ty).sqrt();
+    let t_end = 2.0 * z_half / tz;
+    let (c, s) = ((w * t_end).cos(), (w * t_end).sin());
+    let x = e.x * c + tx / w * s;
+    let y = e.y * c + ty / w * s;
+    let vx = -e.x * w * s + tx * c;
+    let vy = -e.y * w * s + ty * c;
+    // integral of x^2 over [0, t] for x = A cos wt + B sin wt.
+    let sq = |aa: f64, bb: f64| {
+        aa * aa * (t_end / 2.0 + (2.0 * w * t_end).sin() / (4.0 * w))
+            + bb * bb * (t_end / 2.0 - (2.0 * w * t_end).sin() / (4.0 * w))
+            + aa * bb * s * s / w
+    };
+    let rho2 = sq(e.x, tx / w) + sq(e.y, ty / w);
+    let opl = n0 * n0 * (t_end - a * a * rho2);
+    let out_z = (1.0 - vx * vx - vy * vy).sqrt();
+    Exit {
+        position: DVec3::new(x, y, z_half),
+        direction: DVec3::new(vx, vy, out_z),
+        opl: Some(opl),
+    }
+}
+
+/// Rays across a box along +z, on a grid of (x, y) offsets.
+fn box_rays(count: usize, lo: DVec3, hi: DVec3) -> Vec<(DVec3, DVec3)> {
+    let side = (count as f64).sqrt().ceil() as usize;
+    let mut rays = Vec::with_capacity(count);
+    for i in 0..count {
+        let (ix, iy) = (i % side, i / side);
+        let fx = (ix as f64 + 0.5) / side as f64;
+        let fy = (iy as f64 + 0.5) / side as f64;
+        let x = lo.x + (hi.x - lo.x) * (0.1 + 0.8 * fx);
+        let y = lo.y + (hi.y - lo.y) * (0.1 + 0.8 * fy);
+        let d = DVec3::new(0.05 * (fy - 0.5), 0.05 * (fx - 0.5), 1.0).normalize();
+        rays.push((DVec3::new(x, y, lo.z - 0.5), d));
+    }
+    rays
+}
+
+fn numeric_case(name: &str, field: Arc<dyn IndexField>, rays: Vec<(DVec3, DVec3)>) -> Case {
+    let scale = field.bounds().radius();
+    Case {
+        name: name.into(),
+        source: field.clone(),
+        field,
+        rays,
+        exact: None,
+        smooth: true,
+        scale,
+    }
+}
+
+/// Hot air: two Gaussian plumes (delta_n 6e-3 and 4e-3, widths 0.25 and 0.15) in a box.
+pub fn plume(count: usize) -> anyhow::Result<Case> {
+    let field = medium(
+        "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.000293\nfield = { kind = \"plume\", plumes = [ { a = 6.0e-3, center = [0.0, 0.0, 0.0], s = 0.25 }, { a = 4.0e-3, center = [0.3, -0.2, 0.4], s = 0.15 } ] }",
+    )?;
+    let rays = box_rays(count, DVec3::splat(-0.6), DVec3::splat(0.6));
+    Ok(numeric_case("plume", field, rays))
+}
+
+/// A user formula: a ring of warm air whose strength varies along z.
+pub fn expr(count: usize) -> anyhow::Result<Case> {
+    let field = medium(
+        "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.0003\nfield = { kind = \"expr\", n = \"1.0003 - 5e-3*exp(-(x*x+y*y-0.12)^2/0.005)*(1+0.5*sin(3*z))\" }",
+    )?;
+    let rays = box_rays(count, DVec3::splat(-0.7), DVec3::splat(0.7));
+    Ok(numeric_case("expr", field, rays))
+}
+
+/// fBm noise (3 octaves, delta_n up to 2e-3) in a ball.
+pub fn noise(count: usize) -> anyhow::Result<Case> {
+    let field = medium(
+        "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nambient_index = 1.0003\nfield = { kind = \"noise\", noise = \"fbm\", octaves = 3, frequency = 2.0, amplitude = 2e-3, seed = 7 }",
+    )?;
+    let (rays, _) = parallel_beam(count, 1.0);
+    Ok(numeric_case("noise", field, rays))
+}
+
+/// `base` baked at `resolution` nodes with `interp` and `storage`; the reference stays
+/// the unbaked source's (exact where known).
+pub fn baked(
+    base: &Case,
+    resolution: usize,
+    interp: Interp,
+    storage: Storage,
+) -> anyhow::Result<Case> {
+    let opts = BakeOptions {
+        resolution: Some(resolution),
+        interp,
+        storage: Some(storage),
+        error_points: 2000,
+        ..BakeOptions::default()
+    };
+    let (field, _report) = bake::bake(base.source.as_ref(), &opts, &|_, _, _| {})?;
+    let interp_name = match interp {
+        Interp::Trilinear => "trilinear",
+        Interp::Tricubic => "tricubic",
+    };
+    let storage_name = match storage {
+        Storage::F32 => "f32",
+        Storage::I16 => "i16",
+    };
+    Ok(Case {
+        name: format!(
+            "{}-baked{resolution}-{interp_name}-{storage_name}",
+            base.name
+        ),
+        field: Arc::new(field),
+        source: base.source.clone(),
+        rays: base.rays.clone(),
+        exact: base.exact.clone(),
+        // The bake's own error is a floor under every method: no order is measured on it.
+        smooth: false,
+        scale: base.scale,
+    })
+}
+
+/// The cases of a suite.
+pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
+    Ok(match suite {
+        Suite::Quick => {
+            let l = luneburg(12)?;
+            let p = plume(9)?;
+            let lb = baked(&l, 32, Interp::Tricubic, Storage::F32)?;
+            vec![l, p, lb]
+        }
+        Suite::Full => {
+            let l = luneburg(48)?;
+            let p = plume(36)?;
+            let rod = grin_rod(32)?;
+            let mut v = vec![
+                l.clone(),
+                fish_eye(32)?,
+                rod,
+                p.clone(),
+                expr(36)?,
+                noise(32)?,
+            ];
+            for base in [&l, &p] {
+                for (interp, storage) in [
+                    (Interp::Trilinear, Storage::I16),
+                    (Interp::Trilinear, Storage::F32),
+                    (Interp::Tricubic, Storage::F32),
+                    (Interp::Tricubic, Storage::I16),
+                ] {
+                    v.push(baked(base, 64, interp, storage)?);
+                }
+            }
+            v
+        }
+    })
+}

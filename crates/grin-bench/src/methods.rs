@@ -1,0 +1,179 @@
+//! The methods a sweep runs: integrator x step policy x exit method x precision, each at
+//! a list of step sizes or tolerances (relative to the case's length scale).
+
+use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
+use grin_trace::TraceSettings;
+
+/// How step lengths are chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Policy {
+    /// ds = param * scale.
+    Fixed,
+    /// The paper's heuristic, between param * scale / 8 and param * scale.
+    Heuristic,
+    /// Error control at tolerance param * scale (embedded pair for `adaptive`, step
+    /// doubling for the others).
+    Adaptive,
+}
+
+impl Policy {
+    pub const ALL: [Policy; 3] = [Policy::Fixed, Policy::Heuristic, Policy::Adaptive];
+    pub fn name(self) -> &'static str {
+        match self {
+            Policy::Fixed => "fixed",
+            Policy::Heuristic => "heuristic",
+            Policy::Adaptive => "adaptive",
+        }
+    }
+}
+
+/// Arithmetic of the integration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Precision {
+    F64,
+    /// What the GPU computes (the CPU f32 twin).
+    F32,
+}
+
+impl Precision {
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F64 => "f64",
+            Precision::F32 => "f32",
+        }
+    }
+}
+
+/// Integrator, step policy, exit method and precision: one curve of a chart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Method {
+    pub integrator: IntegratorKind,
+    pub policy: Policy,
+    pub exit: ExitMethod,
+    pub precision: Precision,
+}
+
+/// Name of an exit method as the scene file writes it.
+pub fn exit_name(exit: ExitMethod) -> &'static str {
+    match exit {
+        ExitMethod::Hermite => "hermite",
+        ExitMethod::Bisection => "bisection",
+    }
+}
+
+/// The integrator's name as charts show it (`adaptive` is the Dormand-Prince pair).
+pub fn integrator_label(kind: IntegratorKind) -> &'static str {
+    match kind {
+        IntegratorKind::Adaptive => "dopri",
+        k => k.name(),
+    }
+}
+
+impl Method {
+    /// `rk4 fixed hermite f64`.
+    pub fn label(&self) -> String {
+        format!(
+            "{} {} {} {}",
+            integrator_label(self.integrator),
+            self.policy.name(),
+            exit_name(self.exit),
+            self.precision.name()
+        )
+    }
+
+    /// The paper's method: Sharma's integrator, the gradient heuristic, bisection exit.
+    pub fn is_paper(&self) -> bool {
+        self.integrator == IntegratorKind::Sharma
+            && self.policy == Policy::Heuristic
+            && self.exit == ExitMethod::Bisection
+    }
+
+    /// Tracer settings at `param` (step or tolerance relative to `scale`).
+    pub fn settings(&self, param: f64, scale: f64) -> TraceSettings {
+        let step = match self.policy {
+            Policy::Fixed => StepSpec::Fixed(param * scale),
+            Policy::Heuristic => StepSpec::Heuristic {
+                min: param * scale / 8.0,
+                max: param * scale,
+                amplitude: None,
+            },
+            Policy::Adaptive => StepSpec::Adaptive {
+                tolerance: param * scale,
+                initial: None,
+            },
+        };
+        TraceSettings {
+            integrator: self.integrator,
+            step,
+            max_steps: MAX_STEPS,
+            exit: self.exit,
+            macro_cells: true,
+        }
+    }
+
+    /// The parameters swept for this method.
+    pub fn params(&self, quick: bool) -> Vec<f64> {
+        let order = grin_trace::integrate::order(self.integrator) as i32;
+        match self.policy {
+            Policy::Fixed | Policy::Heuristic => {
+                let ks: Vec<i32> = if quick {
+                    vec![2, 4, 6]
+                } else {
+                    (1..=10).collect()
+                };
+                ks.into_iter().map(|k| 2f64.powi(-k)).collect()
+            }
+            Policy::Adaptive => {
+                // Low-order methods at tight tolerances need 10^5+ steps a ray: stop
+                // where they would (euler 1e-6, verlet 1e-9, the others 1e-11).
+                let finest = (3 + 3 * order).min(11);
+                let ks: Vec<i32> = if quick {
+                    vec![3, 5, 7].into_iter().filter(|&k| k <= finest).collect()
+                } else {
+                    (2..=finest).collect()
+                };
+                ks.into_iter().map(|k| 10f64.powi(-k)).collect()
+            }
+        }
+    }
+}
+
+/// Step cap of every sweep run (no configuration swept needs more than ~10^4).
+pub const MAX_STEPS: u32 = 1 << 20;
+
+/// Every method of a sweep: all integrators and policies in both precisions; the quick
+/// suite keeps the Hermite exit only, plus the paper's method with its bisection.
+pub fn all_methods(quick: bool) -> Vec<Method> {
+    let exits: &[ExitMethod] = if quick {
+        &[ExitMethod::Hermite]
+    } else {
+        &[ExitMethod::Hermite, ExitMethod::Bisection]
+    };
+    let mut v = Vec::new();
+    for &integrator in &IntegratorKind::ALL {
+        for policy in Policy::ALL {
+            for &exit in exits {
+                for precision in [Precision::F64, Precision::F32] {
+                    v.push(Method {
+                        integrator,
+                        policy,
+                        exit,
+                        precision,
+                    });
+                }
+            }
+        }
+    }
+    if quick {
+        // The paper's method is one of the curves in every suite.
+        for precision in [Precision::F64, Precision::F32] {
+            v.push(Method {
+                integrator: IntegratorKind::Sharma,
+                policy: Policy::Heuristic,
+                exit: ExitMethod::Bisection,
+                precision,
+            });
+        }
+    }
+    v
+}

@@ -1,0 +1,298 @@
+//! What `grin bench accuracy` writes: accuracy.csv (every run), orders.csv, summary.md
+//! (the method to use per error decade, the paper's method beside it, measured orders)
+//! and one chart per case and precision (SVG and PNG), all committed together.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use grin_output::{Staged, commit, stage_writer};
+use grin_scene::ExitMethod;
+
+use crate::accuracy::{AccuracyRun, DECADES, Point, cheapest_at, pareto};
+use crate::chart::{Chart, Curve, LineKind, png, svg};
+use crate::methods::{Policy, Precision};
+
+/// Points of one case and precision.
+fn select<'a>(run: &'a AccuracyRun, case: &str, precision: Precision) -> Vec<&'a Point> {
+    run.points
+        .iter()
+        .filter(|p| p.case == case && p.method.precision == precision)
+        .collect()
+}
+
+/// `rk4 adaptive 1e-6 (hermite)`: a run as the summary names it.
+pub fn point_name(p: &Point) -> String {
+    let param = match p.method.policy {
+        Policy::Adaptive => format!("tol {:.0e}", p.param),
+        _ => format!("ds {}", fraction(p.param)),
+    };
+    format!("{} {} {} ({} exit)", p.integrator, p.policy, param, p.exit)
+}
+
+/// 0.0625 -> "R/16".
+fn fraction(x: f64) -> String {
+    let inv = 1.0 / x;
+    if (inv - inv.round()).abs() < 1e-9 {
+        format!("R/{}", inv.round())
+    } else {
+        format!("{x}R")
+    }
+}
+
+/// The chart of one case and precision.
+pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart {
+    let pts = select(run, case, precision);
+    let mut curves = Vec::new();
+    let integrators = grin_scene::IntegratorKind::ALL;
+    for (ci, &kind) in integrators.iter().enumerate() {
+        for policy in Policy::ALL {
+            for exit in [ExitMethod::Hermite, ExitMethod::Bisection] {
+                // Bisection exits are drawn for the paper's method only (the CSV has all).
+                let paper =
+                    kind == grin_scene::IntegratorKind::Sharma && policy == Policy::Heuristic;
+                if exit == ExitMethod::Bisection && !paper {
+                    continue;
+                }
+                let mut c: Vec<(f64, f64)> = pts
+                    .iter()
+                    .filter(|p| {
+                        p.method.integrator == kind
+                            && p.method.policy == policy
+                            && p.method.exit == exit
+                            && !p.failed()
+                    })
+                    .map(|p| (p.evals_per_ray, p.err_dir))
+                    .collect();
+                if c.is_empty() {
+                    continue;
+                }
+                c.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let mut label = format!(
+                    "{} {}",
+                    crate::methods::integrator_label(kind),
+                    policy.name()
+                );
+                if exit == ExitMethod::Bisection {
+                    label.push_str(" bisection (paper)");
+                }
+                curves.push(Curve {
+                    label,
+                    color: ci,
+                    style: match policy {
+                        Policy::Fixed => LineKind::Solid,
+                        Policy::Heuristic => LineKind::Dotted,
+                        Policy::Adaptive => LineKind::Dashed,
+                    },
+                    points: c,
+                });
+            }
+        }
+    }
+    let front_idx = pareto(&pts);
+    let front = front_idx
+        .iter()
+        .map(|&i| (pts[i].evals_per_ray, pts[i].err_dir))
+        .collect();
+    let notes = DECADES
+        .iter()
+        .filter_map(|&target| {
+            cheapest_at(&pts, target).map(|p| {
+                (
+                    p.evals_per_ray,
+                    p.err_dir,
+                    format!("  <= {target:.0e} rad: {}", point_name(p)),
+                )
+            })
+        })
+        .collect();
+    Chart {
+        title: format!(
+            "{case}: exit-direction error vs cost ({})",
+            precision.name()
+        ),
+        x_label: "field evaluations per ray".into(),
+        y_label: "worst exit-direction error (rad)".into(),
+        curves,
+        front,
+        notes,
+    }
+}
+
+/// The method to use at each decade, and what the paper's method costs there.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DecadeRow {
+    pub case: String,
+    pub precision: &'static str,
+    pub target: f64,
+    pub best: Option<String>,
+    pub best_evals: Option<f64>,
+    pub best_err: Option<f64>,
+    pub paper_evals: Option<f64>,
+    /// paper_evals / best_evals.
+    pub paper_ratio: Option<f64>,
+}
+
+pub fn decade_rows(run: &AccuracyRun) -> Vec<DecadeRow> {
+    let mut rows = Vec::new();
+    for case in &run.cases {
+        for precision in [Precision::F64, Precision::F32] {
+            let pts = select(run, &case.name, precision);
+            let paper: Vec<&Point> = pts
+                .iter()
+                .copied()
+                .filter(|p| p.method.is_paper())
+                .collect();
+            for target in DECADES {
+                let best = cheapest_at(&pts, target);
+                let paper_best = cheapest_at(&paper, target);
+                rows.push(DecadeRow {
+                    case: case.name.clone(),
+                    precision: precision.name(),
+                    target,
+                    best: best.map(point_name),
+                    best_evals: best.map(|p| p.evals_per_ray),
+                    best_err: best.map(|p| p.err_dir),
+                    paper_evals: paper_best.map(|p| p.evals_per_ray),
+                    paper_ratio: match (paper_best, best) {
+                        (Some(a), Some(b)) => Some(a.evals_per_ray / b.evals_per_ray),
+                        _ => None,
+                    },
+                });
+            }
+        }
+    }
+    rows
+}
+
+fn opt(x: Option<f64>, f: impl Fn(f64) -> String) -> String {
+    x.map_or_else(|| "-".into(), f)
+}
+
+/// summary.md.
+pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# grin bench accuracy\n");
+    let _ = writeln!(
+        s,
+        "`{command}` — {} runs over {} cases in {:.1} s.\n",
+        run.points.len(),
+        run.cases.len(),
+        run.seconds
+    );
+    let _ = writeln!(s, "## References\n");
+    let _ = writeln!(s, "| case | rays | reference | numerical vs exact (rad) |");
+    let _ = writeln!(s, "|---|---|---|---|");
+    for (c, r) in run.cases.iter().zip(&run.references) {
+        let kind = if c.exact.is_some() {
+            "exact"
+        } else {
+            "dopri 1e-12 on the source"
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {kind} | {} |",
+            c.name,
+            c.rays.len(),
+            opt(r.numeric_vs_exact, |x| format!("{x:.1e}"))
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n## The method to use per error decade (cheapest run meeting it)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| case | precision | error <= | cheapest | evals/ray | error | paper's method evals/ray | paper / cheapest |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    for r in decade_rows(run) {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.0e} | {} | {} | {} | {} | {} |",
+            r.case,
+            r.precision,
+            r.target,
+            r.best.clone().unwrap_or_else(|| "none reaches it".into()),
+            opt(r.best_evals, |x| format!("{x:.0}")),
+            opt(r.best_err, |x| format!("{x:.1e}")),
+            opt(r.paper_evals, |x| format!("{x:.0}")),
+            opt(r.paper_ratio, |x| format!("{x:.1}x")),
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n## Measured convergence orders (fixed steps, smooth cases)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| case | integrator | exit | precision | formal | measured | points |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    for o in &run.orders {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} |",
+            o.case,
+            o.integrator,
+            o.exit,
+            o.precision,
+            o.formal,
+            opt(o.measured, |x| format!("{x:.2}")),
+            o.points_used
+        );
+    }
+    let failed = run.points.iter().filter(|p| p.failed()).count();
+    let _ = writeln!(
+        s,
+        "\n{failed} of {} runs lost rays (status other than `exited`); they are in accuracy.csv with infinite error and not on the charts.",
+        run.points.len()
+    );
+    s
+}
+
+fn csv_text<T: serde::Serialize>(rows: &[T]) -> anyhow::Result<Vec<u8>> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    for r in rows {
+        w.serialize(r)?;
+    }
+    Ok(w.into_inner()
+        .map_err(|e| anyhow::Error::msg(e.to_string()))?)
+}
+
+fn stage_bytes(path: &Path, bytes: Vec<u8>) -> anyhow::Result<Staged> {
+    Ok(stage_writer(path, move |w| w.write_all(&bytes))?)
+}
+
+/// Write everything into `dir` (created if missing); returns the files written.
+pub fn write_accuracy(run: &AccuracyRun, dir: &Path, command: &str) -> anyhow::Result<Vec<String>> {
+    std::fs::create_dir_all(dir).map_err(|e| {
+        anyhow::Error::msg(format!(
+            "{}: cannot create: {}",
+            dir.display(),
+            grin_output::plain(&e)
+        ))
+    })?;
+    let mut staged = Vec::new();
+    let mut names = Vec::new();
+    let mut add = |name: String, bytes: Vec<u8>| -> anyhow::Result<()> {
+        staged.push(stage_bytes(&dir.join(&name), bytes)?);
+        names.push(name);
+        Ok(())
+    };
+    add("accuracy.csv".into(), csv_text(&run.points)?)?;
+    add("orders.csv".into(), csv_text(&run.orders)?)?;
+    add(
+        "summary.md".into(),
+        summary_markdown(run, command).into_bytes(),
+    )?;
+    for case in &run.cases {
+        for precision in [Precision::F64, Precision::F32] {
+            let chart = case_chart(run, &case.name, precision);
+            let stem = format!("chart-{}-{}", case.name, precision.name());
+            add(format!("{stem}.svg"), svg(&chart)?.into_bytes())?;
+            add(format!("{stem}.png"), png(&chart)?)?;
+        }
+    }
+    commit(staged)?;
+    Ok(names)
+}
