@@ -61,3 +61,51 @@ fn bench_bake_refuses_zero_rays() {
     assert!(err.contains("1..=16777216"), "{err}");
     assert!(out.stdout.is_empty());
 }
+
+/// CI's smoke test of `grin bench accuracy --quick` and `grin bench stability --quick`:
+/// both finish, write their files and report JSON a script can read.
+#[test]
+fn bench_accuracy_and_stability_quick_smoke() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let acc = dir.path().join("acc");
+    let out = grin()
+        .args(["bench", "accuracy", "--quick", "--json", "-o"])
+        .arg(&acc)
+        .output()
+        .expect("run grin");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "bench accuracy failed: {stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    assert_eq!(v["failed_runs"], 0, "{v}");
+    let orders = v["orders"].as_array().expect("orders");
+    let verlet = orders
+        .iter()
+        .find(|o| o["case"] == "luneburg" && o["integrator"] == "verlet" && o["precision"] == "f64")
+        .expect("verlet order on the Luneburg lens");
+    let slope = verlet["measured"].as_f64().expect("measured order");
+    assert!((slope - 2.0).abs() < 0.3, "verlet order {slope}");
+    for f in [
+        "accuracy.csv",
+        "orders.csv",
+        "summary.md",
+        "chart-luneburg-f64.svg",
+        "chart-luneburg-f64.png",
+    ] {
+        assert!(acc.join(f).is_file(), "missing {f}");
+    }
+
+    let stab = dir.path().join("stab");
+    let out = grin()
+        .args(["bench", "stability", "--quick", "--json", "-o"])
+        .arg(&stab)
+        .output()
+        .expect("run grin");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "bench stability failed: {stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    let cells = v["cells"].as_array().expect("cells");
+    assert!(cells.len() >= 9 * 18, "{} cells", cells.len());
+    assert!(cells.iter().all(|c| c["nan"] == false), "a cell wrote NaN");
+    let md = std::fs::read_to_string(stab.join("stability.md")).expect("stability.md");
+    assert!(md.contains("turning point below a face"));
+}

@@ -24,6 +24,9 @@ const MIN_FLIGHT_VOXELS: f32 = 1e-3;
 // fraction runs out of bits, then projects onto the surface, as the CPU's f32 path does).
 const EXIT_TOL_REL: f32 = 1e-12;
 const F32_EPSILON: f32 = 1.1920929e-7;
+// trace::ENTRY_NUDGE_EPS: a grazing entry point that rounds to outside the bounds is
+// moved inside by this many units of roundoff (else the first step "exits" at once).
+const ENTRY_NUDGE_EPS: f32 = 4.0;
 
 const END_EXITED: u32 = 0u;
 const END_OBJECT: u32 = 1u;
@@ -313,6 +316,10 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             return march_end(END_MISSED, STATUS_MISSED, origin, d, 1.0);
         }
         start = origin + d * max(b.s_in, 0.0);
+        if bounds_signed_distance(start) >= 0.0 {
+            let nudge = ENTRY_NUDGE_EPS * F32_EPSILON * (bounds_radius() + max(max(abs(start.x), abs(start.y)), abs(start.z)));
+            start = start - bounds_normal(start) * nudge;
+        }
     }
     // The first sample: where the ray enters, or where it starts inside.
     var s0 = sample_field(start);

@@ -282,7 +282,7 @@ pub fn plume(count: usize) -> anyhow::Result<Case> {
 /// A user formula: a ring of warm air whose strength varies along z.
 pub fn expr(count: usize) -> anyhow::Result<Case> {
     let field = medium(
-        "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.0003\nfield = { kind = \"expr\", n = \"1.0003 - 5e-3*exp(-(x*x+y*y-0.12)^2/0.005)*(1+0.5*sin(3*z))\" }",
+        "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.0003\nfield = { kind = \"expr\", n = \"1.0003 - 5e-3*exp(-((x*x+y*y-0.12)^2)/0.005)*(1+0.5*sin(3*z))\" }",
     )?;
     let rays = box_rays(count, DVec3::splat(-0.7), DVec3::splat(0.7));
     Ok(numeric_case("expr", field, rays))

@@ -8,3 +8,4 @@ pub mod cases;
 pub mod chart;
 pub mod methods;
 pub mod report;
+pub mod stability;

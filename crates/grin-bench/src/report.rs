@@ -296,3 +296,27 @@ pub fn write_accuracy(run: &AccuracyRun, dir: &Path, command: &str) -> anyhow::R
     commit(staged)?;
     Ok(names)
 }
+
+/// Write stability.md and stability.csv into `dir`; returns the files written.
+pub fn write_stability(
+    m: &crate::stability::Matrix,
+    dir: &Path,
+    command: &str,
+) -> anyhow::Result<Vec<String>> {
+    std::fs::create_dir_all(dir).map_err(|e| {
+        anyhow::Error::msg(format!(
+            "{}: cannot create: {}",
+            dir.display(),
+            grin_output::plain(&e)
+        ))
+    })?;
+    let staged = vec![
+        stage_bytes(&dir.join("stability.csv"), csv_text(&m.cells)?)?,
+        stage_bytes(
+            &dir.join("stability.md"),
+            crate::stability::markdown(m, command).into_bytes(),
+        )?,
+    ];
+    commit(staged)?;
+    Ok(vec!["stability.csv".into(), "stability.md".into()])
+}

@@ -166,10 +166,95 @@ fn check_size(text: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// Refuse a unary minus whose operand is raised to a power (`-x^2`, `exp(-(r/s)^2)`):
+/// exmex binds unary minus tighter than `^`, so it reads `-x^2` as `(-x)^2 = x^2`, the
+/// opposite of the mathematical convention: every Gaussian written the usual way would be
+/// silently wrong. The error names the column of the minus and both ways to write it.
+fn check_unary_minus_power(text: &str) -> Result<(), String> {
+    let chars: Vec<char> = text.chars().collect();
+    let skip_ws = |mut i: usize| {
+        while i < chars.len() && chars[i].is_whitespace() {
+            i += 1;
+        }
+        i
+    };
+    // End (exclusive) of the parenthesised group opening at `i`.
+    let group_end = |i: usize| {
+        let mut depth = 0usize;
+        for (k, &c) in chars.iter().enumerate().skip(i) {
+            match c {
+                '(' => depth += 1,
+                ')' => {
+                    depth = depth.saturating_sub(1);
+                    if depth == 0 {
+                        return k + 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+        chars.len()
+    };
+    let mut prev: Option<char> = None;
+    for (i, &c) in chars.iter().enumerate() {
+        if c.is_whitespace() {
+            continue;
+        }
+        let unary =
+            c == '-' && matches!(prev, None | Some('(' | ',' | '+' | '-' | '*' | '/' | '^'));
+        // An exponent's sign (1e-5) is part of its number.
+        let exponent_sign = c == '-'
+            && matches!(prev, Some('e' | 'E'))
+            && i >= 2
+            && (chars[i - 2].is_ascii_digit() || chars[i - 2] == '.');
+        prev = Some(c);
+        if !unary || exponent_sign {
+            continue;
+        }
+        // The operand: a number, a name (with its call's arguments), or a group.
+        let mut j = skip_ws(i + 1);
+        if j < chars.len() && chars[j] == '(' {
+            j = group_end(j);
+        } else {
+            let start = j;
+            while j < chars.len() {
+                let ch = chars[j];
+                let sign_in_exponent = matches!(ch, '+' | '-')
+                    && j > start
+                    && matches!(chars[j - 1], 'e' | 'E')
+                    && chars[start].is_ascii_digit();
+                if ch.is_alphanumeric() || ch == '_' || ch == '.' || sign_in_exponent {
+                    j += 1;
+                } else {
+                    break;
+                }
+            }
+            let k = skip_ws(j);
+            if j > start && k < chars.len() && chars[k] == '(' {
+                j = group_end(k);
+            }
+        }
+        let k = skip_ws(j);
+        if k < chars.len() && chars[k] == '^' {
+            let operand: String = chars[i + 1..j]
+                .iter()
+                .collect::<String>()
+                .trim()
+                .to_string();
+            return Err(format!(
+                "column {}: `-{operand}^...` would be read as `(-{operand})^...` (the expression parser binds a unary minus tighter than `^`); write `-({operand}^...)` for the usual meaning, or `(-{operand})^...` if that is what you mean",
+                i + 1
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Parse `text` and differentiate it with respect to each coordinate it uses (on a thread
 /// with a [`PARSE_STACK_BYTES`] stack). Errors are sentences for the user.
 fn parse_with_gradient(text: &str) -> Result<(Flat, [Option<Flat>; 3]), String> {
     check_size(text)?;
+    check_unary_minus_power(text)?;
     let owned = text.to_owned();
     let worker = std::thread::Builder::new()
         .name("grin-expr-parse".into())
@@ -452,6 +537,40 @@ mod tests {
         // Non-finite: sqrt of a negative number.
         let e = ExprField::new("sqrt(0.5 - x)", ball(), 1.0, 0.0).expect_err("NaN for x > 0.5");
         assert!(e.to_string().contains("n is not finite (NaN)"), "{e}");
+    }
+
+    #[test]
+    fn unary_minus_before_a_power_is_refused_with_its_column() {
+        for (text, column) in [
+            ("1 + 0.01*exp(-x^2)", 14),
+            ("1 + 0.01*exp(-(x/0.3)^2 - y*y)", 14),
+            ("-x ^ 2 + 2", 1),
+            ("1 + 0.01*exp(2*-sin(x)^2)", 16),
+        ] {
+            let e = ExprField::new(text, ball(), 1.0, 0.0)
+                .expect_err(text)
+                .to_string();
+            assert!(e.contains(&format!("column {column}:")), "{text}: {e}");
+            assert!(e.contains("tighter than `^`"), "{e}");
+        }
+        // What the message suggests, and minus signs that are not before a power, load.
+        for text in [
+            "1 + 0.01*exp(-(x^2))",
+            "1 + 0.01*(-x)^2",
+            "1.5 - x^2",
+            "1 + 1e-3*exp(-x*x)",
+            "1 + 2e-3^2 - 1e-3*y",
+            "1 + 0.01*exp(-(x*x + y*y)/0.1)",
+        ] {
+            ExprField::new(text, ball(), 1.0, 0.0).unwrap_or_else(|e| panic!("{text}: {e}"));
+        }
+        // Why: exmex itself reads -x^2 as (-x)^2 (if this ever fails, the check above can go).
+        let raw = exmex::parse::<f64>("-x^2").expect("parses");
+        assert_eq!(raw.eval(&[0.5]).expect("evaluates"), 0.25);
+        // The suggested form is the mathematical one.
+        let f = ExprField::new("1 + 0.1*exp(-(x^2))", ball(), 1.0, 0.0).expect("valid");
+        let s = f.sample(DVec3::new(0.5, 0.0, 0.0));
+        assert!((s.n - (1.0 + 0.1 * (-0.25f64).exp())).abs() < 1e-14);
     }
 
     #[test]

@@ -95,6 +95,7 @@ fn mirrored_constants_have_the_same_values() {
         ("HERMITE_SCAN", u(boundary::HERMITE_SCAN)),
         ("EXIT_TOL_REL", boundary::EXIT_TOL_REL),
         ("MIN_SPAN_REL", trace::MIN_SPAN_REL),
+        ("ENTRY_NUDGE_EPS", trace::ENTRY_NUDGE_EPS),
         ("F32_EPSILON", f64::from(f32::EPSILON)),
         ("AMBIENT_SKY_WEIGHT", AMBIENT_SKY_WEIGHT),
         ("EVENTS_PER_DEPTH", u(EVENTS_PER_DEPTH)),

@@ -167,6 +167,60 @@ impl Segment {
 /// (a step that starts on the surface after total internal reflection begins at f ~ 0).
 pub const HERMITE_SCAN: u32 = 8;
 
+/// Golden-section iterations refining the largest excursion of a segment outside the
+/// bounds (each a cubic evaluation, no field sample): brackets shrink by 0.618 each, so
+/// 40 resolve a turning point to 1e-8 of a step.
+pub const EXCURSION_ITERATIONS: u32 = 40;
+
+impl Segment {
+    /// For a step whose both ends are inside (`f <= 0`): the parameter where its cubic
+    /// goes farthest outside (`f > 0`) if it leaves and comes back between the ends (a
+    /// turning point just past a face, a grazing orbit), else `None`. Scans
+    /// [`HERMITE_SCAN`] points, then maximises `f` by golden section around the largest.
+    pub fn excursion(&self, f: impl Fn(DVec3) -> f64) -> Option<f64> {
+        if self.h <= 0.0 {
+            return None;
+        }
+        let n = HERMITE_SCAN;
+        let at = |k: u32| self.h * f64::from(k) / f64::from(n);
+        let (mut best_k, mut best_v) = (0, f64::NEG_INFINITY);
+        for k in 1..n {
+            let v = f(self.point(at(k)));
+            if v > 0.0 {
+                return Some(at(k));
+            }
+            if v > best_v {
+                (best_k, best_v) = (k, v);
+            }
+        }
+        let (mut a, mut b) = (at(best_k.saturating_sub(1)), at((best_k + 1).min(n)));
+        const INV_PHI: f64 = 0.618_033_988_749_895;
+        let mut c = b - (b - a) * INV_PHI;
+        let mut d = a + (b - a) * INV_PHI;
+        let (mut fc, mut fd) = (f(self.point(c)), f(self.point(d)));
+        for _ in 0..EXCURSION_ITERATIONS {
+            if fc > 0.0 {
+                return Some(c);
+            }
+            if fd > 0.0 {
+                return Some(d);
+            }
+            if fc > fd {
+                b = d;
+                (d, fd) = (c, fc);
+                c = b - (b - a) * INV_PHI;
+                fc = f(self.point(c));
+            } else {
+                a = c;
+                (c, fc) = (d, fd);
+                d = a + (b - a) * INV_PHI;
+                fd = f(self.point(d));
+            }
+        }
+        None
+    }
+}
+
 /// Bisection cap: 2^-64 of a step is far below f64 resolution of its end points.
 pub const MAX_BISECTIONS: u32 = 64;
 

@@ -18,6 +18,19 @@ use crate::step::{StepController, Taken};
 /// straight flight (and could otherwise stall a ray at a cell face).
 pub const MIN_SPAN_REL: f64 = 1e-9;
 
+/// Newton refinements of the Hermite exit on the integrator's own state (each one
+/// re-step): the cubic's root is accurate to O(h^4), two steps of Newton to the
+/// integrator's order at any step length the controllers choose.
+pub const EXIT_NEWTON_ITERATIONS: u32 = 3;
+
+/// Units of roundoff (times the coordinates' size) an entry point that rounds to outside
+/// the bounds is moved inside.
+pub const ENTRY_NUDGE_EPS: f64 = 4.0;
+
+fn len_scale_of(bounds: &Bounds) -> f64 {
+    bounds.radius()
+}
+
 /// How a ray's trace ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RayStatus {
@@ -175,7 +188,15 @@ pub fn trace_ray_jittered<R: Real>(
         }
     };
 
+    // Rounded to R (f32), a grazing entry point can land just outside the bounds, and
+    // the first step would "exit" where the ray entered: move it inside by a few units of
+    // R's roundoff along the normal.
     let mut r = R::V3::from_dvec3(start);
+    if s_entry.is_some() && bounds.signed_distance(r.to_dvec3()) >= 0.0 {
+        let nudge =
+            ENTRY_NUDGE_EPS * R::EPS.to_f64() * (len_scale_of(&bounds) + start.abs().max_element());
+        r = R::V3::from_dvec3(start - bounds.normal(start) * nudge);
+    }
     let mut s0 = match s_entry {
         Some(s) => s,
         None => {
@@ -254,11 +275,19 @@ pub fn trace_ray_jittered<R: Real>(
             continue;
         }
 
-        let taken: Taken<R> = ctrl.take(field, state, &s0);
+        let mut taken: Taken<R> = ctrl.take(field, state, &s0);
         res.evals += u64::from(taken.evals);
+        let mut outside = bounds.signed_distance(taken.step.state.r.to_dvec3()) > 0.0;
+        if !outside && let Some(cut) = excursion_step(field, settings, &bounds, state, &s0, &taken)
+        {
+            // The step left the medium and came back between its ends: cut it where it
+            // is outside, so the exit search below finds the first crossing (no tunnel).
+            res.evals += u64::from(cut.evals);
+            taken = cut;
+            outside = true;
+        }
         let mut next = integrate::add_compensated(state, taken.step.delta, &mut comp);
         let mut h = taken.h;
-        let outside = bounds.signed_distance(next.r.to_dvec3()) > 0.0;
         if outside && is_finite_v::<R>(next.r) {
             let (exit_state, exit_h, evals) =
                 exit_medium(field, settings, &bounds, state, &s0, &taken, exit_tol);
@@ -351,6 +380,46 @@ fn accumulate<R: Real>(
     }
 }
 
+/// A step from `s` that ended inside: if its cubic dense output goes outside between the
+/// ends (checked only when an end is within the step's length of the surface), the step
+/// re-taken to the point farthest out, when the integrator agrees that point is outside.
+fn excursion_step<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    bounds: &Bounds,
+    s: RayState<R>,
+    s0: &FieldSample<R>,
+    taken: &Taken<R>,
+) -> Option<Taken<R>> {
+    let r0 = s.r.to_dvec3();
+    let r1 = taken.step.state.r.to_dvec3();
+    let h = taken.h.to_f64();
+    let reach = h * s
+        .t
+        .to_dvec3()
+        .length()
+        .max(taken.step.state.t.to_dvec3().length());
+    let sd = |p: DVec3| bounds.signed_distance(p);
+    if !(reach.is_finite() && r1.is_finite()) || (sd(r0) < -reach && sd(r1) < -reach) {
+        return None;
+    }
+    let seg = Segment {
+        r0,
+        t0: s.t.to_dvec3(),
+        r1,
+        t1: taken.step.state.t.to_dvec3(),
+        h,
+    };
+    let tau = seg.excursion(sd)?;
+    let hm = R::from_f64(tau);
+    let step = integrate::step(settings.integrator, field, s, s0.n_grad_n(), hm);
+    (sd(step.state.r.to_dvec3()) > 0.0).then_some(Taken {
+        evals: step.evals,
+        step,
+        h: hm,
+    })
+}
+
 /// The step from `s` ended outside the bounds: find where it crosses the surface.
 /// Returns the state on the surface (projected onto it for the Hermite method), the step
 /// length in t that reaches it and the field evaluations spent.
@@ -406,12 +475,36 @@ pub fn exit_medium<R: Real>(
                 t1: taken.step.state.t.to_dvec3(),
                 h: taken.h.to_f64(),
             };
-            let tau = seg.first_crossing(sd);
-            let hm = R::from_f64(tau);
-            let st = integrate::step(kind, field, s, d0, hm);
+            // The cubic's root is O(h^4) off the integrator's own crossing; Newton steps
+            // on the integrator's state (g = signed distance, g' = normal . T) bring it
+            // to the integrator's order. Each costs one re-step; kept only if closer.
+            let mut tau = seg.first_crossing(sd);
+            let h_max = taken.h.to_f64();
+            let mut st = integrate::step(kind, field, s, d0, R::from_f64(tau));
+            let mut evals = st.evals;
+            for _ in 0..EXIT_NEWTON_ITERATIONS {
+                let p = st.state.r.to_dvec3();
+                let g = sd(p);
+                if g.abs() <= tol {
+                    break;
+                }
+                let slope = bounds.normal(p).dot(st.state.t.to_dvec3());
+                if !(slope > 0.0) {
+                    break;
+                }
+                let next = (tau - g / slope).clamp(0.0, h_max);
+                let trial = integrate::step(kind, field, s, d0, R::from_f64(next));
+                evals += trial.evals;
+                if sd(trial.state.r.to_dvec3()).abs() < g.abs() {
+                    tau = next;
+                    st = trial;
+                } else {
+                    break;
+                }
+            }
             let mut state = st.state;
             state.r = R::V3::from_dvec3(project_to_surface(bounds, state.r.to_dvec3()));
-            (state, hm, st.evals)
+            (state, R::from_f64(tau), evals)
         }
     }
 }

@@ -3,6 +3,7 @@
 mod accuracy;
 mod bake;
 mod speed;
+mod stability;
 
 /// Arguments of `grin bench`.
 #[derive(Debug, clap::Args)]
@@ -25,6 +26,10 @@ pub enum Mode {
     /// on reference fields (exact solutions where known): CSV, charts, the Pareto front,
     /// measured convergence orders.
     Accuracy(accuracy::Args),
+    /// Hard cases x methods (steep features, index jumps, grazing and tangent rays,
+    /// tunnelling, trapped orbits, n -> 0, invalid spikes): converged, degraded or
+    /// failed per cell, and which wrong answers grin reported as `exited`.
+    Stability(stability::Args),
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -32,5 +37,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Mode::Speed(a) => speed::run(a),
         Mode::Bake(a) => bake::run(a),
         Mode::Accuracy(a) => accuracy::run(a),
+        Mode::Stability(a) => stability::run(a),
     }
 }

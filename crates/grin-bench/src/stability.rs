@@ -1,0 +1,686 @@
+//! `grin bench stability`: hard cases x methods. Each case is a field and a few rays with
+//! a known right outcome (an exact exit, or "trapped", or "the field is invalid there");
+//! each cell runs one method on the case's rays and is classified:
+//!
+//! - **converged**: every ray ends as the truth says, within the case's tolerance;
+//! - **degraded**: every status right, but the worst error is above the tolerance (the
+//!   error is given);
+//! - **failed**: a status other than the truth's (`max_steps`, `error`, `missed`), or NaN
+//!   anywhere in the result;
+//! - and, across all three, **silent**: a ray grin reported `exited` that is wrong by
+//!   more than [`WRONG_DIR`] rad or [`WRONG_POS`] of the scale, or reported `exited` where the
+//!   truth is that it never leaves or meets an invalid field. A silent cell is a confident
+//!   wrong answer: the thing this matrix exists to find.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use grin_field::IndexField;
+use grin_scene::{ExitMethod, IntegratorKind, MediumSpec};
+use grin_trace::{RayResult, RayStatus};
+use rayon::prelude::*;
+
+use crate::accuracy::{angle, trace};
+use crate::cases::{Exit, rod_exit};
+use crate::methods::{Method, Policy, Precision};
+
+/// An `exited` ray off by more than this (rad) is a wrong answer, not a degraded one.
+pub const WRONG_DIR: f64 = 1e-2;
+/// ... or off by more than this fraction of the scale in position.
+pub const WRONG_POS: f64 = 1e-2;
+
+/// What the right outcome of a ray is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Truth {
+    /// Leaves the medium this way.
+    Exits(Exit),
+    /// Never leaves (a trapped orbit): `max_steps` is the right status.
+    Trapped,
+    /// Heads into a spike of n <= 0 along `incoming`. The t-parameter ray equation turns
+    /// a ray around where n reaches 0 (T = n d -> 0), so `exited` backwards is its
+    /// solution and `error` (a sample met n <= 0) is grin's refusal; `exited` onwards means
+    /// the ray stepped over the spike as if it were not there.
+    Spike { incoming: DVec3 },
+}
+
+/// One hard case.
+#[derive(Debug, Clone)]
+pub struct StabilityCase {
+    pub name: &'static str,
+    /// Why the case is hard: one sentence for the matrix.
+    pub why: &'static str,
+    pub field: Arc<dyn IndexField>,
+    pub rays: Vec<(DVec3, DVec3, Truth)>,
+    /// Error (rad, and of the scale in position) within which a ray has converged.
+    pub tol: f64,
+    pub scale: f64,
+    /// Cells of this case run with this step cap (trapped rays end there).
+    pub max_steps: u32,
+    /// What grin itself says about the case before any ray is traced (a bake that reports
+    /// its budget unmet): wrong answers in such a case were warned of, not silent.
+    pub warning: Option<String>,
+}
+
+fn medium(text: &str) -> anyhow::Result<Arc<dyn IndexField>> {
+    let spec: MediumSpec = toml::from_str(text)?;
+    Ok(grin_field::build_field(&spec, std::path::Path::new("."))?)
+}
+
+/// The Luneburg lens ray from `r0` along `t0` (T = n d, inside): exact exit, from the
+/// harmonic solution r(t) = r0 cos(t/R) + R T0 sin(t/R), by a fine scan and bisection.
+fn luneburg_exit(r0: DVec3, t0: DVec3, radius: f64) -> Exit {
+    let at = |t: f64| r0 * (t / radius).cos() + t0 * (radius * (t / radius).sin());
+    let g = |t: f64| at(t).length() - radius;
+    let (mut lo, mut hi) = (0.0, 0.0);
+    let dt = 1e-4 * radius;
+    let mut t = dt;
+    while t < 10.0 * radius {
+        if g(t) > 0.0 {
+            lo = t - dt;
+            hi = t;
+            break;
+        }
+        t += dt;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if g(mid) > 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    let t = 0.5 * (lo + hi);
+    let v = -r0 / radius * (t / radius).sin() + t0 * (t / radius).cos();
+    Exit {
+        position: at(t),
+        direction: v.normalize(),
+        opl: None,
+    }
+}
+
+/// The hard cases.
+pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
+    let mut v = Vec::new();
+
+    // 1. A steep, narrow plume: a = 0.05 over s = 0.03 in a unit box.
+    {
+        let field = medium(
+            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nfield = { kind = \"plume\", plumes = [ { a = 0.05, center = [0.0, 0.0, 0.0], s = 0.03 } ] }",
+        )?;
+        let reference = fine_reference(field.clone());
+        let rays = [0.01, 0.02, 0.03]
+            .iter()
+            .map(|&y| {
+                let o = DVec3::new(0.0, y, -1.5);
+                (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
+            })
+            .collect();
+        v.push(StabilityCase {
+            name: "steep narrow plume",
+            why: "a feature 3% of the box wide deflects rays by ~0.1 rad; a step longer than it steps over it",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 3f64.sqrt(),
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+
+    // 2. An index jump inside a baked grid: a glass ball baked into a box.
+    {
+        let source = medium(
+            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nfield = { kind = \"expr\", n = \"1.25 - 0.25*tanh((x*x+y*y+z*z - 0.25)/0.002)\" }",
+        )?;
+        let reference = fine_reference(source.clone());
+        let opts = grin_field::bake::BakeOptions {
+            resolution: Some(48),
+            error_points: 1000,
+            ..Default::default()
+        };
+        let (baked, report) = grin_field::bake::bake(source.as_ref(), &opts, &|_, _, _| {})?;
+        let warning = (!report.meets_budget).then(|| {
+            format!(
+                "the bake reports relative error {:.1e} over its budget {:.0e}",
+                report.relative_error, report.budget
+            )
+        });
+        let rays = [0.1, 0.25, 0.4]
+            .iter()
+            .map(|&y| {
+                let o = DVec3::new(0.0, y, -1.5);
+                (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
+            })
+            .collect();
+        v.push(StabilityCase {
+            name: "index jump in a baked grid",
+            why: "a 0.5 jump in n over 0.2% of the box, baked at 48^3: the grid smears the interface over a voxel",
+            field: Arc::new(baked),
+            rays,
+            tol: 1e-3,
+            scale: 3f64.sqrt(),
+            max_steps: 1 << 18,
+            warning,
+        });
+    }
+
+    // 3. Grazing incidence on the Luneburg lens.
+    {
+        let field = medium(
+            "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"luneburg\" }",
+        )?;
+        let rays = [0.99, 0.999, 0.9999]
+            .iter()
+            .map(|&p: &f64| {
+                let s = p;
+                let exit = Exit {
+                    position: DVec3::new(0.0, 0.0, 1.0),
+                    direction: DVec3::new(-s, 0.0, (1.0 - s * s).sqrt()),
+                    opl: None,
+                };
+                (DVec3::new(p, 0.0, -2.0), DVec3::Z, Truth::Exits(exit))
+            })
+            .collect();
+        v.push(StabilityCase {
+            name: "grazing incidence",
+            why: "Luneburg rays entering at 0.99-0.9999 R meet the surface almost tangentially, enter and leave in a short arc",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 1.0,
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+
+    // 4. Tangent to the bounds from inside.
+    {
+        let field = medium(
+            "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"luneburg\" }",
+        )?;
+        let rays = [0.999, 0.9999]
+            .iter()
+            .map(|&r: &f64| {
+                let r0 = DVec3::new(r, 0.0, 0.0);
+                let n = (2.0 - r * r).sqrt();
+                let t0 = DVec3::Y * n;
+                (r0, DVec3::Y, Truth::Exits(luneburg_exit(r0, t0, 1.0)))
+            })
+            .collect();
+        v.push(StabilityCase {
+            name: "tangent from inside",
+            why: "a ray starting just inside the surface, tangent to it: its orbit crosses r = R after a short arc",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 1.0,
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+
+    // 5. A turning point just below a face (tunnelling).
+    {
+        // n^2 = 1 + k y in the box y in [0, 1]; ambient n(0) = 1 (no refraction at y = 0).
+        let k = 0.02;
+        let field = medium(
+            "bounds = { box = { min = [-1.0, 0.0, -1.0], max = [1.0, 1.0, 1.0] } }\nfield = { kind = \"linear-n2\", n0 = 1.0049875621, k = 0.02, axis = \"y\" }",
+        )?;
+        // linear-n2 is relative to the bounds' centre (y = 0.5): n^2 = n0^2 + k (y - 0.5),
+        // n0^2 = 1 + 0.5 k puts n^2 = 1 + k y.
+        let mut rays = Vec::new();
+        for dip in [1e-6, 1e-5, 1e-4] {
+            let y0: f64 = 0.01;
+            // Ray inside from (-0.95, y0, 0): T0 = n(y0) (cos a, -sin a, 0) with the
+            // turning point y0 - T0y^2 / k = -dip.
+            let n = (1.0 + k * y0).sqrt();
+            let ty = -((y0 + dip) * k).sqrt();
+            let tx = (n * n - ty * ty).sqrt();
+            let r0 = DVec3::new(-0.95, y0, 0.0);
+            let t0 = DVec3::new(tx, ty, 0.0);
+            // y(t) = y0 + ty t + k t^2 / 4 = 0: first root.
+            let disc = ty * ty - k * y0;
+            let t = (-ty - disc.sqrt()) / (0.5 * k);
+            let pos = DVec3::new(r0.x + tx * t, 0.0, 0.0);
+            let vel = DVec3::new(tx, ty + 0.5 * k * t, 0.0);
+            rays.push((
+                r0,
+                t0.normalize(),
+                Truth::Exits(Exit {
+                    position: pos,
+                    direction: vel.normalize(),
+                    opl: None,
+                }),
+            ));
+        }
+        v.push(StabilityCase {
+            name: "turning point below a face",
+            why: "a mirage ray whose turning point dips 1e-6..1e-4 below the bottom face: it must leave there, not tunnel through between step ends",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 3f64.sqrt(),
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+
+    // 6. A trapped orbit: total internal reflection forever inside a glass ball.
+    {
+        let field = medium(
+            "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"uniform\", n = 1.5 }",
+        )?;
+        let rays = vec![
+            (DVec3::new(0.0, -0.9, 0.0), DVec3::X, Truth::Trapped),
+            (
+                DVec3::new(0.0, 0.0, -0.8),
+                DVec3::new(1.0, 0.2, 0.0).normalize(),
+                Truth::Trapped,
+            ),
+        ];
+        v.push(StabilityCase {
+            name: "trapped orbit",
+            why: "inside n = 1.5 at incidence beyond the critical angle the ray reflects forever: `max_steps` is the truth",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 1.0,
+            max_steps: 4096,
+            warning: None,
+        });
+    }
+
+    // 7. n approaching 0 along an on-axis ray.
+    {
+        // n^2 = 1 - 0.99 (z + 1) / 2 from z = -1 (n = 1) to z = +1 (n = 0.1).
+        let field = medium(
+            "bounds = { box = { min = [-0.5, -0.5, -1.0], max = [0.5, 0.5, 1.0] } }\nambient_index = 1.0\nfield = { kind = \"linear-n2\", n0 = 0.71063352, k = -0.495, axis = \"z\" }",
+        )?;
+        let rays = [0.0, 0.1]
+            .iter()
+            .map(|&x| {
+                let o = DVec3::new(x, 0.0, -1.5);
+                // On-axis: straight through; leaving n = 0.1 into 1 along the normal.
+                let exit = Exit {
+                    position: DVec3::new(x, 0.0, 1.0),
+                    direction: DVec3::Z,
+                    opl: None,
+                };
+                (o, DVec3::Z, Truth::Exits(exit))
+            })
+            .collect();
+        v.push(StabilityCase {
+            name: "n approaching 0",
+            why: "n falls to 0.1 along the ray: a step of fixed length is a long step in t = s/n and can reverse T",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 1.2,
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+
+    // 8. A spike of n <= 0 between the load check's grid points.
+    {
+        let field = medium(
+            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nfield = { kind = \"expr\", n = \"1 - 3*exp(-((x-0.0833)^2 + (y-0.0833)^2 + (z-0.0833)^2)/0.0004)\" }",
+        )?;
+        let rays = vec![(
+            DVec3::new(0.0833, 0.0833, -1.5),
+            DVec3::Z,
+            Truth::Spike { incoming: DVec3::Z },
+        )];
+        v.push(StabilityCase {
+            name: "n <= 0 spike",
+            why: "n dips to -2 in a ball of radius ~0.02 that the load check's grid misses: a ray aimed at it must turn where n -> 0 or stop with `error`, not pass straight through",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 3f64.sqrt(),
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+
+    // 9. The GRIN rod in f32 at tight tolerances (roundoff floor).
+    {
+        let field = medium(
+            "bounds = { box = { min = [-0.5, -0.5, -1.0], max = [0.5, 0.5, 1.0] } }\nfield = { kind = \"grin-rod\", n0 = 1.5, a = 0.8, axis = \"z\" }",
+        )?;
+        let rays = [(0.1, 0.05), (0.2, -0.1)]
+            .iter()
+            .map(|&(x, y)| {
+                let e = DVec3::new(x, y, -1.0);
+                let d = DVec3::new(0.05, -0.03, 1.0).normalize();
+                let o = e - d * (0.5 / d.z);
+                (o, d, Truth::Exits(rod_exit(e, d, 1.5, 0.8, 1.0)))
+            })
+            .collect();
+        v.push(StabilityCase {
+            name: "GRIN rod (exact)",
+            why: "a smooth field with an exact solution: every method should converge; f32 at tight tolerances hits its roundoff floor",
+            field,
+            rays,
+            tol: 1e-4,
+            scale: 1.5,
+            max_steps: 1 << 18,
+            warning: None,
+        });
+    }
+    Ok(v)
+}
+
+/// A reference that resolves any feature: RK4 at a fixed step of 1e-4 of the box radius
+/// in f64 with the bisection exit.
+fn fine_reference(field: Arc<dyn IndexField>) -> impl Fn(DVec3, DVec3) -> Exit {
+    let scale = field.bounds().radius();
+    let settings = Method {
+        integrator: IntegratorKind::Rk4,
+        policy: Policy::Fixed,
+        exit: ExitMethod::Bisection,
+        precision: Precision::F64,
+    }
+    .settings(1e-4, scale);
+    move |o, d| {
+        let r = grin_trace::trace_ray::<f64>(field.as_ref(), &settings, o, d);
+        Exit {
+            position: r.position,
+            direction: r.direction,
+            opl: None,
+        }
+    }
+}
+
+/// A method and parameter of a matrix column.
+#[derive(Debug, Clone, Copy)]
+pub struct Column {
+    pub method: Method,
+    pub param: f64,
+}
+
+impl Column {
+    pub fn label(&self) -> String {
+        let p = match self.method.policy {
+            Policy::Adaptive => format!("{:.0e}", self.param),
+            _ => format!("R/{}", (1.0 / self.param).round()),
+        };
+        format!(
+            "{} {} {} {}",
+            crate::methods::integrator_label(self.method.integrator),
+            self.method.policy.name(),
+            p,
+            self.method.precision.name()
+        )
+    }
+}
+
+/// The columns: every integrator with a coarse and a fine fixed step, the heuristic, and
+/// error control at 1e-6 (f64) and 1e-9 (f64 and f32).
+pub fn columns(quick: bool) -> Vec<Column> {
+    let mut v = Vec::new();
+    for &integrator in &IntegratorKind::ALL {
+        let mut add = |policy, param, precision| {
+            v.push(Column {
+                method: Method {
+                    integrator,
+                    policy,
+                    exit: ExitMethod::Hermite,
+                    precision,
+                },
+                param,
+            })
+        };
+        add(Policy::Fixed, 1.0 / 16.0, Precision::F64);
+        if !quick {
+            add(Policy::Fixed, 1.0 / 256.0, Precision::F64);
+            add(Policy::Heuristic, 1.0 / 16.0, Precision::F64);
+        }
+        add(Policy::Adaptive, 1e-6, Precision::F64);
+        if !quick {
+            add(Policy::Adaptive, 1e-9, Precision::F64);
+        }
+        add(Policy::Adaptive, 1e-9, Precision::F32);
+    }
+    v
+}
+
+/// A cell's class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Outcome {
+    Converged,
+    Degraded,
+    Failed,
+}
+
+/// One cell of the matrix.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Cell {
+    pub case: &'static str,
+    pub method: String,
+    pub outcome: Outcome,
+    /// A ray reported `exited` with a wrong answer (see the module docs) and nothing
+    /// warned of it.
+    pub silent: bool,
+    /// The case's warning applies (grin said before tracing that results are off).
+    pub warned: bool,
+    /// Worst direction error (rad) over the rays that exited where the truth does.
+    pub err_dir: f64,
+    /// Worst position error / scale over the same rays.
+    pub err_pos: f64,
+    /// Statuses of the rays, in order (`exited`, `max_steps`, ...).
+    pub statuses: String,
+    /// Any NaN in a result.
+    pub nan: bool,
+    pub evals_per_ray: f64,
+    pub seconds: f64,
+}
+
+fn has_nan(r: &RayResult) -> bool {
+    r.position.is_nan() || r.direction.is_nan() || r.opl.is_nan() || r.length.is_nan()
+}
+
+/// Run one cell.
+pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
+    let mut settings = col.method.settings(col.param, case.scale);
+    settings.max_steps = case.max_steps;
+    let start = Instant::now();
+    let results: Vec<RayResult> = case
+        .rays
+        .iter()
+        .map(|&(o, d, _)| trace(case.field.as_ref(), &settings, col.method.precision, o, d))
+        .collect();
+    let seconds = start.elapsed().as_secs_f64();
+    let mut cell = Cell {
+        case: case.name,
+        method: col.label(),
+        outcome: Outcome::Converged,
+        silent: false,
+        warned: case.warning.is_some(),
+        err_dir: 0.0,
+        err_pos: 0.0,
+        statuses: results
+            .iter()
+            .map(|r| r.status.name())
+            .collect::<Vec<_>>()
+            .join(" "),
+        nan: results.iter().any(has_nan),
+        evals_per_ray: results.iter().map(|r| r.evals as f64).sum::<f64>() / results.len() as f64,
+        seconds,
+    };
+    let mut failed = cell.nan;
+    for (r, &(_, _, truth)) in results.iter().zip(&case.rays) {
+        match truth {
+            Truth::Exits(e) => {
+                if r.status != RayStatus::Exited {
+                    failed = true;
+                    continue;
+                }
+                let ed = angle(r.direction, e.direction);
+                let ep = (r.position - e.position).length() / case.scale;
+                let (ed, ep) = (nan_inf(ed), nan_inf(ep));
+                cell.err_dir = cell.err_dir.max(ed);
+                cell.err_pos = cell.err_pos.max(ep);
+                if ed > WRONG_DIR || ep > WRONG_POS {
+                    cell.silent = true;
+                }
+            }
+            Truth::Trapped => match r.status {
+                RayStatus::MaxSteps | RayStatus::Absorbed => {}
+                RayStatus::Exited => {
+                    cell.silent = true;
+                    failed = true;
+                }
+                _ => failed = true,
+            },
+            Truth::Spike { incoming } => match r.status {
+                RayStatus::Error => {}
+                RayStatus::Exited if r.direction.dot(incoming) < 0.0 => {}
+                RayStatus::Exited => {
+                    cell.silent = true;
+                    failed = true;
+                }
+                _ => failed = true,
+            },
+        }
+    }
+    if cell.warned {
+        cell.silent = false;
+    }
+    cell.outcome = if failed {
+        Outcome::Failed
+    } else if cell.err_dir > case.tol || cell.err_pos > case.tol {
+        Outcome::Degraded
+    } else {
+        Outcome::Converged
+    };
+    cell
+}
+
+fn nan_inf(x: f64) -> f64 {
+    if x.is_nan() { f64::INFINITY } else { x }
+}
+
+/// The whole matrix.
+#[derive(Debug, Clone)]
+pub struct Matrix {
+    /// (name, why, grin's own warning) per case.
+    pub cases: Vec<(&'static str, &'static str, Option<String>)>,
+    pub columns: Vec<String>,
+    pub cells: Vec<Cell>,
+    pub seconds: f64,
+}
+
+/// Longest a single cell may take before the run reports it (a hang would be a defect).
+pub const CELL_TIME_LIMIT: Duration = Duration::from_secs(60);
+
+/// Run every case against every column.
+pub fn run(quick: bool, progress: &(dyn Fn(u64, u64) + Sync)) -> anyhow::Result<Matrix> {
+    let start = Instant::now();
+    let cases = cases()?;
+    let cols = columns(quick);
+    let jobs: Vec<(usize, usize)> = (0..cases.len())
+        .flat_map(|c| (0..cols.len()).map(move |k| (c, k)))
+        .collect();
+    let total = jobs.len() as u64;
+    let done = std::sync::atomic::AtomicU64::new(0);
+    let cells: Vec<Cell> = jobs
+        .par_iter()
+        .map(|&(c, k)| {
+            let cell = run_cell(&cases[c], &cols[k]);
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(d, total);
+            cell
+        })
+        .collect();
+    Ok(Matrix {
+        cases: cases
+            .iter()
+            .map(|c| (c.name, c.why, c.warning.clone()))
+            .collect(),
+        columns: cols.iter().map(Column::label).collect(),
+        cells,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The cell's short text: `ok`, `1.2e-3`, `FAIL max_steps`, with `!` for silent.
+pub fn cell_text(c: &Cell) -> String {
+    let base = match c.outcome {
+        Outcome::Converged => "ok".to_string(),
+        Outcome::Degraded => format!("~{:.0e}", c.err_dir.max(c.err_pos)),
+        Outcome::Failed => {
+            let bad: Vec<&str> = c.statuses.split(' ').filter(|s| *s != "exited").collect();
+            if c.nan {
+                "FAIL NaN".into()
+            } else if bad.is_empty() {
+                "FAIL exited".into()
+            } else {
+                format!("FAIL {}", bad[0])
+            }
+        }
+    };
+    if c.silent {
+        format!("**{base} (silent)**")
+    } else if c.warned && c.outcome != Outcome::Converged {
+        format!("{base} (warned)")
+    } else {
+        base
+    }
+}
+
+/// The matrix as Markdown: one row per case (with why), one column per method.
+pub fn markdown(m: &Matrix, command: &str) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(s, "# grin bench stability\n");
+    let _ = writeln!(
+        s,
+        "`{command}` — {} cells in {:.1} s. `ok` converged; `~e` degraded with worst error e (rad or of the scale); `FAIL s` a ray ended `s` against the truth; **(silent)** a ray reported `exited` with a wrong answer and nothing warned of it; (warned) grin said so before tracing.\n",
+        m.cells.len(),
+        m.seconds
+    );
+    for (case, why, warning) in &m.cases {
+        match warning {
+            Some(w) => {
+                let _ = writeln!(s, "- **{case}**: {why}. grin warns: {w}.");
+            }
+            None => {
+                let _ = writeln!(s, "- **{case}**: {why}.");
+            }
+        }
+    }
+    let _ = writeln!(s);
+    let _ = write!(s, "| method |");
+    for (case, _, _) in &m.cases {
+        let _ = write!(s, " {case} |");
+    }
+    let _ = writeln!(s);
+    let _ = write!(s, "|---|");
+    for _case in &m.cases {
+        let _ = write!(s, "---|");
+    }
+    let _ = writeln!(s);
+    for col in &m.columns {
+        let _ = write!(s, "| {col} |");
+        for (case, _, _) in &m.cases {
+            let text = m
+                .cells
+                .iter()
+                .find(|c| c.case == *case && &c.method == col)
+                .map_or_else(|| "-".into(), cell_text);
+            let _ = write!(s, " {text} |");
+        }
+        let _ = writeln!(s);
+    }
+    let silent = m.cells.iter().filter(|c| c.silent).count();
+    let _ = writeln!(
+        s,
+        "\n{silent} of {} cells are silent wrong answers.",
+        m.cells.len()
+    );
+    s
+}
