@@ -255,8 +255,8 @@ fn csv_text<T: serde::Serialize>(rows: &[T]) -> anyhow::Result<Vec<u8>> {
     for r in rows {
         w.serialize(r)?;
     }
-    Ok(w.into_inner()
-        .map_err(|e| anyhow::Error::msg(e.to_string()))?)
+    w.into_inner()
+        .map_err(|e| anyhow::Error::msg(e.to_string()))
 }
 
 fn stage_bytes(path: &Path, bytes: Vec<u8>) -> anyhow::Result<Staged> {

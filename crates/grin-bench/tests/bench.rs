@@ -1,6 +1,9 @@
 //! grin-bench: the exact solutions, measured orders, the sweep's outputs and the
 //! stability matrix's verdicts.
 
+// Tests: a failed unwrap is the failure message.
+#![allow(clippy::unwrap_used)]
+
 use grin_bench::accuracy::{self, Point, log_slope, pareto, reference, run_point};
 use grin_bench::cases::{self, Suite};
 use grin_bench::methods::{Method, Policy, Precision};

@@ -489,7 +489,7 @@ pub fn exit_medium<R: Real>(
                     break;
                 }
                 let slope = bounds.normal(p).dot(st.state.t.to_dvec3());
-                if !(slope > 0.0) {
+                if slope.is_nan() || slope <= 0.0 {
                     break;
                 }
                 let next = (tau - g / slope).clamp(0.0, h_max);
