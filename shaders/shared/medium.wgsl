@@ -202,6 +202,95 @@ fn first_crossing(seg: Segment) -> f32 {
     return 0.5 * (lo + hi);
 }
 
+// trace::EXIT_NEWTON_ITERATIONS and boundary::EXCURSION_ITERATIONS.
+const EXIT_NEWTON_ITERATIONS: u32 = 3u;
+const EXCURSION_ITERATIONS: u32 = 40u;
+const INV_PHI: f32 = 0.618034;
+
+struct Excursion {
+    found: bool,
+    tau: f32,
+}
+
+// For a step whose ends are both inside: where its dense output goes farthest outside,
+// if it leaves and comes back between them (Segment::excursion): a scan, then golden
+// section around the largest sample.
+fn segment_excursion(seg: Segment) -> Excursion {
+    if !(seg.h > 0.0) {
+        return Excursion(false, 0.0);
+    }
+    var best_k = 1u;
+    var best_v = -INF;
+    for (var k = 1u; k < HERMITE_SCAN; k++) {
+        let tau = seg.h * f32(k) / f32(HERMITE_SCAN);
+        let v = bounds_signed_distance(segment_point(seg, tau));
+        if v > 0.0 {
+            return Excursion(true, tau);
+        }
+        if v > best_v {
+            best_k = k;
+            best_v = v;
+        }
+    }
+    var a = seg.h * f32(best_k - 1u) / f32(HERMITE_SCAN);
+    var b = seg.h * f32(min(best_k + 1u, HERMITE_SCAN)) / f32(HERMITE_SCAN);
+    var c = b - (b - a) * INV_PHI;
+    var d = a + (b - a) * INV_PHI;
+    var fc = bounds_signed_distance(segment_point(seg, c));
+    var fd = bounds_signed_distance(segment_point(seg, d));
+    for (var i = 0u; i < EXCURSION_ITERATIONS; i++) {
+        if fc > 0.0 {
+            return Excursion(true, c);
+        }
+        if fd > 0.0 {
+            return Excursion(true, d);
+        }
+        if fc > fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - (b - a) * INV_PHI;
+            fc = bounds_signed_distance(segment_point(seg, c));
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + (b - a) * INV_PHI;
+            fd = bounds_signed_distance(segment_point(seg, d));
+        }
+    }
+    return Excursion(false, 0.0);
+}
+
+struct ExcursionStep {
+    found: bool,
+    taken: Taken,
+}
+
+// trace::excursion_step: a step that ended inside, near the surface, whose path dips
+// outside between its ends, re-taken to the point farthest out (when the integrator
+// agrees it is outside).
+fn excursion_step(s: RayState, s0: FieldSample, taken: Taken) -> ExcursionStep {
+    let none = ExcursionStep(false, taken);
+    let r1 = taken.step.state.r;
+    let reach = taken.h * max(length(s.t), length(taken.step.state.t));
+    if !(reach < INF) || !finite3(r1) {
+        return none;
+    }
+    if bounds_signed_distance(s.r) < -reach && bounds_signed_distance(r1) < -reach {
+        return none;
+    }
+    let e = segment_excursion(Segment(s.r, s.t, r1, taken.step.state.t, taken.h));
+    if !e.found {
+        return none;
+    }
+    let st = integrate_step(s, s0.grad_n * s0.n, e.tau);
+    if bounds_signed_distance(st.state.r) > 0.0 {
+        return ExcursionStep(true, Taken(st, e.tau, st.evals));
+    }
+    return none;
+}
+
 struct ExitOut {
     state: RayState,
     h: f32,
@@ -214,11 +303,32 @@ fn exit_medium(s: RayState, s0: FieldSample, taken: Taken, tol: f32) -> ExitOut 
     let d0 = s0.grad_n * s0.n;
     if field_flag(FLAG_EXIT_HERMITE) {
         let seg = Segment(s.r, s.t, taken.step.state.r, taken.step.state.t, taken.h);
-        let tau = first_crossing(seg);
-        let st = integrate_step(s, d0, tau);
+        // Newton steps on the integrator's own state keep its order (trace::exit_medium).
+        var tau = first_crossing(seg);
+        var st = integrate_step(s, d0, tau);
+        var evals = st.evals;
+        for (var i = 0u; i < EXIT_NEWTON_ITERATIONS; i++) {
+            let g = bounds_signed_distance(st.state.r);
+            if abs(g) <= tol {
+                break;
+            }
+            let slope = dot(bounds_normal(st.state.r), st.state.t);
+            if !(slope > 0.0) {
+                break;
+            }
+            let next_tau = clamp(tau - g / slope, 0.0, taken.h);
+            let trial = integrate_step(s, d0, next_tau);
+            evals += trial.evals;
+            if abs(bounds_signed_distance(trial.state.r)) < abs(g) {
+                tau = next_tau;
+                st = trial;
+            } else {
+                break;
+            }
+        }
         var state = st.state;
         state.r = project_to_surface(state.r);
-        return ExitOut(state, tau, st.evals);
+        return ExitOut(state, tau, evals);
     }
     var lo = 0.0;
     var hi = taken.h;
@@ -394,6 +504,17 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             if !fly && bounds_signed_distance(next.r) > 0.0 {
                 event = MARCH_EVENT_LEAVE;
                 break;
+            }
+            if !fly {
+                // Left and came back between the step's ends: cut there and leave.
+                let cut = excursion_step(state, s0, taken);
+                if cut.found {
+                    taken = cut.taken;
+                    (*stats).evals += taken.evals;
+                    next = taken.step.state;
+                    event = MARCH_EVENT_LEAVE;
+                    break;
+                }
             }
             if taken.step.has_end && !fly {
                 s1 = taken.step.end;

@@ -17,6 +17,12 @@ const SAFETY: f32 = 0.9;
 const MAX_GROWTH: f32 = 5.0;
 const MIN_SHRINK: f32 = 0.2;
 const MAX_REJECTIONS: u32 = 60u;
+// step::LENGTH_SCALE_STEP_FRACTION: every step is at most this fraction of n / |grad n|
+// at its start (no reversal of T where n is small).
+const LENGTH_SCALE_STEP_FRACTION: f32 = 0.5;
+// step::FEATURE_STEP_FRACTION of the field's feature size: the GPU's field is a baked
+// grid, whose feature size (BakedField::feature_size) is two spacings.
+const FEATURE_STEP_FRACTION: f32 = 1.0;
 // Shortest jittered first step, as a fraction of the nominal step.
 const MIN_JITTER_FRACTION: f32 = 1e-3;
 
@@ -87,14 +93,22 @@ fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32
     return Taken(second, h, 0u);
 }
 
-fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample, tol_asked: f32) -> Taken {
+// LENGTH_SCALE_STEP_FRACTION of n / |grad n| (infinite where grad n = 0).
+fn length_scale_cap(n: f32, grad_n: f32) -> f32 {
+    if grad_n > 0.0 && grad_n < INF {
+        return LENGTH_SCALE_STEP_FRACTION * abs(n) / grad_n;
+    }
+    return INF;
+}
+
+fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample, tol_asked: f32, cap: f32) -> Taken {
     let n0 = s0.n;
     let d0 = s0.grad_n * s0.n;
     let kind = INTEGRATOR;
     let exponent = 1.0 / f32(integrator_order(kind));
     let ds_min = max(ADAPTIVE_MIN_DS_REL, ADAPTIVE_MIN_DS_EPS * F32_EPSILON) * (*ctrl).len_scale;
     let tol = max(tol_asked, ADAPTIVE_TOL_FLOOR_EPS * F32_EPSILON * (*ctrl).len_scale);
-    let ds_max = ADAPTIVE_MAX_DS_REL * (*ctrl).len_scale;
+    let ds_max = max(min(ADAPTIVE_MAX_DS_REL * (*ctrl).len_scale, cap), ds_min);
     var evals = 0u;
     var rejections = 0u;
     loop {
@@ -132,6 +146,8 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
 fn take_step(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample) -> Taken {
     let n0 = s0.n;
     let d0 = s0.grad_n * s0.n;
+    let feature = 2.0 / max_element(params.grid_inv_spacing.xyz);
+    let cap = min(length_scale_cap(n0, length(s0.grad_n)), FEATURE_STEP_FRACTION * feature);
     var ds: f32;
     switch STEP_POLICY {
         case STEP_HEURISTIC: {
@@ -139,13 +155,13 @@ fn take_step(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample) 
             ds = heuristic_ds(params.step.x, params.step.y, params.step.z, dir, s0.grad_n);
         }
         case STEP_ADAPTIVE: {
-            return take_adaptive(ctrl, s, s0, params.step.x);
+            return take_adaptive(ctrl, s, s0, params.step.x, cap);
         }
         default: {
             ds = params.step.x;
         }
     }
-    ds *= (*ctrl).jitter;
+    ds = min(ds * (*ctrl).jitter, cap);
     (*ctrl).jitter = 1.0;
     let h = ds / n0;
     let step = integrate_step(s, d0, h);

@@ -67,6 +67,15 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// The shortest length over which the field can change by a large part of its range,
+    /// where the field knows one: a plume's smallest width, the finest noise octave's half
+    /// wavelength, twice a grid's spacing. Error-controlled steps stay below it, so no
+    /// step can pass over a whole feature between samples. `None`: no scale below the
+    /// bounds' own (analytic profiles, expressions).
+    fn feature_size(&self) -> Option<f64> {
+        None
+    }
+
     /// The grid itself when this field is a baked one (a `.grinf` file): the GPU
     /// uploads it as it is instead of baking the field again.
     fn as_baked(&self) -> Option<&crate::baked::BakedField> {

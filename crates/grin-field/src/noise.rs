@@ -281,6 +281,12 @@ impl IndexField for NoiseField {
         (self.ambient - a, self.ambient + a)
     }
 
+    /// Half the wavelength of the finest octave: 1 / (2 frequency lacunarity^(octaves-1)).
+    fn feature_size(&self) -> Option<f64> {
+        let octaves = self.octaves.len().max(1) as i32;
+        let finest = self.spec.frequency.abs() * self.spec.lacunarity.abs().powi(octaves - 1);
+        (finest > 0.0 && finest.is_finite()).then(|| 0.5 / finest)
+    }
     fn max_grad_n(&self) -> f64 {
         self.max_grad
     }

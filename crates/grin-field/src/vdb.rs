@@ -601,6 +601,14 @@ impl IndexField for VdbField {
         self.n_range
     }
 
+    /// Two voxels (the shortest column of the grid-to-world transform).
+    fn feature_size(&self) -> Option<f64> {
+        let m = &self.world_from_grid;
+        let voxel = (0..3)
+            .map(|c| DVec3::new(m[0][c], m[1][c], m[2][c]).length())
+            .fold(f64::INFINITY, f64::min);
+        (voxel > 0.0 && voxel.is_finite()).then_some(2.0 * voxel)
+    }
     fn max_grad_n(&self) -> f64 {
         self.max_grad
     }

@@ -96,6 +96,13 @@ fn mirrored_constants_have_the_same_values() {
         ("EXIT_TOL_REL", boundary::EXIT_TOL_REL),
         ("MIN_SPAN_REL", trace::MIN_SPAN_REL),
         ("ENTRY_NUDGE_EPS", trace::ENTRY_NUDGE_EPS),
+        ("EXIT_NEWTON_ITERATIONS", u(trace::EXIT_NEWTON_ITERATIONS)),
+        ("EXCURSION_ITERATIONS", u(boundary::EXCURSION_ITERATIONS)),
+        (
+            "LENGTH_SCALE_STEP_FRACTION",
+            step::LENGTH_SCALE_STEP_FRACTION,
+        ),
+        ("FEATURE_STEP_FRACTION", step::FEATURE_STEP_FRACTION),
         ("F32_EPSILON", f64::from(f32::EPSILON)),
         ("AMBIENT_SKY_WEIGHT", AMBIENT_SKY_WEIGHT),
         ("EVENTS_PER_DEPTH", u(EVENTS_PER_DEPTH)),

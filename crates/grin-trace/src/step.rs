@@ -28,6 +28,17 @@ pub const MAX_GROWTH: f64 = 5.0;
 pub const MIN_SHRINK: f64 = 0.2;
 /// Rejections allowed for one step before it is taken at the smallest size.
 pub const MAX_REJECTIONS: u32 = 60;
+/// Every step (fixed, heuristic or error-controlled) is at most this fraction of the
+/// field's local length scale n / |grad n| at the step's start. Where n is small the t
+/// step h = ds / n grows like 1/n while T = n d shrinks: without the cap one step can
+/// reverse T and "reflect" a ray (n -> 0 on axis: pi rad off, reported `exited`). In air
+/// the scale is ~10^2 m and the cap never acts.
+pub const LENGTH_SCALE_STEP_FRACTION: f64 = 0.5;
+/// Steps of every policy are at most this many of the field's feature size
+/// (`IndexField::feature_size`): a step that long still puts several of a Runge-Kutta
+/// step's stages inside any feature it crosses (a plume of width s = 0.01 R: dopri at
+/// tolerance 1e-9 passed over it, 8e-2 rad off, before this cap).
+pub const FEATURE_STEP_FRACTION: f64 = 1.0;
 
 /// Chooses step lengths along one ray (error control keeps its state between steps).
 #[derive(Debug, Clone)]
@@ -39,6 +50,12 @@ pub struct StepController {
     len_scale: f64,
     /// Heuristic amplitude (|grad n| at which the step is the minimum).
     amplitude: f64,
+    /// [`FEATURE_STEP_FRACTION`] of the field's feature size (infinite without one):
+    /// no step of any policy is longer, so no feature is stepped over whole.
+    feature_cap: f64,
+    /// Longest error-controlled step: [`ADAPTIVE_MAX_DS_REL`] of the radius, or the
+    /// feature cap when that is shorter.
+    ds_max: f64,
     /// Current error-controlled step (world length).
     ds_adapt: f64,
     /// Factor on the next fixed or heuristic step (the renderer's per-pixel jitter of a
@@ -73,11 +90,18 @@ impl StepController {
             } => ds,
             _ => ADAPTIVE_INITIAL_DS_REL * len_scale,
         };
+        let feature_cap = field
+            .feature_size()
+            .filter(|f| f.is_finite() && *f > 0.0)
+            .map_or(f64::INFINITY, |f| FEATURE_STEP_FRACTION * f);
+        let ds_max = feature_cap.min(ADAPTIVE_MAX_DS_REL * len_scale);
         StepController {
             spec,
             kind,
             len_scale,
             amplitude,
+            feature_cap,
+            ds_max,
             ds_adapt,
             jitter: 1.0,
         }
@@ -115,9 +139,10 @@ impl StepController {
     ) -> Taken<R> {
         let n0 = s0.n.to_f64();
         let d0 = s0.n_grad_n();
+        let cap = Self::length_scale_cap(n0, s0.grad_n.to_dvec3().length()).min(self.feature_cap);
         match self.spec {
             StepSpec::Fixed(ds) => {
-                let h = R::from_f64(ds * self.take_jitter() / n0);
+                let h = R::from_f64((ds * self.take_jitter()).min(cap) / n0);
                 let step = integrate::step(self.kind, field, s, d0, h);
                 Taken {
                     evals: step.evals,
@@ -128,7 +153,7 @@ impl StepController {
             StepSpec::Heuristic { min, max, .. } => {
                 let dir = s.t.to_dvec3().normalize_or_zero();
                 let ds = Self::heuristic_ds(min, max, self.amplitude, dir, s0.grad_n.to_dvec3());
-                let h = R::from_f64(ds * self.take_jitter() / n0);
+                let h = R::from_f64((ds * self.take_jitter()).min(cap) / n0);
                 let step = integrate::step(self.kind, field, s, d0, h);
                 Taken {
                     evals: step.evals,
@@ -136,7 +161,18 @@ impl StepController {
                     h,
                 }
             }
-            StepSpec::Adaptive { tolerance, .. } => self.take_adaptive(field, s, s0, tolerance),
+            StepSpec::Adaptive { tolerance, .. } => {
+                self.take_adaptive(field, s, s0, tolerance, cap)
+            }
+        }
+    }
+
+    /// [`LENGTH_SCALE_STEP_FRACTION`] of n / |grad n| (infinite where grad n = 0).
+    pub fn length_scale_cap(n: f64, grad_n: f64) -> f64 {
+        if grad_n > 0.0 && grad_n.is_finite() {
+            LENGTH_SCALE_STEP_FRACTION * n.abs() / grad_n
+        } else {
+            f64::INFINITY
         }
     }
 
@@ -146,6 +182,7 @@ impl StepController {
         s: RayState<R>,
         s0: &FieldSample<R>,
         tol: f64,
+        cap: f64,
     ) -> Taken<R> {
         let n0 = s0.n.to_f64();
         let d0 = s0.n_grad_n();
@@ -155,7 +192,7 @@ impl StepController {
         let eps = R::EPS.to_f64();
         let ds_min = ADAPTIVE_MIN_DS_REL.max(ADAPTIVE_MIN_DS_EPS * eps) * self.len_scale;
         let tol = tol.max(ADAPTIVE_TOL_FLOOR_EPS * eps * self.len_scale);
-        let ds_max = ADAPTIVE_MAX_DS_REL * self.len_scale;
+        let ds_max = self.ds_max.min(cap).max(ds_min);
         let mut evals = 0;
         let mut rejections = 0;
         loop {

@@ -105,6 +105,10 @@ impl IndexField for Plume {
     fn describe(&self) -> String {
         format!("plume ({} blobs)", self.blobs.len())
     }
+    /// The narrowest blob's width s.
+    fn feature_size(&self) -> Option<f64> {
+        self.blobs.iter().map(|b| b.s).reduce(f64::min)
+    }
 }
 
 #[cfg(test)]

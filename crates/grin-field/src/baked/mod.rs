@@ -682,6 +682,10 @@ impl IndexField for BakedField {
         self.n_range
     }
 
+    /// Two grid spacings: nothing narrower is represented.
+    fn feature_size(&self) -> Option<f64> {
+        Some(2.0 * self.geometry.spacing.min_element())
+    }
     fn max_grad_n(&self) -> f64 {
         self.max_grad
     }
