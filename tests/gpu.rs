@@ -166,6 +166,13 @@ fn bench_speed_quick_reports_both_backends() {
                 run["rays_per_second"].as_f64().is_some_and(|t| t > 0.0),
                 "{run}"
             );
+            // The spread over the timed frames: min <= median <= max, min is the rate's frame.
+            let ms = |k: &str| run[k].as_f64().unwrap_or(f64::NAN);
+            assert!(
+                ms("ms_min") <= ms("ms_median") && ms("ms_median") <= ms("ms_max"),
+                "{run}"
+            );
+            assert_eq!(ms("ms_min"), ms("ms_per_frame"), "{run}");
         }
     }
     assert!(

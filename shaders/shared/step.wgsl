@@ -107,7 +107,9 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
     let kind = INTEGRATOR;
     let exponent = 1.0 / f32(integrator_order(kind));
     let ds_min = max(ADAPTIVE_MIN_DS_REL, ADAPTIVE_MIN_DS_EPS * F32_EPSILON) * (*ctrl).len_scale;
-    let tol = max(tol_asked, ADAPTIVE_TOL_FLOOR_EPS * F32_EPSILON * (*ctrl).len_scale);
+    let tol_floor = ADAPTIVE_TOL_FLOOR_EPS * F32_EPSILON * (*ctrl).len_scale;
+    // params.step.z = 1: `auto`, tol_asked is per unit path length (step::Tolerance).
+    let per_length = params.step.z > 0.5;
     let ds_max = max(min(ADAPTIVE_MAX_DS_REL * (*ctrl).len_scale, cap), ds_min);
     var evals = 0u;
     var rejections = 0u;
@@ -125,6 +127,11 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
             err = step.err_r.x;
         }
         evals += step.evals;
+        var tol = tol_asked;
+        if per_length {
+            tol = tol_asked * ds;
+        }
+        tol = max(tol, tol_floor);
         let accept = err <= tol || ds <= ds_min || rejections >= MAX_REJECTIONS;
         var factor = MIN_SHRINK;
         if err > 0.0 && err < INF {

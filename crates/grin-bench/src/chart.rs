@@ -24,6 +24,8 @@ pub enum LineKind {
     Solid,
     Dashed,
     Dotted,
+    /// A wide solid line (the accuracy knob's curves).
+    Thick,
 }
 
 /// A chart's content.
@@ -141,6 +143,7 @@ where
             LineKind::Solid => ctx.draw_series(LineSeries::new(pts.clone(), style)),
             LineKind::Dashed => ctx.draw_series(DashedLineSeries::new(pts.clone(), 8, 5, style)),
             LineKind::Dotted => ctx.draw_series(DashedLineSeries::new(pts.clone(), 2, 4, style)),
+            LineKind::Thick => ctx.draw_series(LineSeries::new(pts.clone(), color.stroke_width(4))),
         }
         .map_err(err)?;
         anno.label(&c.label).legend(move |(x, y)| {

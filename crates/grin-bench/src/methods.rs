@@ -14,15 +14,24 @@ pub enum Policy {
     /// Error control at tolerance param * scale (embedded pair for `adaptive`, step
     /// doubling for the others).
     Adaptive,
+    /// `step = { auto = param }`: the accuracy knob, param the exit-direction error asked
+    /// for (rad).
+    Auto,
 }
 
 impl Policy {
-    pub const ALL: [Policy; 3] = [Policy::Fixed, Policy::Heuristic, Policy::Adaptive];
+    pub const ALL: [Policy; 4] = [
+        Policy::Fixed,
+        Policy::Heuristic,
+        Policy::Adaptive,
+        Policy::Auto,
+    ];
     pub fn name(self) -> &'static str {
         match self {
             Policy::Fixed => "fixed",
             Policy::Heuristic => "heuristic",
             Policy::Adaptive => "adaptive",
+            Policy::Auto => "auto",
         }
     }
 }
@@ -101,6 +110,7 @@ impl Method {
                 tolerance: param * scale,
                 initial: None,
             },
+            Policy::Auto => StepSpec::Auto(param),
         };
         TraceSettings {
             integrator: self.integrator,
@@ -124,6 +134,22 @@ impl Method {
                     (1..=9).collect()
                 };
                 ks.into_iter().map(|k| 2f64.powi(-k)).collect()
+            }
+            Policy::Auto => {
+                // Exit-direction errors asked for: the decades the summary names, and
+                // between (the same low-order limits as error control).
+                // (Error per unit length: euler needs ~1/asked^2 steps, verlet 1/asked.)
+                let finest = match order {
+                    1 => 3,
+                    2 => 5,
+                    _ => 8,
+                };
+                let ks: Vec<i32> = if quick {
+                    vec![2, 4, 6].into_iter().filter(|&k| k <= finest).collect()
+                } else {
+                    (2..=finest).collect()
+                };
+                ks.into_iter().map(|k| 10f64.powi(-k)).collect()
             }
             Policy::Adaptive => {
                 // Low-order methods at tight tolerances need 10^5+ steps a ray: stop

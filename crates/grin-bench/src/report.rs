@@ -24,6 +24,7 @@ fn select<'a>(run: &'a AccuracyRun, case: &str, precision: Precision) -> Vec<&'a
 pub fn point_name(p: &Point) -> String {
     let param = match p.method.policy {
         Policy::Adaptive => format!("tol {:.0e}", p.param),
+        Policy::Auto => format!("{:.0e} rad", p.param),
         _ => format!("ds {}", fraction(p.param)),
     };
     format!("{} {} {} ({} exit)", p.integrator, p.policy, param, p.exit)
@@ -82,6 +83,7 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
                         Policy::Fixed => LineKind::Solid,
                         Policy::Heuristic => LineKind::Dotted,
                         Policy::Adaptive => LineKind::Dashed,
+                        Policy::Auto => LineKind::Thick,
                     },
                     points: c,
                 });
@@ -164,6 +166,57 @@ pub fn decade_rows(run: &AccuracyRun) -> Vec<DecadeRow> {
     rows
 }
 
+/// What the accuracy knob delivered: one `step = { auto = asked }` run, beside the
+/// cheapest fixed-step run and the paper's method that reach the same error.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AutoRow {
+    pub case: String,
+    pub precision: &'static str,
+    pub integrator: &'static str,
+    pub asked: f64,
+    pub delivered: f64,
+    /// delivered / asked (<= 1: the knob kept its word).
+    pub ratio: f64,
+    pub evals: f64,
+    /// Cheapest fixed-step run (any integrator, exit) with err_dir <= asked.
+    pub best_fixed_evals: Option<f64>,
+    /// Cheapest run of the paper's method with err_dir <= asked.
+    pub paper_evals: Option<f64>,
+}
+
+pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
+    let mut rows = Vec::new();
+    for p in run
+        .points
+        .iter()
+        .filter(|p| p.method.policy == Policy::Auto && p.method.exit == ExitMethod::Hermite)
+    {
+        let same: Vec<&Point> = select(run, &p.case, p.method.precision);
+        let fixed: Vec<&Point> = same
+            .iter()
+            .copied()
+            .filter(|q| q.method.policy == Policy::Fixed)
+            .collect();
+        let paper: Vec<&Point> = same
+            .iter()
+            .copied()
+            .filter(|q| q.method.is_paper())
+            .collect();
+        rows.push(AutoRow {
+            case: p.case.clone(),
+            precision: p.precision,
+            integrator: p.integrator,
+            asked: p.param,
+            delivered: p.err_dir,
+            ratio: p.err_dir / p.param,
+            evals: p.evals_per_ray,
+            best_fixed_evals: cheapest_at(&fixed, p.param).map(|q| q.evals_per_ray),
+            paper_evals: cheapest_at(&paper, p.param).map(|q| q.evals_per_ray),
+        });
+    }
+    rows
+}
+
 fn opt(x: Option<f64>, f: impl Fn(f64) -> String) -> String {
     x.map_or_else(|| "-".into(), f)
 }
@@ -217,6 +270,32 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             opt(r.best_err, |x| format!("{x:.1e}")),
             opt(r.paper_evals, |x| format!("{x:.0}")),
             opt(r.paper_ratio, |x| format!("{x:.1}x")),
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n## The accuracy knob: `step = {{ auto = asked }}` (dopri and sharma, f64)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| case | integrator | asked (rad) | delivered | delivered / asked | evals/ray | cheapest fixed step reaching it | paper's method reaching it |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    for r in auto_rows(run)
+        .iter()
+        .filter(|r| r.precision == "f64" && (r.integrator == "dopri" || r.integrator == "sharma"))
+    {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.0e} | {:.1e} | {:.2} | {:.0} | {} | {} |",
+            r.case,
+            r.integrator,
+            r.asked,
+            r.delivered,
+            r.ratio,
+            r.evals,
+            opt(r.best_fixed_evals, |x| format!("{x:.0}")),
+            opt(r.paper_evals, |x| format!("{x:.0}")),
         );
     }
     let _ = writeln!(
@@ -281,6 +360,7 @@ pub fn write_accuracy(run: &AccuracyRun, dir: &Path, command: &str) -> anyhow::R
     };
     add("accuracy.csv".into(), csv_text(&run.points)?)?;
     add("orders.csv".into(), csv_text(&run.orders)?)?;
+    add("auto.csv".into(), csv_text(&auto_rows(run))?)?;
     add(
         "summary.md".into(),
         summary_markdown(run, command).into_bytes(),

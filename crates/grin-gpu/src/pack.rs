@@ -50,6 +50,16 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
             STEP_ADAPTIVE,
             [tolerance as f32, initial.unwrap_or(0.0) as f32, 0.0, 0.0],
         ),
+        // Error control per unit path length (step.z = 1 selects it in step.wgsl).
+        StepSpec::Auto(accuracy) => (
+            STEP_ADAPTIVE,
+            [
+                (grin_scene::AUTO_TOL_PER_RAD * accuracy) as f32,
+                0.0,
+                1.0,
+                0.0,
+            ],
+        ),
     };
     let mut flags = 0;
     if s.macro_cells {

@@ -275,6 +275,13 @@ fn every_integrator_step_policy_and_exit_matches_cpu() {
             ExitMethod::Bisection,
             false,
         ),
+        // The accuracy knob: error per unit length (step.z = 1 on the GPU).
+        (
+            IntegratorKind::Adaptive,
+            StepSpec::Auto(1e-4),
+            ExitMethod::Hermite,
+            true,
+        ),
     ];
     for (integrator, step, exit, macro_cells) in cases {
         let mut scene = base.clone();

@@ -82,6 +82,13 @@ impl TraceSettings {
                     )));
                 }
             }
+            StepSpec::Auto(a) => {
+                if !(pos(a) && a < 1.0) {
+                    return Err(TraceError::Step(format!(
+                        "auto accuracy {a} must be an exit-direction error in (0, 1) radians"
+                    )));
+                }
+            }
             StepSpec::Fixed(_) => {}
         }
         if !(1..=grin_scene::MAX_STEPS).contains(&self.max_steps) {
@@ -99,6 +106,7 @@ impl TraceSettings {
             StepSpec::Fixed(ds) => Some(("fixed step", ds)),
             StepSpec::Heuristic { min, .. } => Some(("heuristic min step", min)),
             StepSpec::Adaptive { initial, .. } => initial.map(|i| ("adaptive initial step", i)),
+            StepSpec::Auto(_) => None,
         };
         if let Some((what, ds)) = shortest
             && ds < floor

@@ -370,6 +370,11 @@ fn render_errors() {
             "step = { adaptive = { tolerance = -1e-5 } }",
             "scene.toml:25:23: render.step.adaptive.tolerance: must be > 0, got -0.00001",
         ),
+        (
+            "step = { heuristic = { min = 0.002, max = 0.05 } }",
+            "step = { auto = 2.0 }",
+            "scene.toml:25:10: render.step.auto: is an exit-direction error in radians and must be < 1, got 2",
+        ),
     ];
     for (from, to, want) in cases {
         assert_eq!(error_of(from, to), want);

@@ -469,7 +469,18 @@ pub enum StepSpec {
         #[serde(default)]
         initial: Option<f64>,
     },
+    /// The accuracy knob: error control for a worst exit-direction error of about this
+    /// many radians. `step = { auto = 1e-4 }`. Steps are held to an error (the tracer's
+    /// norm: position, or direction error times the medium's radius) of at most
+    /// [`AUTO_TOL_PER_RAD`] x accuracy per unit of path length, so the errors of a path
+    /// of length L add up to at most that times L whatever the integrator's order
+    /// (`grin bench accuracy` measures what each delivers; docs/accuracy.md).
+    Auto(f64),
 }
+
+/// Error per unit path length per radian of asked exit-direction error: a ray crossing
+/// the medium's diameter (2 radii) accumulates at most the asked error.
+pub const AUTO_TOL_PER_RAD: f64 = 0.5;
 
 /// How the exit point on the bounds is found on the step that leaves the medium.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]

@@ -424,5 +424,15 @@ fn render(r: &RenderSettings) -> Check {
             positive("render.step.adaptive.tolerance", tolerance)?;
             initial.map_or(Ok(()), |s| positive("render.step.adaptive.initial", s))
         }
+        StepSpec::Auto(a) => {
+            positive("render.step.auto", a)?;
+            if a >= 1.0 {
+                return fail(
+                    "render.step.auto",
+                    format!("is an exit-direction error in radians and must be < 1, got {a}"),
+                );
+            }
+            Ok(())
+        }
     }
 }

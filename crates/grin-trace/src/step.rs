@@ -40,6 +40,17 @@ pub const LENGTH_SCALE_STEP_FRACTION: f64 = 0.5;
 /// tolerance 1e-9 passed over it, 8e-2 rad off, before this cap).
 pub const FEATURE_STEP_FRACTION: f64 = 1.0;
 
+/// What an error-controlled step's error (world length) is held to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Tolerance {
+    /// At most this much per step (`step = { adaptive = ... }`).
+    PerStep(f64),
+    /// At most this much per unit of path length (`step = { auto = ... }`): the errors
+    /// of all steps then add up to at most this times the path, whatever the
+    /// integrator's order, so an asked exit-direction error maps to one number.
+    PerLength(f64),
+}
+
 /// Chooses step lengths along one ray (error control keeps its state between steps).
 #[derive(Debug, Clone)]
 pub struct StepController {
@@ -162,8 +173,15 @@ impl StepController {
                 }
             }
             StepSpec::Adaptive { tolerance, .. } => {
-                self.take_adaptive(field, s, s0, tolerance, cap)
+                self.take_adaptive(field, s, s0, Tolerance::PerStep(tolerance), cap)
             }
+            StepSpec::Auto(accuracy) => self.take_adaptive(
+                field,
+                s,
+                s0,
+                Tolerance::PerLength(grin_scene::AUTO_TOL_PER_RAD * accuracy),
+                cap,
+            ),
         }
     }
 
@@ -181,7 +199,7 @@ impl StepController {
         field: &dyn IndexField,
         s: RayState<R>,
         s0: &FieldSample<R>,
-        tol: f64,
+        tol: Tolerance,
         cap: f64,
     ) -> Taken<R> {
         let n0 = s0.n.to_f64();
@@ -191,7 +209,7 @@ impl StepController {
         let exponent = 1.0 / p as f64;
         let eps = R::EPS.to_f64();
         let ds_min = ADAPTIVE_MIN_DS_REL.max(ADAPTIVE_MIN_DS_EPS * eps) * self.len_scale;
-        let tol = tol.max(ADAPTIVE_TOL_FLOOR_EPS * eps * self.len_scale);
+        let tol_floor = ADAPTIVE_TOL_FLOOR_EPS * eps * self.len_scale;
         let ds_max = self.ds_max.min(cap).max(ds_min);
         let mut evals = 0;
         let mut rejections = 0;
@@ -206,6 +224,11 @@ impl StepController {
                 self.doubled(field, s, d0, h, p)
             };
             evals += step.evals;
+            let tol = match tol {
+                Tolerance::PerStep(t) => t,
+                Tolerance::PerLength(t) => t * ds,
+            }
+            .max(tol_floor);
             let accept = err <= tol || ds <= ds_min || rejections >= MAX_REJECTIONS;
             let factor = if err > 0.0 && err.is_finite() {
                 (SAFETY * (tol / err).powf(exponent)).clamp(MIN_SHRINK, MAX_GROWTH)

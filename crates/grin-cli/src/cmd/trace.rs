@@ -42,7 +42,8 @@ pub struct Args {
     /// Integrator, overriding the scene's: euler | symplectic-euler | verlet | sharma | rk4 | adaptive.
     #[arg(long, value_parser = parse_integrator)]
     pub integrator: Option<IntegratorKind>,
-    /// Step policy, overriding the scene's: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] | adaptive=TOL.
+    /// Step policy, overriding the scene's: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] |
+    /// adaptive=TOL | auto=RAD (error control for an exit-direction error of RAD radians).
     #[arg(long, value_parser = parse_step)]
     pub step: Option<StepSpec>,
     /// Per-ray step cap, overriding the scene's max_steps.
@@ -73,7 +74,7 @@ fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
 }
 
 fn parse_step(s: &str) -> Result<StepSpec, String> {
-    let usage = "expected fixed=DS, heuristic=MIN,MAX[,AMPLITUDE] or adaptive=TOL";
+    let usage = "expected fixed=DS, heuristic=MIN,MAX[,AMPLITUDE], adaptive=TOL or auto=RAD";
     let (kind, values) = s.split_once('=').ok_or_else(|| format!("`{s}`: {usage}"))?;
     let nums = values
         .split(',')
@@ -101,6 +102,10 @@ fn parse_step(s: &str) -> Result<StepSpec, String> {
             tolerance: *tol,
             initial: None,
         }),
+        ("auto", [rad]) if *rad < 1.0 => Ok(StepSpec::Auto(*rad)),
+        ("auto", [_]) => Err(format!(
+            "`{s}`: auto takes an exit-direction error in radians, below 1"
+        )),
         _ => Err(format!("`{s}`: {usage}")),
     }
 }

@@ -68,7 +68,12 @@ struct Run {
     backend: &'static str,
     width: u32,
     height: u32,
+    /// The fastest frame (the rates below are of it).
     ms_per_frame: f64,
+    /// Frame times over all timed frames: fastest, median, slowest.
+    ms_min: f64,
+    ms_median: f64,
+    ms_max: f64,
     rays_per_second: f64,
     steps_per_ray: f64,
     evals_per_ray: f64,
@@ -102,17 +107,50 @@ fn mean(frame: &Frame, f: fn(&grin_trace::image::PixelOut) -> f32) -> f64 {
     frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / frame.pixels.len().max(1) as f64
 }
 
-fn run_of(scene: &str, backend: &'static str, frame: &Frame, spp: u32, seconds: f64) -> Run {
+/// Spread (slowest - fastest) / fastest above which the machine was busy during a run.
+const BUSY_SPREAD: f64 = 0.25;
+
+/// (min, median, max) of frame times in seconds.
+fn min_median_max(times: &[f64]) -> (f64, f64, f64) {
+    let mut t = times.to_vec();
+    t.sort_by(f64::total_cmp);
+    let n = t.len();
+    if n == 0 {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    }
+    let median = if n % 2 == 1 {
+        t[n / 2]
+    } else {
+        0.5 * (t[n / 2 - 1] + t[n / 2])
+    };
+    (t[0], median, t[n - 1])
+}
+
+fn run_of(scene: &str, backend: &'static str, frame: &Frame, spp: u32, times: &[f64]) -> Run {
+    let (min, median, max) = min_median_max(times);
+    let seconds = min;
     let rays = f64::from(frame.width) * f64::from(frame.height) * f64::from(spp);
     let steps = mean(frame, |p| p.steps);
     let evals = mean(frame, |p| p.evals);
     let s = seconds.max(1e-9);
+    if times.len() > 1 && (max - min) / min.max(1e-12) > BUSY_SPREAD {
+        eprintln!(
+            "warning: {scene} ({backend}): frame times {:.1} / {:.1} / {:.1} ms (min / median / max) spread by more than {:.0}%: the machine was busy; rerun for figures to quote",
+            min * 1e3,
+            median * 1e3,
+            max * 1e3,
+            BUSY_SPREAD * 100.0
+        );
+    }
     Run {
         scene: scene.to_owned(),
         backend,
         width: frame.width,
         height: frame.height,
         ms_per_frame: seconds * 1e3,
+        ms_min: min * 1e3,
+        ms_median: median * 1e3,
+        ms_max: max * 1e3,
         rays_per_second: rays / s,
         steps_per_ray: steps,
         evals_per_ray: evals,
@@ -222,17 +260,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         renderer.render(&|_| {}, &cancel)?; // warm-up: lavapipe compiles lazily
         progress.inc(1);
         let mut best: Option<(Frame, f64)> = None;
+        let mut times = Vec::new();
         for _ in 0..frames {
             let start = Instant::now();
             let frame = renderer.render(&|_| {}, &cancel)?;
             let t = start.elapsed().as_secs_f64();
+            times.push(t);
             if best.as_ref().is_none_or(|(_, b)| t < *b) {
                 best = Some((frame, t));
             }
             progress.inc(1);
         }
-        if let Some((frame, t)) = best {
-            runs.push(run_of(label, "gpu", &frame, rs.settings.spp, t));
+        if let Some((frame, _)) = best {
+            runs.push(run_of(label, "gpu", &frame, rs.settings.spp, &times));
         }
         if *label == MARCH_ONLY {
             raw_rate = renderer.field_sample_rate(3)?;
@@ -240,17 +280,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if !args.gpu_only {
             progress.set_message(format!("{label} (cpu)"));
             let mut best: Option<(Frame, f64)> = None;
+            let mut times = Vec::new();
             for _ in 0..frames {
                 let start = Instant::now();
                 let frame = render_cpu(rs, &|_| {}, &cancel)?;
                 let t = start.elapsed().as_secs_f64();
+                times.push(t);
                 if best.as_ref().is_none_or(|(_, b)| t < *b) {
                     best = Some((frame, t));
                 }
                 progress.inc(1);
             }
-            if let Some((frame, t)) = best {
-                runs.push(run_of(label, "cpu", &frame, rs.settings.spp, t));
+            if let Some((frame, _)) = best {
+                runs.push(run_of(label, "cpu", &frame, rs.settings.spp, &times));
             }
         }
     }
@@ -292,11 +334,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.bake_resolution
     );
     outln!(
-        "{:<20} {:<4} {:>9} {:>10} {:>11} {:>9} {:>9} {:>12}",
+        "{:<20} {:<4} {:>9} {:>22} {:>11} {:>9} {:>9} {:>12}",
         "scene",
         "",
         "size",
-        "ms/frame",
+        "ms/frame min/med/max",
         "Mrays/s",
         "steps/ray",
         "evals/ray",
@@ -304,11 +346,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for r in &report.runs {
         outln!(
-            "{:<20} {:<4} {:>9} {:>10.1} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
+            "{:<20} {:<4} {:>9} {:>22} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
             r.scene,
             r.backend,
             format!("{}x{}", r.width, r.height),
-            r.ms_per_frame,
+            format!("{:.1}/{:.1}/{:.1}", r.ms_min, r.ms_median, r.ms_max),
             r.rays_per_second / 1e6,
             r.steps_per_ray,
             r.evals_per_ray,
@@ -331,4 +373,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.verlet_ray_steps_fraction_of_raw * 100.0
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::min_median_max;
+
+    #[test]
+    fn frame_time_spread_is_min_median_max() {
+        assert_eq!(min_median_max(&[3.0, 1.0, 2.0]), (1.0, 2.0, 3.0));
+        assert_eq!(min_median_max(&[4.0, 1.0, 2.0, 3.0]), (1.0, 2.5, 4.0));
+        assert_eq!(min_median_max(&[5.0]), (5.0, 5.0, 5.0));
+        assert!(min_median_max(&[]).0.is_nan());
+    }
 }
