@@ -7,8 +7,8 @@
 
 @compute @workgroup_size(8, 8, 1)
 fn render_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let width = params.image.x;
-    if gid.x >= width || gid.y >= params.rows.y {
+    let width = params.width;
+    if gid.x >= width || gid.y >= params.row_count {
         return;
     }
     if !render_pixel(gid.x, gid.y) {
@@ -31,23 +31,23 @@ fn render_deferred(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let local = deferred[gid.x];
-    let width = params.image.x;
+    let width = params.width;
     render_pixel(local % width, local / width);
 }
 
 // All samples of pixel (px, band row `row`): the mean radiance and the first sample's
 // AOVs into `out_pixels`. False (nothing written) when PASS_FIRST left it to PASS_MEDIUM.
 fn render_pixel(px: u32, row: u32) -> bool {
-    let width = params.image.x;
-    let py = params.rows.x + row;
+    let width = params.width;
+    let py = params.first_row + row;
     let index = py * width + px;
-    let spp = params.image.z;
+    let spp = params.spp;
     var rgb = vec3<f32>(0.0);
     var steps = 0.0;
     var evals = 0.0;
     var first = PrimaryAov(0.0, vec3<f32>(0.0), 0.0, 0u, 0u, STATUS_MISSED);
     for (var sample = 0u; sample < spp; sample++) {
-        var rng = rng_for_pixel(index, sample, params.image.w);
+        var rng = rng_for_pixel(index, sample, params.seed);
         var sx = 0.5;
         var sy = 0.5;
         if spp != 1u {

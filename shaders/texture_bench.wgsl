@@ -9,14 +9,14 @@ const BENCH_SAMPLES: u32 = 256u;
 
 @compute @workgroup_size(8, 8, 1)
 fn bench_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let width = params.image.x;
-    if gid.x >= width || gid.y >= params.rows.y {
+    let width = params.width;
+    if gid.x >= width || gid.y >= params.row_count {
         return;
     }
     let gmax = grid_max();
     // A ray per pixel across the grid, like a camera looking down z.
     let u = (f32(gid.x) + 0.5) / f32(width);
-    let v = (f32(gid.y) + 0.5) / f32(params.rows.y);
+    let v = (f32(gid.y) + 0.5) / f32(params.row_count);
     var g = vec3<f32>(u * gmax.x, v * gmax.y, 0.0);
     let dg = vec3<f32>(0.01 * gmax.x, -0.005 * gmax.y, gmax.z) / f32(BENCH_SAMPLES);
     var acc = vec4<f32>(0.0);

@@ -18,15 +18,15 @@ fn field_flag(bit: u32) -> bool {
 }
 
 fn ambient_index() -> f32 {
-    return params.bounds_box_max.w;
+    return params.ambient_n;
 }
 
 fn grid_from_world_point(p: vec3<f32>) -> vec3<f32> {
-    return (p - params.grid_origin.xyz) * params.grid_inv_spacing.xyz;
+    return (p - params.grid_origin) * params.grid_inv_spacing;
 }
 
 fn grid_max() -> vec3<f32> {
-    return vec3<f32>(params.grid_dims.xyz - vec3<u32>(1u));
+    return vec3<f32>(params.grid_dims - vec3<u32>(1u));
 }
 
 fn beyond_grid(g: vec3<f32>) -> bool {
@@ -38,7 +38,7 @@ fn voxel(i: i32, j: i32, k: i32) -> vec4<f32> {
 }
 
 fn trilinear(g: vec3<f32>) -> vec4<f32> {
-    let d = vec3<i32>(params.grid_dims.xyz);
+    let d = vec3<i32>(params.grid_dims);
     let base = min(vec3<i32>(floor(g)), d - vec3<i32>(2));
     let t = g - vec3<f32>(base);
     let c000 = voxel(base.x, base.y, base.z);
@@ -78,7 +78,7 @@ fn mirror_index(i: i32, n: i32) -> i32 {
 }
 
 fn tricubic(g: vec3<f32>) -> vec4<f32> {
-    let d = vec3<i32>(params.grid_dims.xyz);
+    let d = vec3<i32>(params.grid_dims);
     let fl = floor(g);
     let wx = bspline_weights(g.x - fl.x);
     let wy = bspline_weights(g.y - fl.y);
@@ -116,20 +116,20 @@ fn sample_field(p: vec3<f32>) -> FieldSample {
 // ---- Macro cells (the paper's "infinite step") ----
 
 fn macro_homogeneous(c: vec3<i32>) -> bool {
-    return textureLoad(macro_tex, c, 0).x <= params.grid_origin.w;
+    return textureLoad(macro_tex, c, 0).x <= params.macro_threshold;
 }
 
 // The macro cell holding grid point g (clamped into the grid).
 fn macro_cell(g: vec3<f32>) -> vec3<i32> {
-    let gc = clamp(g, vec3<f32>(0.0), grid_max()) / f32(params.macro_dims.w);
-    return min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), vec3<i32>(params.macro_dims.xyz) - vec3<i32>(1));
+    let gc = clamp(g, vec3<f32>(0.0), grid_max()) / f32(params.macro_cell_voxels);
+    return min(vec3<i32>(max(floor(gc), vec3<f32>(0.0))), vec3<i32>(params.macro_dims) - vec3<i32>(1));
 }
 
 // From grid point g along grid direction dg: world length to the end of the run of
 // homogeneous cells starting at g's cell; negative if that cell varies (MacroGrid::span).
 fn macro_span(g: vec3<f32>, dg: vec3<f32>) -> f32 {
-    let cell = f32(params.macro_dims.w);
-    let mdims = vec3<i32>(params.macro_dims.xyz);
+    let cell = f32(params.macro_cell_voxels);
+    let mdims = vec3<i32>(params.macro_dims);
     let gmax = grid_max();
     var c = macro_cell(g);
     if !macro_homogeneous(c) {
@@ -191,14 +191,14 @@ fn may_fly(p: vec3<f32>) -> bool {
 // BakedField::homogeneous_span: positive world length of a straight flight, or -1.
 fn homogeneous_span(p: vec3<f32>, dir: vec3<f32>) -> f32 {
     let g = grid_from_world_point(p);
-    let dg = dir * params.grid_inv_spacing.xyz;
+    let dg = dir * params.grid_inv_spacing;
     var span = -1.0;
     if beyond_grid(g) {
         if !field_flag(FLAG_OUTSIDE_AMBIENT) {
             return -1.0;
         }
-        let lo = params.grid_origin.xyz;
-        let hi = lo + grid_max() / params.grid_inv_spacing.xyz;
+        let lo = params.grid_origin;
+        let hi = lo + grid_max() / params.grid_inv_spacing;
         let to_grid = box_interval(lo, hi, p, dir);
         let to_exit = bounds_intersect(p, dir);
         if to_grid.found && to_exit.found {

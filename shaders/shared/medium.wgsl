@@ -99,8 +99,8 @@ fn refract(d: vec3<f32>, normal: vec3<f32>, n1: f32, n2: f32) -> Interface {
 
 fn project_to_surface(p: vec3<f32>) -> vec3<f32> {
     if bounds_is_box() {
-        let bmin = params.bounds_box_min.xyz;
-        let bmax = params.bounds_box_max.xyz;
+        let bmin = params.box_min;
+        let bmax = params.box_max;
         let normal = bounds_normal(p);
         var q = clamp(p, bmin, bmax);
         for (var axis = 0; axis < 3; axis++) {
@@ -112,11 +112,11 @@ fn project_to_surface(p: vec3<f32>) -> vec3<f32> {
         }
         return q;
     }
-    let c = params.bounds_sphere.xyz;
+    let c = params.bounds_center;
     let d = p - c;
     let len = length(d);
     if len > 0.0 {
-        return c + d * (params.bounds_sphere.w / len);
+        return c + d * (params.bounds_radius / len);
     }
     return p;
 }
@@ -384,7 +384,7 @@ fn chord_hit(seg: Segment) -> Hit {
     if len == 0.0 {
         return no_hit();
     }
-    return intersect_objects(params.medium_objects.x, params.medium_objects.y, seg.r0, chord / len, 0.0, len);
+    return intersect_objects(params.medium_objects_first, params.medium_objects_count, seg.r0, chord / len, 0.0, len);
 }
 
 fn finite3(v: vec3<f32>) -> bool {
@@ -450,7 +450,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     var ctrl = step_controller_new(jitter);
     let len_scale = ctrl.len_scale;
     let exit_tol = EXIT_TOL_REL * len_scale;
-    let max_steps = params.march.z;
+    let max_steps = params.max_steps;
     // The hot loop below takes steps and straight flights, which share its field
     // sample, length sum and object test, and breaks out for the rarer events (leaving
     // the bounds, an object, a stop), handled after it. SIMD implementations that run
@@ -458,7 +458,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     // code once per event instead of on every step; on a GPU it keeps divergent lanes
     // out of the step's critical path. Each outer pass ends with a counted step or
     // flight, or a total reflection after one: 2 * max_steps + 2 passes bound it.
-    let min_flight = max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS / max_element(params.grid_inv_spacing.xyz));
+    let min_flight = max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS / max_element(params.grid_inv_spacing));
     for (var guard = 0u; guard < 2u * max_steps + 2u; guard++) {
         var event = MARCH_EVENT_STOP;
         var taken: Taken;

@@ -111,22 +111,22 @@ fn sign_nonzero(x: f32) -> f32 {
 }
 
 fn intersect_object(obj: GpuObject, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> PrimHit {
-    switch obj.kinds.x {
+    switch obj.shape {
         case SHAPE_SPHERE: {
-            return intersect_sphere(obj.a.xyz, obj.a.w, o, d, t_min, t_max);
+            return intersect_sphere(obj.a, obj.radius, o, d, t_min, t_max);
         }
         case SHAPE_PLANE: {
-            return intersect_plane(obj.a.xyz, obj.b.xyz, o, d, t_min, t_max);
+            return intersect_plane(obj.a, obj.b, o, d, t_min, t_max);
         }
         default: {
-            return intersect_box(obj.a.xyz, obj.b.xyz, o, d, t_min, t_max);
+            return intersect_box(obj.a, obj.b, o, d, t_min, t_max);
         }
     }
 }
 
 // Nearest hit among the scene objects along o + t d, t in (t_min, t_max).
 fn intersect_scene(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> Hit {
-    return intersect_objects(0u, params.rows.w, o, d, t_min, t_max);
+    return intersect_objects(0u, params.object_count, o, d, t_min, t_max);
 }
 
 // The nearest hit among objects[first .. first + count] (hit.object: the scene index).
@@ -141,7 +141,7 @@ fn intersect_objects(first: u32, count: u32, o: vec3<f32>, d: vec3<f32>, t_min: 
             t_best = h.t;
             best.found = true;
             best.t = h.t;
-            best.object = obj.kinds.z;
+            best.object = obj.scene_index;
             outward = h.outward;
         }
     }
@@ -161,14 +161,14 @@ fn bounds_is_box() -> bool {
 
 fn bounds_signed_distance(p: vec3<f32>) -> f32 {
     if bounds_is_box() {
-        let bmin = params.bounds_box_min.xyz;
-        let bmax = params.bounds_box_max.xyz;
+        let bmin = params.box_min;
+        let bmax = params.box_max;
         let c = (bmin + bmax) * 0.5;
         let h = (bmax - bmin) * 0.5;
         let q = abs(p - c) - h;
         return length(max(q, vec3<f32>(0.0))) + min(max_element(q), 0.0);
     }
-    return length(p - params.bounds_sphere.xyz) - params.bounds_sphere.w;
+    return length(p - params.bounds_center) - params.bounds_radius;
 }
 
 fn bounds_contains(p: vec3<f32>) -> bool {
@@ -177,8 +177,8 @@ fn bounds_contains(p: vec3<f32>) -> bool {
 
 fn bounds_normal(p: vec3<f32>) -> vec3<f32> {
     if bounds_is_box() {
-        let bmin = params.bounds_box_min.xyz;
-        let bmax = params.bounds_box_max.xyz;
+        let bmin = params.box_min;
+        let bmax = params.box_max;
         let c = (bmin + bmax) * 0.5;
         let h = (bmax - bmin) * 0.5;
         let d = p - c;
@@ -193,7 +193,7 @@ fn bounds_normal(p: vec3<f32>) -> vec3<f32> {
         n[axis] = sign_nonzero(d[axis]);
         return n;
     }
-    return normalize(p - params.bounds_sphere.xyz);
+    return normalize(p - params.bounds_center);
 }
 
 // (s_in, s_out) of o + s d inside a box; found if s_out >= max(s_in, 0).
@@ -214,10 +214,10 @@ fn box_interval(bmin: vec3<f32>, bmax: vec3<f32>, o: vec3<f32>, d: vec3<f32>) ->
 
 fn bounds_intersect(o: vec3<f32>, d: vec3<f32>) -> Interval {
     if bounds_is_box() {
-        return box_interval(params.bounds_box_min.xyz, params.bounds_box_max.xyz, o, d);
+        return box_interval(params.box_min, params.box_max, o, d);
     }
-    let oc = o - params.bounds_sphere.xyz;
-    let r = params.bounds_sphere.w;
+    let oc = o - params.bounds_center;
+    let r = params.bounds_radius;
     let a = dot(d, d);
     if a == 0.0 {
         return Interval(false, 0.0, 0.0);

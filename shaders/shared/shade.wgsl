@@ -86,7 +86,7 @@ fn angle_between_deg(a: vec3<f32>, b: vec3<f32>) -> f32 {
 // One pixel sample: the camera ray `d` through the medium and the objects, up to
 // max_depth bounces. `jitter` scales the first step of the camera ray's passage.
 fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample {
-    var origin = params.cam_origin.xyz;
+    var origin = params.cam_origin;
     var dir = d;
     var throughput = vec3<f32>(1.0);
     var radiance = vec3<f32>(0.0);
@@ -94,7 +94,7 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
     var primary = true;
     var inside = has_medium() && bounds_signed_distance(origin) < 0.0;
     var bounces = 0u;
-    let max_events = EVENTS_PER_DEPTH * (params.rows.z + 1u);
+    let max_events = EVENTS_PER_DEPTH * (params.max_depth + 1u);
     for (var ev_i = 0u; ev_i < max_events; ev_i++) {
         var event: Event;
         if inside {
@@ -170,7 +170,7 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
             break;
         }
         primary = false;
-        if bounces >= params.rows.z {
+        if bounces >= params.max_depth {
             break;
         }
         bounces += 1u;
@@ -178,28 +178,28 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
         let cos_i = -dot(hit_dir, hit.normal);
         var next = vec3<f32>(0.0);
         var weight = vec3<f32>(1.0);
-        switch obj.kinds.y {
+        switch obj.material {
             case MATERIAL_DIFFUSE: {
-                radiance += throughput * shade_diffuse(hit, obj.color_a.xyz);
+                radiance += throughput * shade_diffuse(hit, obj.color_a);
             }
             case MATERIAL_CHECKER: {
-                var albedo = obj.color_b.xyz;
-                if checker_is_a(hit.point, hit.normal, obj.color_a.w) {
-                    albedo = obj.color_a.xyz;
+                var albedo = obj.color_b;
+                if checker_is_a(hit.point, hit.normal, obj.param) {
+                    albedo = obj.color_a;
                 }
                 radiance += throughput * shade_diffuse(hit, albedo);
             }
             case MATERIAL_MIRROR: {
                 next = reflect_dir(hit_dir, hit.normal);
-                weight = obj.color_a.xyz;
+                weight = obj.color_a;
             }
             case MATERIAL_METAL: {
                 next = reflect_dir(hit_dir, hit.normal);
-                weight = fresnel_schlick(cos_i, obj.color_a.xyz);
+                weight = fresnel_schlick(cos_i, obj.color_a);
             }
             default: {
                 // Glass: Fresnel chooses reflection or refraction at random.
-                let ior = obj.color_a.w;
+                let ior = obj.param;
                 let side = select(-1.0, 1.0, hit.front_face);
                 let n_outside = index_at(hit.point + hit.normal * (SURFACE_EPS * side));
                 if n_outside < 0.0 {
@@ -216,13 +216,13 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
                 let t = refract_dir(hit_dir, hit.normal, n1, n2);
                 if t.w > 0.5 && u >= f {
                     next = t.xyz;
-                    weight = obj.color_a.xyz;
+                    weight = obj.color_a;
                 } else {
                     next = reflect_dir(hit_dir, hit.normal);
                 }
             }
         }
-        if obj.kinds.y == MATERIAL_DIFFUSE || obj.kinds.y == MATERIAL_CHECKER {
+        if obj.material == MATERIAL_DIFFUSE || obj.material == MATERIAL_CHECKER {
             // Diffuse surfaces end the path (direct light only).
             break;
         }
@@ -238,21 +238,21 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
 fn shade_diffuse(hit: Hit, albedo: vec3<f32>) -> vec3<f32> {
     var irradiance = sky_radiance(hit.normal) * (AMBIENT_SKY_WEIGHT * PI);
     let p = hit.point + hit.normal * SURFACE_EPS;
-    let count = params.grid_dims.w;
+    let count = params.light_count;
     for (var i = 0u; i < count; i++) {
         let light = lights[i];
         var to_light: vec3<f32>;
         var dist: f32;
         var intensity: vec3<f32>;
-        if light.position.w < 0.5 {
-            let v = light.position.xyz - p;
+        if light.kind == LIGHT_KIND_POINT {
+            let v = light.position - p;
             dist = length(v);
             to_light = v / dist;
-            intensity = light.intensity.xyz / (dist * dist);
+            intensity = light.intensity / (dist * dist);
         } else {
-            to_light = -normalize(light.position.xyz);
+            to_light = -normalize(light.position);
             dist = INF;
-            intensity = light.intensity.xyz;
+            intensity = light.intensity;
         }
         let cos = dot(hit.normal, to_light);
         if cos <= 0.0 {
@@ -267,13 +267,13 @@ fn shade_diffuse(hit: Hit, albedo: vec3<f32>) -> vec3<f32> {
 // Transmittance of a straight segment through the objects; w = 0 if blocked.
 fn straight_transmittance(o: vec3<f32>, d: vec3<f32>, dist: f32) -> vec4<f32> {
     var t = vec3<f32>(1.0);
-    let count = params.rows.w;
+    let count = params.object_count;
     for (var i = 0u; i < count; i++) {
         let obj = objects[i];
         if intersect_object(obj, o, d, SURFACE_EPS, dist).found {
-            if obj.kinds.y == MATERIAL_GLASS {
-                let r0 = fresnel_dielectric(1.0, 1.0, obj.color_a.w);
-                t *= obj.color_a.xyz * (1.0 - r0) * (1.0 - r0);
+            if obj.material == MATERIAL_GLASS {
+                let r0 = fresnel_dielectric(1.0, 1.0, obj.param);
+                t *= obj.color_a * (1.0 - r0) * (1.0 - r0);
             } else {
                 return vec4<f32>(0.0);
             }

@@ -22,7 +22,7 @@ fn env_lookup(d: vec3<f32>) -> vec3<f32> {
     let yb = min(ya + 1, h - 1);
     let top = mix(env_texel(xa, ya), env_texel(xb, ya), fx);
     let bottom = mix(env_texel(xa, yb), env_texel(xb, yb), fx);
-    return mix(top, bottom, fy) * params.sky_zenith.w;
+    return mix(top, bottom, fy) * params.env_intensity;
 }
 
 fn sky_radiance(d: vec3<f32>) -> vec3<f32> {
@@ -30,7 +30,7 @@ fn sky_radiance(d: vec3<f32>) -> vec3<f32> {
         return env_lookup(d);
     }
     if d.y < 0.0 {
-        return params.sky_ground.xyz;
+        return params.sky_ground;
     }
-    return mix(params.sky_horizon.xyz, params.sky_zenith.xyz, min(d.y, 1.0));
+    return mix(params.sky_horizon, params.sky_zenith, min(d.y, 1.0));
 }

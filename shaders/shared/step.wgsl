@@ -41,17 +41,17 @@ struct Taken {
 
 fn bounds_radius() -> f32 {
     if bounds_is_box() {
-        return min_element((params.bounds_box_max.xyz - params.bounds_box_min.xyz) * 0.5);
+        return min_element((params.box_max - params.box_min) * 0.5);
     }
-    return params.bounds_sphere.w;
+    return params.bounds_radius;
 }
 
 fn step_controller_new(jitter: f32) -> StepController {
     let len_scale = bounds_radius();
     var ds = ADAPTIVE_INITIAL_DS_REL * len_scale;
-    // params.step.y > 0 carries the scene's adaptive `initial`.
-    if STEP_POLICY == STEP_ADAPTIVE && params.step.y > 0.0 {
-        ds = params.step.y;
+    // ds_initial > 0 carries the scene's adaptive `initial`.
+    if STEP_POLICY == STEP_ADAPTIVE && params.ds_initial > 0.0 {
+        ds = params.ds_initial;
     }
     return StepController(len_scale, ds, jitter);
 }
@@ -108,8 +108,8 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
     let exponent = 1.0 / f32(integrator_order(kind));
     let ds_min = max(ADAPTIVE_MIN_DS_REL, ADAPTIVE_MIN_DS_EPS * F32_EPSILON) * (*ctrl).len_scale;
     let tol_floor = ADAPTIVE_TOL_FLOOR_EPS * F32_EPSILON * (*ctrl).len_scale;
-    // params.step.z = 1: `auto`, tol_asked is per unit path length (step::Tolerance).
-    let per_length = params.step.z > 0.5;
+    // `auto`: tol_asked is per unit path length (step::Tolerance).
+    let per_length = params.tolerance_per_length != 0u;
     let ds_max = max(min(ADAPTIVE_MAX_DS_REL * (*ctrl).len_scale, cap), ds_min);
     var evals = 0u;
     var rejections = 0u;
@@ -153,19 +153,19 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
 fn take_step(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample) -> Taken {
     let n0 = s0.n;
     let d0 = s0.grad_n * s0.n;
-    let feature = 2.0 / max_element(params.grid_inv_spacing.xyz);
+    let feature = 2.0 / max_element(params.grid_inv_spacing);
     let cap = min(length_scale_cap(n0, length(s0.grad_n)), FEATURE_STEP_FRACTION * feature);
     var ds: f32;
     switch STEP_POLICY {
         case STEP_HEURISTIC: {
             let dir = normalize_or_zero(s.t);
-            ds = heuristic_ds(params.step.x, params.step.y, params.step.z, dir, s0.grad_n);
+            ds = heuristic_ds(params.ds, params.ds_max, params.amplitude, dir, s0.grad_n);
         }
         case STEP_ADAPTIVE: {
-            return take_adaptive(ctrl, s, s0, params.step.x, cap);
+            return take_adaptive(ctrl, s, s0, params.tolerance, cap);
         }
         default: {
-            ds = params.step.x;
+            ds = params.ds;
         }
     }
     ds = min(ds * (*ctrl).jitter, cap);

@@ -1,38 +1,81 @@
 // Structs shared by the kernels. Keep in sync with crates/grin-gpu/src/gpu_data.rs.
 
+// Every field named; a vec3 and the scalar after it share one 16-byte row.
 struct FrameParams {
-    cam_origin: vec4<f32>,       // w = tan(fov_y / 2)
-    cam_forward: vec4<f32>,      // w = aspect
-    cam_right: vec4<f32>,
-    cam_up: vec4<f32>,
-    image: vec4<u32>,            // width, height, spp, seed
-    rows: vec4<u32>,             // first row, row count, max_depth, object count
-    march: vec4<u32>,            // integrator, step policy, max_steps, flags
-    step: vec4<f32>,             // fixed ds | (min, max, amplitude) | adaptive initial
-    bounds_sphere: vec4<f32>,    // centre, radius
-    bounds_box_min: vec4<f32>,   // w = bounds kind
-    bounds_box_max: vec4<f32>,   // w = ambient index
-    grid_origin: vec4<f32>,      // w = macro-cell homogeneity threshold
-    grid_inv_spacing: vec4<f32>,
-    grid_dims: vec4<u32>,        // w = light count
-    macro_dims: vec4<u32>,       // w = voxels per macro cell
-    sky_horizon: vec4<f32>,      // w = sky kind
-    sky_zenith: vec4<f32>,       // w = environment map intensity
-    sky_ground: vec4<f32>,
-    medium_objects: vec4<u32>,   // first, count (copies with kinds.z = scene index)
+    cam_origin: vec3<f32>,
+    tan_half_fov_y: f32,
+    cam_forward: vec3<f32>,
+    aspect: f32,                 // width / height
+    cam_right: vec3<f32>,
+    env_intensity: f32,          // environment map's intensity
+    cam_up: vec3<f32>,
+    ambient_n: f32,              // index outside the medium
+    width: u32,
+    height: u32,
+    spp: u32,
+    seed: u32,
+    first_row: u32,              // first row of this dispatch
+    row_count: u32,              // rows in this dispatch
+    max_depth: u32,
+    object_count: u32,
+    integrator: u32,             // INTEGRATOR_* (also the INTEGRATOR override)
+    step_policy: u32,            // STEP_* (also the STEP_POLICY override)
+    max_steps: u32,
+    flags: u32,                  // FLAG_* (also the FLAGS override)
+    light_count: u32,
+    bounds_kind: u32,            // BOUNDS_KIND_* (also the BOUNDS_BOX override)
+    sky_kind: u32,               // SKY_KIND_* (also the SKY_MAP override)
+    macro_cell_voxels: u32,      // voxels per macro cell along an axis
+    ds: f32,                     // fixed: the step; heuristic: the shortest step
+    ds_max: f32,                 // heuristic: the longest step
+    amplitude: f32,              // heuristic: |grad n| at which the step is the shortest
+    tolerance: f32,              // adaptive: per step; auto: per unit path length
+    ds_initial: f32,             // adaptive: the first step (0: ADAPTIVE_INITIAL_DS_REL)
+    tolerance_per_length: u32,   // 1 for `auto` (step::Tolerance::PerLength)
+    medium_objects_first: u32,   // copies of the objects a chord in the medium can meet
+    medium_objects_count: u32,
+    bounds_center: vec3<f32>,    // sphere bounds
+    bounds_radius: f32,
+    box_min: vec3<f32>,          // box bounds
+    macro_threshold: f32,        // max |grad n| of a homogeneous macro cell
+    box_max: vec3<f32>,
+    _pad0: f32,
+    grid_origin: vec3<f32>,      // world position of grid node (0, 0, 0)
+    _pad1: f32,
+    grid_inv_spacing: vec3<f32>, // 1 / node spacing per axis
+    _pad2: f32,
+    grid_dims: vec3<u32>,        // node counts
+    _pad3: u32,
+    macro_dims: vec3<u32>,       // macro-cell counts
+    _pad4: u32,
+    sky_horizon: vec3<f32>,
+    _pad5: f32,
+    sky_zenith: vec3<f32>,
+    _pad6: f32,
+    sky_ground: vec3<f32>,
+    _pad7: f32,
 }
 
 struct GpuObject {
-    a: vec4<f32>,
-    b: vec4<f32>,
-    color_a: vec4<f32>,          // w = checker scale | glass ior
-    color_b: vec4<f32>,
-    kinds: vec4<u32>,            // shape, material, scene index
+    a: vec3<f32>,                // sphere: centre; plane: point; box: min
+    radius: f32,                 // sphere
+    b: vec3<f32>,                // plane: unit normal; box: max
+    _pad0: f32,
+    color_a: vec3<f32>,
+    param: f32,                  // checker scale | glass ior
+    color_b: vec3<f32>,
+    _pad1: f32,
+    shape: u32,                  // SHAPE_*
+    material: u32,               // MATERIAL_*
+    scene_index: u32,            // the object's index in the scene (copies keep it)
+    _pad2: u32,
 }
 
 struct GpuLight {
-    position: vec4<f32>,         // w = kind (0 point, 1 directional)
-    intensity: vec4<f32>,
+    position: vec3<f32>,         // point: position; directional: direction of travel
+    kind: u32,                   // LIGHT_KIND_*
+    intensity: vec3<f32>,
+    _pad0: f32,
 }
 
 struct PixelOut {
@@ -73,6 +116,12 @@ const MATERIAL_CHECKER: u32 = 1u;
 const MATERIAL_MIRROR: u32 = 2u;
 const MATERIAL_METAL: u32 = 3u;
 const MATERIAL_GLASS: u32 = 4u;
+const LIGHT_KIND_POINT: u32 = 0u;
+const LIGHT_KIND_DIRECTIONAL: u32 = 1u;
+const BOUNDS_KIND_SPHERE: u32 = 0u;
+const BOUNDS_KIND_BOX: u32 = 1u;
+const SKY_KIND_GRADIENT: u32 = 0u;
+const SKY_KIND_MAP: u32 = 1u;
 
 const PI: f32 = 3.14159265358979;
 const TAU: f32 = 6.28318530717959;

@@ -18,11 +18,11 @@ impl GpuRenderer<'_> {
     pub fn field_sample_rate(&self, repeats: u32) -> Result<f64, GpuError> {
         let ctx = self.ctx;
         let device = &ctx.device;
-        let width = self.params.image[0];
+        let width = self.params.width;
         let rows = self.rows_per_band;
         let mut params = self.params;
-        params.rows[0] = 0;
-        params.rows[1] = rows;
+        params.first_row = 0;
+        params.row_count = rows;
         let (pipeline, bind_group, params_buffer) =
             ctx.scoped("creating the texture microbenchmark", || {
                 let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

@@ -177,19 +177,21 @@ pub fn upload_field(
     )?;
     let o = geometry.origin.as_vec3();
     let inv = geometry.spacing.recip().as_vec3();
-    params.grid_origin = [o.x, o.y, o.z, grid.threshold as f32];
-    params.grid_inv_spacing = [inv.x, inv.y, inv.z, 0.0];
-    params.grid_dims[0..3].copy_from_slice(&dims);
-    params.macro_dims = [mdims[0], mdims[1], mdims[2], grid.cell as u32];
+    params.grid_origin = o.to_array();
+    params.macro_threshold = grid.threshold as f32;
+    params.grid_inv_spacing = inv.to_array();
+    params.grid_dims = dims;
+    params.macro_dims = mdims;
+    params.macro_cell_voxels = grid.cell as u32;
     if baked.outside() == Outside::Ambient {
-        params.march[3] |= FLAG_OUTSIDE_AMBIENT;
+        params.flags |= FLAG_OUTSIDE_AMBIENT;
     }
     if baked.interp() == Interp::Tricubic {
-        params.march[3] |= FLAG_TRICUBIC;
+        params.flags |= FLAG_TRICUBIC;
     }
     // No straight flight anywhere: the marcher skips the macro-cell test (same result).
     if !baked.may_fly() {
-        params.march[3] &= !FLAG_MACRO_CELLS;
+        params.flags &= !FLAG_MACRO_CELLS;
     }
     Ok(FieldTextures {
         field,
@@ -218,9 +220,10 @@ pub fn empty_field(ctx: &GpuContext, params: &mut FrameParams) -> Result<FieldTe
         4,
         &[0; 4],
     )?;
-    params.grid_inv_spacing = [1.0, 1.0, 1.0, 0.0];
-    params.grid_dims[0..3].copy_from_slice(&[2, 2, 2]);
-    params.macro_dims = [1, 1, 1, 8];
+    params.grid_inv_spacing = [1.0; 3];
+    params.grid_dims = [2, 2, 2];
+    params.macro_dims = [1, 1, 1];
+    params.macro_cell_voxels = 8;
     Ok(FieldTextures {
         field,
         macro_cells,

@@ -4,7 +4,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// Integrator codes (`FrameParams::march[0]`).
+/// Integrator codes (`FrameParams::integrator`).
 pub const INTEGRATOR_EULER: u32 = 0;
 pub const INTEGRATOR_SYMPLECTIC_EULER: u32 = 1;
 pub const INTEGRATOR_VERLET: u32 = 2;
@@ -12,12 +12,12 @@ pub const INTEGRATOR_SHARMA: u32 = 3;
 pub const INTEGRATOR_RK4: u32 = 4;
 pub const INTEGRATOR_ADAPTIVE: u32 = 5;
 
-/// Step policy codes (`FrameParams::march[1]`).
+/// Step policy codes (`FrameParams::step_policy`).
 pub const STEP_FIXED: u32 = 0;
 pub const STEP_HEURISTIC: u32 = 1;
 pub const STEP_ADAPTIVE: u32 = 2;
 
-/// Flag bits (`FrameParams::march[3]`). FLAG_JITTER scales the camera ray's first
+/// Flag bits (`FrameParams::flags`). FLAG_JITTER scales the camera ray's first
 /// step in the medium by a per-pixel random fraction (the CPU renderer has no jitter:
 /// GPU-vs-CPU comparisons turn it off).
 pub const FLAG_HAS_MEDIUM: u32 = 1;
@@ -30,7 +30,7 @@ pub const FLAG_OUTSIDE_AMBIENT: u32 = 16;
 pub const FLAG_TRICUBIC: u32 = 32;
 /// Exit found by the root of the Hermite dense output instead of bisection.
 pub const FLAG_EXIT_HERMITE: u32 = 64;
-/// Some object can meet a chord inside the medium (`FrameParams::medium_objects`); else
+/// Some object can meet a chord inside the medium (`FrameParams::medium_objects_first`, `medium_objects_count`); else
 /// the marcher skips the per-step object test.
 pub const FLAG_MEDIUM_OBJECTS: u32 = 128;
 /// The scene has objects (else the kernel is compiled without its surface code).
@@ -41,92 +41,147 @@ pub const PASS_ALL: u32 = 0;
 pub const PASS_FIRST: u32 = 1;
 pub const PASS_MEDIUM: u32 = 2;
 
-/// Shape codes (`GpuObject::kinds[0]`).
+/// Shape codes (`GpuObject::shape`).
 pub const SHAPE_SPHERE: u32 = 0;
 pub const SHAPE_PLANE: u32 = 1;
 pub const SHAPE_BOX: u32 = 2;
 
-/// Material codes (`GpuObject::kinds[1]`).
+/// Material codes (`GpuObject::material`).
 pub const MATERIAL_DIFFUSE: u32 = 0;
 pub const MATERIAL_CHECKER: u32 = 1;
 pub const MATERIAL_MIRROR: u32 = 2;
 pub const MATERIAL_METAL: u32 = 3;
 pub const MATERIAL_GLASS: u32 = 4;
 
-/// Light codes (`GpuLight::position.w`).
-pub const LIGHT_POINT: f32 = 0.0;
-pub const LIGHT_DIRECTIONAL: f32 = 1.0;
+/// Light codes (`GpuLight::kind`).
+pub const LIGHT_KIND_POINT: u32 = 0;
+pub const LIGHT_KIND_DIRECTIONAL: u32 = 1;
 
-/// Bounds codes (`FrameParams::bounds_box_min.w`).
-pub const BOUNDS_SPHERE: f32 = 0.0;
-pub const BOUNDS_BOX: f32 = 1.0;
+/// Bounds codes (`FrameParams::bounds_kind`; the kernel reads the `BOUNDS_BOX` override).
+pub const BOUNDS_KIND_SPHERE: u32 = 0;
+pub const BOUNDS_KIND_BOX: u32 = 1;
 
-/// Sky codes (`FrameParams::sky_horizon.w`).
-pub const SKY_GRADIENT: f32 = 0.0;
-pub const SKY_MAP: f32 = 1.0;
+/// Sky codes (`FrameParams::sky_kind`; the kernel reads the `SKY_MAP` override).
+pub const SKY_KIND_GRADIENT: u32 = 0;
+pub const SKY_KIND_MAP: u32 = 1;
 
-/// Everything uniform over one dispatch. Keep in sync with `FrameParams` in
-/// shaders/shared/types.wgsl.
+/// Everything uniform over one dispatch, every field named. Keep in sync with
+/// `FrameParams` in shaders/shared/types.wgsl: a `[f32; 3]` and the 4-byte field after
+/// it fill one 16-byte row, as a WGSL vec3 and the scalar after it do.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct FrameParams {
-    /// Camera origin; w = tan(fov_y / 2).
-    pub cam_origin: [f32; 4],
-    /// Unit forward; w = aspect (width / height).
-    pub cam_forward: [f32; 4],
-    /// Unit right; w unused.
-    pub cam_right: [f32; 4],
-    /// Unit up; w unused.
-    pub cam_up: [f32; 4],
-    /// width, height, spp, seed.
-    pub image: [u32; 4],
-    /// First row of this dispatch, rows in it, max_depth, object count.
-    pub rows: [u32; 4],
-    /// integrator, step policy, max_steps, flags.
-    pub march: [u32; 4],
-    /// Fixed: (ds, -, -, -); heuristic: (min, max, amplitude, -); adaptive: (tolerance,
-    /// initial or 0, -, -).
-    pub step: [f32; 4],
-    /// Sphere bounds: centre, radius.
-    pub bounds_sphere: [f32; 4],
-    /// Box bounds min; w = bounds kind.
-    pub bounds_box_min: [f32; 4],
-    /// Box bounds max; w = ambient index.
-    pub bounds_box_max: [f32; 4],
-    /// World position of grid node (0, 0, 0); w = macro-cell homogeneity threshold.
-    pub grid_origin: [f32; 4],
-    /// 1 / node spacing per axis; w unused.
-    pub grid_inv_spacing: [f32; 4],
-    /// Node counts; w = light count.
-    pub grid_dims: [u32; 4],
-    /// Macro-cell counts; w = voxels per macro cell.
-    pub macro_dims: [u32; 4],
-    /// Gradient sky horizon colour; w = sky kind.
-    pub sky_horizon: [f32; 4],
-    /// Gradient sky zenith colour; w = environment map intensity.
-    pub sky_zenith: [f32; 4],
-    /// Gradient sky ground colour; w unused.
-    pub sky_ground: [f32; 4],
+    pub cam_origin: [f32; 3],
+    /// tan(fov_y / 2).
+    pub tan_half_fov_y: f32,
+    /// Unit forward.
+    pub cam_forward: [f32; 3],
+    /// width / height.
+    pub aspect: f32,
+    /// Unit right.
+    pub cam_right: [f32; 3],
+    /// The environment map's intensity.
+    pub env_intensity: f32,
+    /// Unit up.
+    pub cam_up: [f32; 3],
+    /// Index outside the medium.
+    pub ambient_n: f32,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub seed: u32,
+    /// First row of this dispatch.
+    pub first_row: u32,
+    /// Rows in this dispatch.
+    pub row_count: u32,
+    pub max_depth: u32,
+    pub object_count: u32,
+    /// `INTEGRATOR_*` (also the `INTEGRATOR` pipeline constant).
+    pub integrator: u32,
+    /// `STEP_*` (also `STEP_POLICY`).
+    pub step_policy: u32,
+    pub max_steps: u32,
+    /// `FLAG_*` (also `FLAGS`).
+    pub flags: u32,
+    pub light_count: u32,
+    /// `BOUNDS_KIND_*` (also `BOUNDS_BOX`).
+    pub bounds_kind: u32,
+    /// `SKY_KIND_*` (also `SKY_MAP`).
+    pub sky_kind: u32,
+    /// Voxels per macro cell along an axis.
+    pub macro_cell_voxels: u32,
+    /// Fixed: the step; heuristic: the shortest step.
+    pub ds: f32,
+    /// Heuristic: the longest step.
+    pub ds_max: f32,
+    /// Heuristic: |grad n| at which the step is the shortest.
+    pub amplitude: f32,
+    /// Adaptive: error per step; auto: error per unit path length.
+    pub tolerance: f32,
+    /// Adaptive: the first step (0: `ADAPTIVE_INITIAL_DS_REL` of the radius).
+    pub ds_initial: f32,
+    /// 1 for `auto` (`grin_trace::step::Tolerance::PerLength`), else 0.
+    pub tolerance_per_length: u32,
     /// The objects a chord inside the medium can meet, as copies in the objects array:
-    /// first index, count; z, w unused.
-    pub medium_objects: [u32; 4],
+    /// first index and count.
+    pub medium_objects_first: u32,
+    pub medium_objects_count: u32,
+    /// Sphere bounds.
+    pub bounds_center: [f32; 3],
+    pub bounds_radius: f32,
+    /// Box bounds.
+    pub box_min: [f32; 3],
+    /// Largest max |grad n| of a macro cell counted homogeneous.
+    pub macro_threshold: f32,
+    pub box_max: [f32; 3],
+    pub _pad0: f32,
+    /// World position of grid node (0, 0, 0).
+    pub grid_origin: [f32; 3],
+    pub _pad1: f32,
+    /// 1 / node spacing per axis.
+    pub grid_inv_spacing: [f32; 3],
+    pub _pad2: f32,
+    /// Node counts.
+    pub grid_dims: [u32; 3],
+    pub _pad3: u32,
+    /// Macro-cell counts.
+    pub macro_dims: [u32; 3],
+    pub _pad4: u32,
+    /// Gradient sky colours.
+    pub sky_horizon: [f32; 3],
+    pub _pad5: f32,
+    pub sky_zenith: [f32; 3],
+    pub _pad6: f32,
+    pub sky_ground: [f32; 3],
+    pub _pad7: f32,
 }
-const _: () = assert!(std::mem::size_of::<FrameParams>() == 19 * 16);
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 20 * 16);
 
 /// One scene object. Keep in sync with `GpuObject` in shaders/shared/types.wgsl.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct GpuObject {
-    /// Sphere: centre, radius; plane: point; box: min.
-    pub a: [f32; 4],
+    /// Sphere: centre; plane: point; box: min.
+    pub a: [f32; 3],
+    /// Sphere: radius.
+    pub radius: f32,
     /// Plane: unit normal; box: max.
-    pub b: [f32; 4],
-    /// Diffuse/mirror/metal/glass colour, checker colour a; w = checker scale or glass ior.
-    pub color_a: [f32; 4],
+    pub b: [f32; 3],
+    pub _pad0: f32,
+    /// Diffuse/mirror/metal/glass colour, checker colour a.
+    pub color_a: [f32; 3],
+    /// Checker scale or glass ior.
+    pub param: f32,
     /// Checker colour b.
-    pub color_b: [f32; 4],
-    /// shape kind, material kind, 0, 0.
-    pub kinds: [u32; 4],
+    pub color_b: [f32; 3],
+    pub _pad1: f32,
+    /// `SHAPE_*`.
+    pub shape: u32,
+    /// `MATERIAL_*`.
+    pub material: u32,
+    /// The object's index in the scene (its copies keep it).
+    pub scene_index: u32,
+    pub _pad2: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuObject>() == 5 * 16);
 
@@ -134,10 +189,13 @@ const _: () = assert!(std::mem::size_of::<GpuObject>() == 5 * 16);
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct GpuLight {
-    /// Point: position; directional: direction of travel. w = light kind.
-    pub position: [f32; 4],
-    /// RGB intensity; w unused.
-    pub intensity: [f32; 4],
+    /// Point: position; directional: direction of travel.
+    pub position: [f32; 3],
+    /// `LIGHT_KIND_*`.
+    pub kind: u32,
+    /// RGB intensity.
+    pub intensity: [f32; 3],
+    pub _pad0: f32,
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 2 * 16);
 
@@ -176,6 +234,117 @@ impl PixelOut {
 mod tests {
     use super::*;
     use crate::shaders::RENDER_WGSL;
+
+    /// Byte offset of every member of the WGSL struct `name` (naga's layouter on the
+    /// assembled render kernel).
+    fn wgsl_offsets(name: &str) -> (usize, Vec<(String, usize)>) {
+        let module = naga::front::wgsl::parse_str(RENDER_WGSL).expect("render.wgsl parses");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let (handle, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("{name} not in render.wgsl"));
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+            panic!("{name} is not a struct");
+        };
+        let offsets = members
+            .iter()
+            .map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize))
+            .collect();
+        (layouter[handle].size as usize, offsets)
+    }
+
+    /// The WGSL struct has exactly these members, in this order, at the Rust offsets,
+    /// and the same size.
+    macro_rules! same_layout {
+        ($ty:ident, $($field:ident),+ $(,)?) => {{
+            let (size, wgsl) = wgsl_offsets(stringify!($ty));
+            let rust: Vec<(String, usize)> = vec![
+                $((stringify!($field).to_string(), std::mem::offset_of!($ty, $field))),+
+            ];
+            assert_eq!(wgsl, rust, "{} members: WGSL (left) vs Rust (right)", stringify!($ty));
+            assert_eq!(size, std::mem::size_of::<$ty>(), "{} size", stringify!($ty));
+        }};
+    }
+
+    /// The named fields of the Rust structs and their WGSL twins agree member by member:
+    /// a field added, dropped, renamed or moved on one side only fails here.
+    #[test]
+    fn struct_members_match_their_wgsl_twins() {
+        same_layout!(
+            FrameParams,
+            cam_origin,
+            tan_half_fov_y,
+            cam_forward,
+            aspect,
+            cam_right,
+            env_intensity,
+            cam_up,
+            ambient_n,
+            width,
+            height,
+            spp,
+            seed,
+            first_row,
+            row_count,
+            max_depth,
+            object_count,
+            integrator,
+            step_policy,
+            max_steps,
+            flags,
+            light_count,
+            bounds_kind,
+            sky_kind,
+            macro_cell_voxels,
+            ds,
+            ds_max,
+            amplitude,
+            tolerance,
+            ds_initial,
+            tolerance_per_length,
+            medium_objects_first,
+            medium_objects_count,
+            bounds_center,
+            bounds_radius,
+            box_min,
+            macro_threshold,
+            box_max,
+            _pad0,
+            grid_origin,
+            _pad1,
+            grid_inv_spacing,
+            _pad2,
+            grid_dims,
+            _pad3,
+            macro_dims,
+            _pad4,
+            sky_horizon,
+            _pad5,
+            sky_zenith,
+            _pad6,
+            sky_ground,
+            _pad7,
+        );
+        same_layout!(
+            GpuObject,
+            a,
+            radius,
+            b,
+            _pad0,
+            color_a,
+            param,
+            color_b,
+            _pad1,
+            shape,
+            material,
+            scene_index,
+            _pad2,
+        );
+        same_layout!(GpuLight, position, kind, intensity, _pad0);
+    }
 
     /// The Rust structs and their WGSL twins have the same size (naga's layouter on the
     /// assembled render kernel): the "keep in sync" comments, checked.

@@ -15,27 +15,32 @@ use crate::gpu_data::*;
 use crate::{GpuContext, GpuError};
 
 /// The frame parameters of `scene`: camera, image, integrator, step policy, flags and sky
-/// (the medium's bounds and field are placed by the caller).
+/// and the medium's bounds (its field is placed by [`crate::field::upload_field`]).
 pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError> {
     let s = &scene.settings;
     let cam = &scene.camera;
     let mut params = FrameParams::zeroed();
-    params.cam_origin = v4(cam.origin, cam.tan_half_fov_y as f32);
-    params.cam_forward = v4(
-        cam.forward,
-        (f64::from(cam.width) / f64::from(cam.height)) as f32,
-    );
-    params.cam_right = v4(cam.right, 0.0);
-    params.cam_up = v4(cam.up, 0.0);
-    params.image = [s.width, s.height, s.spp, s.seed as u32];
-    let n_objects = u32::try_from(scene.objects.len())
+    params.cam_origin = f3(cam.origin);
+    params.tan_half_fov_y = cam.tan_half_fov_y as f32;
+    params.cam_forward = f3(cam.forward);
+    params.aspect = (f64::from(cam.width) / f64::from(cam.height)) as f32;
+    params.cam_right = f3(cam.right);
+    params.cam_up = f3(cam.up);
+    params.width = s.width;
+    params.height = s.height;
+    params.spp = s.spp;
+    params.seed = s.seed as u32;
+    params.max_depth = s.max_depth;
+    params.object_count = u32::try_from(scene.objects.len())
         .map_err(|_| GpuError::Unsupported("more than 2^32 objects".into()))?;
-    let n_lights = u32::try_from(scene.lights.len())
+    params.light_count = u32::try_from(scene.lights.len())
         .map_err(|_| GpuError::Unsupported("more than 2^32 lights".into()))?;
-    params.rows = [0, 0, s.max_depth, n_objects];
-    params.grid_dims[3] = n_lights;
-    let (step_code, step) = match s.step {
-        StepSpec::Fixed(ds) => (STEP_FIXED, [ds as f32, 0.0, 0.0, 0.0]),
+    params.ambient_n = scene.medium.as_ref().map_or(1.0, |m| m.ambient as f32);
+    params.step_policy = match s.step {
+        StepSpec::Fixed(ds) => {
+            params.ds = ds as f32;
+            STEP_FIXED
+        }
         StepSpec::Heuristic {
             min,
             max,
@@ -44,22 +49,22 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
             let amp = amplitude
                 .or_else(|| scene.medium.as_ref().map(|m| m.field.max_grad_n()))
                 .unwrap_or(0.0);
-            (STEP_HEURISTIC, [min as f32, max as f32, amp as f32, 0.0])
+            params.ds = min as f32;
+            params.ds_max = max as f32;
+            params.amplitude = amp as f32;
+            STEP_HEURISTIC
         }
-        StepSpec::Adaptive { tolerance, initial } => (
-            STEP_ADAPTIVE,
-            [tolerance as f32, initial.unwrap_or(0.0) as f32, 0.0, 0.0],
-        ),
-        // Error control per unit path length (step.z = 1 selects it in step.wgsl).
-        StepSpec::Auto(accuracy) => (
-            STEP_ADAPTIVE,
-            [
-                (grin_scene::AUTO_TOL_PER_RAD * accuracy) as f32,
-                0.0,
-                1.0,
-                0.0,
-            ],
-        ),
+        StepSpec::Adaptive { tolerance, initial } => {
+            params.tolerance = tolerance as f32;
+            params.ds_initial = initial.unwrap_or(0.0) as f32;
+            STEP_ADAPTIVE
+        }
+        // Error control per unit path length.
+        StepSpec::Auto(accuracy) => {
+            params.tolerance = (grin_scene::AUTO_TOL_PER_RAD * accuracy) as f32;
+            params.tolerance_per_length = 1;
+            STEP_ADAPTIVE
+        }
     };
     let mut flags = 0;
     if s.macro_cells {
@@ -77,21 +82,39 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     if !scene.objects.is_empty() {
         flags |= FLAG_HAS_OBJECTS;
     }
-    params.march = [integrator_code(s.integrator), step_code, s.max_steps, flags];
-    params.step = step;
+    params.integrator = integrator_code(s.integrator);
+    params.max_steps = s.max_steps;
+    params.flags = flags;
     match &scene.sky {
         SkyModel::Gradient {
             horizon,
             zenith,
             ground,
         } => {
-            params.sky_horizon = v4(*horizon, SKY_GRADIENT);
-            params.sky_zenith = v4(*zenith, 1.0);
-            params.sky_ground = v4(*ground, 0.0);
+            params.sky_kind = SKY_KIND_GRADIENT;
+            params.sky_horizon = f3(*horizon);
+            params.sky_zenith = f3(*zenith);
+            params.sky_ground = f3(*ground);
+            params.env_intensity = 1.0;
         }
         SkyModel::Map(map) => {
-            params.sky_horizon = [0.0, 0.0, 0.0, SKY_MAP];
-            params.sky_zenith = [0.0, 0.0, 0.0, map.intensity as f32];
+            params.sky_kind = SKY_KIND_MAP;
+            params.env_intensity = map.intensity as f32;
+        }
+    }
+    if let Some(m) = &scene.medium {
+        params.flags |= FLAG_HAS_MEDIUM;
+        match m.bounds {
+            Bounds::Sphere { center, radius } => {
+                params.bounds_kind = BOUNDS_KIND_SPHERE;
+                params.bounds_center = f3(center);
+                params.bounds_radius = radius as f32;
+            }
+            Bounds::Box { min, max } => {
+                params.bounds_kind = BOUNDS_KIND_BOX;
+                params.box_min = f3(min);
+                params.box_max = f3(max);
+            }
         }
     }
 
@@ -105,7 +128,7 @@ pub(crate) fn scene_arrays(
     scene: &RenderScene,
     params: &mut FrameParams,
 ) -> (Vec<GpuObject>, Vec<GpuLight>) {
-    let n_objects = params.rows[3];
+    let n_objects = params.object_count;
     let mut objects: Vec<GpuObject> = scene
         .objects
         .iter()
@@ -127,8 +150,9 @@ pub(crate) fn scene_arrays(
             .map(|(_, o)| *o)
             .collect();
         if !inside.is_empty() {
-            params.medium_objects = [n_objects, inside.len() as u32, 0, 0];
-            params.march[3] |= FLAG_MEDIUM_OBJECTS;
+            params.medium_objects_first = n_objects;
+            params.medium_objects_count = inside.len() as u32;
+            params.flags |= FLAG_MEDIUM_OBJECTS;
             objects.extend(inside);
         }
     }
@@ -176,13 +200,12 @@ pub(crate) fn env_texels(
     Ok(env)
 }
 
-pub(crate) fn v4(v: DVec3, w: f32) -> [f32; 4] {
-    let f = v.as_vec3();
-    [f.x, f.y, f.z, w]
+pub(crate) fn f3(v: DVec3) -> [f32; 3] {
+    v.as_vec3().to_array()
 }
 
-fn a4(v: [f64; 3], w: f32) -> [f32; 4] {
-    v4(DVec3::from_array(v), w)
+fn a3(v: [f64; 3]) -> [f32; 3] {
+    f3(DVec3::from_array(v))
 }
 
 fn integrator_code(k: IntegratorKind) -> u32 {
@@ -209,50 +232,72 @@ fn bounding_ball(bounds: &Bounds) -> (DVec3, f64) {
 }
 
 fn object(prim: &Primitive, material: &Material, index: u32) -> GpuObject {
-    let (a, b, shape) = match *prim {
-        Primitive::Sphere { center, radius } => (v4(center, radius as f32), [0.0; 4], SHAPE_SPHERE),
-        Primitive::Plane { point, normal } => (v4(point, 0.0), v4(normal, 0.0), SHAPE_PLANE),
-        Primitive::Box { min, max } => (v4(min, 0.0), v4(max, 0.0), SHAPE_BOX),
-    };
-    let (color_a, color_b, mat) = match *material {
-        Material::Diffuse { color } => (a4(color, 0.0), [0.0; 4], MATERIAL_DIFFUSE),
+    let mut o = GpuObject::zeroed();
+    o.scene_index = index;
+    match *prim {
+        Primitive::Sphere { center, radius } => {
+            o.shape = SHAPE_SPHERE;
+            o.a = f3(center);
+            o.radius = radius as f32;
+        }
+        Primitive::Plane { point, normal } => {
+            o.shape = SHAPE_PLANE;
+            o.a = f3(point);
+            o.b = f3(normal);
+        }
+        Primitive::Box { min, max } => {
+            o.shape = SHAPE_BOX;
+            o.a = f3(min);
+            o.b = f3(max);
+        }
+    }
+    match *material {
+        Material::Diffuse { color } => {
+            o.material = MATERIAL_DIFFUSE;
+            o.color_a = a3(color);
+        }
         Material::Checker {
             color_a,
             color_b,
             scale,
-        } => (
-            a4(color_a, scale as f32),
-            a4(color_b, 0.0),
-            MATERIAL_CHECKER,
-        ),
-        Material::Mirror { color } => (a4(color, 0.0), [0.0; 4], MATERIAL_MIRROR),
-        Material::Metal { color } => (a4(color, 0.0), [0.0; 4], MATERIAL_METAL),
-        Material::Glass { ior, color } => (a4(color, ior as f32), [0.0; 4], MATERIAL_GLASS),
-    };
-    GpuObject {
-        a,
-        b,
-        color_a,
-        color_b,
-        kinds: [shape, mat, index, 0],
+        } => {
+            o.material = MATERIAL_CHECKER;
+            o.color_a = a3(color_a);
+            o.color_b = a3(color_b);
+            o.param = scale as f32;
+        }
+        Material::Mirror { color } => {
+            o.material = MATERIAL_MIRROR;
+            o.color_a = a3(color);
+        }
+        Material::Metal { color } => {
+            o.material = MATERIAL_METAL;
+            o.color_a = a3(color);
+        }
+        Material::Glass { ior, color } => {
+            o.material = MATERIAL_GLASS;
+            o.color_a = a3(color);
+            o.param = ior as f32;
+        }
     }
+    o
 }
 
 fn light(l: &Light) -> GpuLight {
-    match *l {
+    let (position, kind, intensity) = match *l {
         Light::Point {
             position,
             intensity,
-        } => GpuLight {
-            position: a4(position, LIGHT_POINT),
-            intensity: a4(intensity, 0.0),
-        },
+        } => (position, LIGHT_KIND_POINT, intensity),
         Light::Directional {
             direction,
             intensity,
-        } => GpuLight {
-            position: a4(direction, LIGHT_DIRECTIONAL),
-            intensity: a4(intensity, 0.0),
-        },
+        } => (direction, LIGHT_KIND_DIRECTIONAL, intensity),
+    };
+    GpuLight {
+        position: a3(position),
+        kind,
+        intensity: a3(intensity),
+        _pad0: 0.0,
     }
 }

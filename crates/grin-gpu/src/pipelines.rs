@@ -43,26 +43,13 @@ pub(crate) fn render_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
 /// The kernel's pipeline-overridable constants (shaders/shared/types.wgsl), from the
 /// filled-in `params`: the compiler then drops every unused integrator and feature.
 pub(crate) fn pipeline_constants(params: &FrameParams, pass: u32) -> Vec<(&'static str, f64)> {
+    let flag = |on: bool| if on { 1.0 } else { 0.0 };
     vec![
         ("PASS", f64::from(pass)),
-        ("INTEGRATOR", f64::from(params.march[0])),
-        ("STEP_POLICY", f64::from(params.march[1])),
-        ("FLAGS", f64::from(params.march[3])),
-        (
-            "BOUNDS_BOX",
-            if params.bounds_box_min[3] == BOUNDS_BOX {
-                1.0
-            } else {
-                0.0
-            },
-        ),
-        (
-            "SKY_MAP",
-            if params.sky_horizon[3] == SKY_MAP {
-                1.0
-            } else {
-                0.0
-            },
-        ),
+        ("INTEGRATOR", f64::from(params.integrator)),
+        ("STEP_POLICY", f64::from(params.step_policy)),
+        ("FLAGS", f64::from(params.flags)),
+        ("BOUNDS_BOX", flag(params.bounds_kind == BOUNDS_KIND_BOX)),
+        ("SKY_MAP", flag(params.sky_kind == SKY_KIND_MAP)),
     ]
 }

@@ -5,7 +5,6 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use grin_field::Bounds;
 use grin_field::baked::BakedField;
 use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
@@ -15,7 +14,7 @@ use crate::field::{
     upload_field,
 };
 use crate::gpu_data::*;
-use crate::pack::{env_texels, frame_params, scene_arrays, v4};
+use crate::pack::{env_texels, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::{GpuContext, GpuError, shaders};
 
@@ -76,18 +75,6 @@ impl<'a> GpuRenderer<'a> {
         let mut warnings = Vec::new();
         let field = match &scene.medium {
             Some(m) => {
-                params.march[3] |= FLAG_HAS_MEDIUM;
-                match m.bounds {
-                    Bounds::Sphere { center, radius } => {
-                        params.bounds_sphere = v4(center, radius as f32);
-                        params.bounds_box_min = [0.0, 0.0, 0.0, BOUNDS_SPHERE];
-                        params.bounds_box_max = [0.0, 0.0, 0.0, m.ambient as f32];
-                    }
-                    Bounds::Box { min, max } => {
-                        params.bounds_box_min = v4(min, BOUNDS_BOX);
-                        params.bounds_box_max = v4(max, m.ambient as f32);
-                    }
-                }
                 let owned;
                 // The caller's grid, else the scene's own baked file as it is (if the
                 // device can hold it), else a bake of the field here; warnings are kept
@@ -113,10 +100,7 @@ impl<'a> GpuRenderer<'a> {
                 };
                 upload_field(ctx, baked, &mut params)?
             }
-            None => {
-                params.bounds_box_max = [0.0, 0.0, 0.0, 1.0];
-                empty_field(ctx, &mut params)?
-            }
+            None => empty_field(ctx, &mut params)?,
         };
 
         let device = &ctx.device;
@@ -348,7 +332,7 @@ impl<'a> GpuRenderer<'a> {
     /// Render every pixel. `progress(rows_done)` is called after each band of rows;
     /// setting `cancel` stops between bands with [`GpuError::Cancelled`].
     pub fn render(&self, progress: &dyn Fn(u32), cancel: &AtomicBool) -> Result<Frame, GpuError> {
-        let [width, height, ..] = self.params.image;
+        let (width, height) = (self.params.width, self.params.height);
         let mut pixels = grin_field::alloc::try_with_capacity(
             width as usize * height as usize,
             &format!("a {width}x{height} frame"),
@@ -386,10 +370,10 @@ impl<'a> GpuRenderer<'a> {
 
     fn render_band(&self, first_row: u32, rows: u32) -> Result<Vec<PixelOut>, GpuError> {
         let ctx = self.ctx;
-        let width = self.params.image[0];
+        let width = self.params.width;
         let mut params = self.params;
-        params.rows[0] = first_row;
-        params.rows[1] = rows;
+        params.first_row = first_row;
+        params.row_count = rows;
         let bytes = u64::from(width) * u64::from(rows) * std::mem::size_of::<PixelOut>() as u64;
         ctx.scoped("dispatching the render kernel", || {
             ctx.queue
@@ -439,12 +423,12 @@ impl<'a> GpuRenderer<'a> {
     }
 }
 
-/// Map `buffer` (MAP_READ), copy out its first `bytes` as pixels, unmap.
-pub(crate) fn read_buffer(
+/// Map `buffer` (MAP_READ), copy out its first `bytes` as `T`s (pixels), unmap.
+pub(crate) fn read_buffer<T: bytemuck::Pod>(
     ctx: &GpuContext,
     buffer: &wgpu::Buffer,
     bytes: u64,
-) -> Result<Vec<PixelOut>, GpuError> {
+) -> Result<Vec<T>, GpuError> {
     let slice = buffer.slice(0..bytes);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -464,7 +448,7 @@ pub(crate) fn read_buffer(
         let view = slice
             .get_mapped_range()
             .map_err(|e| GpuError::DeviceLost(format!("reading pixels back: {e}")))?;
-        bytemuck::cast_slice::<u8, PixelOut>(&view).to_vec()
+        bytemuck::cast_slice::<u8, T>(&view).to_vec()
     };
     buffer.unmap();
     Ok(out)
