@@ -24,6 +24,18 @@ const MIN_FLIGHT_VOXELS: f32 = 1e-3;
 // fraction runs out of bits, then projects onto the surface, as the CPU's f32 path does).
 const EXIT_TOL_REL: f32 = 1e-12;
 const F32_EPSILON: f32 = 1.1920929e-7;
+// boundary::EXIT_TOL_EPS: the tolerance is at least this much roundoff times the
+// bounds' largest coordinate.
+const EXIT_TOL_EPS: f32 = 4.0;
+
+// boundary::exit_tolerance in f32.
+fn exit_tolerance() -> f32 {
+    var coordinates = max_element(abs(params.bounds_center)) + params.bounds_radius;
+    if bounds_is_box() {
+        coordinates = max_element(max(abs(params.box_min), abs(params.box_max)));
+    }
+    return max(EXIT_TOL_REL * bounds_radius(), EXIT_TOL_EPS * F32_EPSILON * coordinates);
+}
 // trace::ENTRY_NUDGE_EPS: a grazing entry point that rounds to outside the bounds is
 // moved inside by this many units of roundoff (else the first step "exits" at once).
 const ENTRY_NUDGE_EPS: f32 = 4.0;
@@ -449,7 +461,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     var state = RayState(start, d_in * s0.n);
     var ctrl = step_controller_new(jitter);
     let len_scale = ctrl.len_scale;
-    let exit_tol = EXIT_TOL_REL * len_scale;
+    let exit_tol = exit_tolerance();
     let max_steps = params.max_steps;
     // The hot loop below takes steps and straight flights, which share its field
     // sample, length sum and object test, and breaks out for the rarer events (leaving

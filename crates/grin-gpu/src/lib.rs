@@ -16,7 +16,9 @@
 //!
 //! Every WGSL kernel in `shaders/` has a CPU twin of the same name in
 //! `grin_trace::render` (`trace_path`, `march_medium`, `exit_medium`, `cross_boundary`,
-//! `sky_radiance`, `intersect_scene`, ...); `tests/` compares their images.
+//! `sky_radiance`, `intersect_scene`, ...); `tests/` compares their images, and
+//! [`stages`] runs the marcher's stages one by one on batches of states for
+//! `tests/stages.rs` to hold against their CPU twins.
 //!
 //! [`BakedField`]: grin_field::baked::BakedField
 
@@ -29,6 +31,7 @@ mod pack;
 mod pipelines;
 pub mod render;
 pub mod shaders;
+pub mod stages;
 
 pub use device::{GpuContext, describe_adapter};
 pub use error::GpuError;

@@ -5,3 +5,7 @@ pub const RENDER_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/render.wgs
 
 /// The field-sampling microbenchmark (`bench_main`): shaders/texture_bench.wgsl.
 pub const TEXTURE_BENCH_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/texture_bench.wgsl"));
+
+/// The test-only stage kernels (`stage_sample`, `stage_integrate`, `stage_take`,
+/// `stage_leave`): shaders/stages.wgsl, run by [`crate::stages`].
+pub const STAGES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/stages.wgsl"));

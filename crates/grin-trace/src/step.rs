@@ -125,6 +125,19 @@ impl StepController {
         self
     }
 
+    /// Start error control at step `ds` (world length) instead of the policy's first
+    /// step: the state a controller has after some steps (the GPU stage tests set both
+    /// backends' controllers to the same one).
+    pub fn with_current_ds(mut self, ds: f64) -> Self {
+        self.ds_adapt = ds;
+        self
+    }
+
+    /// The error-controlled step the next [`Self::take`] tries first.
+    pub fn current_ds(&self) -> f64 {
+        self.ds_adapt
+    }
+
     /// The jitter factor for this step; later steps get 1.
     fn take_jitter(&mut self) -> f64 {
         std::mem::replace(&mut self.jitter, 1.0)

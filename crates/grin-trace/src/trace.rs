@@ -9,7 +9,8 @@ use grin_scene::ExitMethod;
 pub use grin_render::settings::{MIN_STEP_FRACTION, TraceError, TraceSettings};
 
 use crate::boundary::{
-    EXIT_TOL_REL, Interface, MAX_BISECTIONS, Segment, project_to_surface, refract,
+    Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface, refract,
+    signed_distance_in,
 };
 use crate::integrate::{self, RayState, is_finite_v};
 use crate::step::{StepController, Taken};
@@ -214,7 +215,7 @@ pub fn trace_ray_jittered<R: Real>(
     let mut ctrl = StepController::new(settings.step, settings.integrator, field)
         .with_jitter(first_step_scale);
     let len_scale = bounds.radius();
-    let exit_tol = EXIT_TOL_REL * len_scale;
+    let exit_tol = exit_tolerance::<R>(&bounds);
 
     loop {
         r = state.r;
@@ -383,7 +384,7 @@ fn accumulate<R: Real>(
 /// A step from `s` that ended inside: if its cubic dense output goes outside between the
 /// ends (checked only when an end is within the step's length of the surface), the step
 /// re-taken to the point farthest out, when the integrator agrees that point is outside.
-fn excursion_step<R: Real>(
+pub fn excursion_step<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
     bounds: &Bounds,
@@ -435,6 +436,8 @@ pub fn exit_medium<R: Real>(
     let kind = settings.integrator;
     let d0 = s0.n_grad_n();
     let sd = |p: DVec3| bounds.signed_distance(p);
+    // The stopping tests in the trace's own precision (what the GPU computes in f32).
+    let sd_r = |p: R::V3| signed_distance_in::<R>(bounds, p);
     match settings.exit {
         ExitMethod::Bisection => {
             let mut lo = 0.0;
@@ -446,7 +449,7 @@ pub fn exit_medium<R: Real>(
                 let hm = R::from_f64(mid);
                 let st = integrate::step(kind, field, s, d0, hm);
                 evals += st.evals;
-                let dist = sd(st.state.r.to_dvec3());
+                let dist = sd_r(st.state.r);
                 if dist <= 0.0 {
                     best = (st.state, hm);
                 }
@@ -484,7 +487,7 @@ pub fn exit_medium<R: Real>(
             let mut evals = st.evals;
             for _ in 0..EXIT_NEWTON_ITERATIONS {
                 let p = st.state.r.to_dvec3();
-                let g = sd(p);
+                let g = sd_r(st.state.r);
                 if g.abs() <= tol {
                     break;
                 }
@@ -495,7 +498,7 @@ pub fn exit_medium<R: Real>(
                 let next = (tau - g / slope).clamp(0.0, h_max);
                 let trial = integrate::step(kind, field, s, d0, R::from_f64(next));
                 evals += trial.evals;
-                if sd(trial.state.r.to_dvec3()).abs() < g.abs() {
+                if sd_r(trial.state.r).abs() < g.abs() {
                     tau = next;
                     st = trial;
                 } else {

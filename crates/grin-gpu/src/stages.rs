@@ -1,0 +1,220 @@
+//! The marcher's stages one at a time: runs a test-only entry point of
+//! shaders/stages.wgsl (field sample, one integrator step, one controlled step, one step
+//! with the tunnelling check and the exit search) on a batch of states, with the frame
+//! parameters and field texture the renderer would use for the same scene. A test
+//! instrument (tests/stages.rs holds each stage against its CPU twin): it compiles one
+//! small pipeline per call.
+
+use bytemuck::{Pod, Zeroable};
+use grin_field::baked::BakedField;
+use grin_render::scene::RenderScene;
+
+use crate::field::upload_field;
+use crate::gpu_data::PASS_ALL;
+use crate::pack::frame_params;
+use crate::pipelines::{pipeline_constants, render_layout_entries};
+use crate::render::read_buffer;
+use crate::{GpuContext, GpuError, shaders};
+
+/// The stages of shaders/stages.wgsl.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// `sample_field` at `r`.
+    Sample,
+    /// `integrate_step` from (`r`, `t`) by `h`, D sampled at `r`.
+    Integrate,
+    /// `take_step`: the step policy's step from (`r`, `t`) (controller at `ds_adapt`).
+    Take,
+    /// `take_step`, then `excursion_step` or `exit_medium` when the step leaves.
+    Leave,
+}
+
+impl Stage {
+    fn entry_point(self) -> &'static str {
+        match self {
+            Stage::Sample => "stage_sample",
+            Stage::Integrate => "stage_integrate",
+            Stage::Take => "stage_take",
+            Stage::Leave => "stage_leave",
+        }
+    }
+}
+
+/// One input state. Keep in sync with `StageIn` in shaders/stages.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct StageIn {
+    pub r: [f32; 3],
+    /// [`Stage::Integrate`]: the t-step.
+    pub h: f32,
+    pub t: [f32; 3],
+    /// [`Stage::Take`], [`Stage::Leave`]: the controller's current error-controlled step
+    /// (0: its first).
+    pub ds_adapt: f32,
+}
+
+/// One result. Keep in sync with `StageOut` in shaders/stages.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct StageOut {
+    /// End state (sample: unused).
+    pub r: [f32; 3],
+    /// t-length of the step (sample: delta_n).
+    pub h: f32,
+    pub t: [f32; 3],
+    /// Field evaluations, the start sample not counted.
+    pub evals: u32,
+    /// Sample: the field at `r`; integrate: the step's end sample when it made one.
+    pub grad_n: [f32; 3],
+    pub n: f32,
+    /// Integrate: the adaptive pair's embedded error estimate (e_r, e_T).
+    pub err_r: [f32; 3],
+    /// Take, leave: the controller's step after this one.
+    pub ds_next: f32,
+    pub err_t: [f32; 3],
+    /// Leave: 0 stayed inside, 1 the step ended outside, 2 it left and came back.
+    pub code: u32,
+}
+const _: () = assert!(std::mem::size_of::<StageIn>() == 2 * 16);
+const _: () = assert!(std::mem::size_of::<StageOut>() == 5 * 16);
+
+/// Threads per workgroup of every stage entry point (`STAGE_WORKGROUP`).
+const STAGE_WORKGROUP: u32 = 64;
+
+/// Run `stage` on `input` with `scene`'s settings (integrator, step policy, exit method,
+/// bounds) over `baked`, as [`crate::GpuRenderer`] would upload them.
+pub fn run_stage(
+    ctx: &GpuContext,
+    scene: &RenderScene,
+    baked: &BakedField,
+    stage: Stage,
+    input: &[StageIn],
+) -> Result<Vec<StageOut>, GpuError> {
+    if input.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut params = frame_params(scene)?;
+    let field = upload_field(ctx, baked, &mut params)?;
+    let count = u32::try_from(input.len())
+        .map_err(|_| GpuError::Unsupported("more than 2^32 stage inputs".into()))?;
+    let out_bytes = (input.len() * std::mem::size_of::<StageOut>()) as u64;
+    let readback = ctx.scoped("running a marcher stage", || {
+        use wgpu::util::DeviceExt;
+        let device = &ctx.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("stages.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::STAGES_WGSL.into()),
+        });
+        // Group 0: the render kernel's params and field texture, the only resources of
+        // it the stages read.
+        let frame_entries: Vec<_> = render_layout_entries()
+            .into_iter()
+            .filter(|e| e.binding == 0 || e.binding == 3)
+            .collect();
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("stage frame bindings"),
+            entries: &frame_entries,
+        });
+        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("stage io"),
+            entries: &[storage(0, true), storage(1, false)],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("stage"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&io_layout)],
+            immediate_size: 0,
+        });
+        let constants = pipeline_constants(&params, PASS_ALL);
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(stage.entry_point()),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some(stage.entry_point()),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &constants,
+                zero_initialize_workgroup_memory: false,
+            },
+            cache: None,
+        });
+        let params_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("stage params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let in_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("stage in"),
+            contents: bytemuck::cast_slice(input),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let out_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("stage out"),
+            size: out_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("stage readback"),
+            size: out_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let field_view = field
+            .field
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("stage frame bindings"),
+            layout: &frame_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&field_view),
+                },
+            ],
+        });
+        let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("stage io"),
+            layout: &io_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: in_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: out_buffer.as_entire_binding(),
+                },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("stage"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(stage.entry_point()),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &frame_group, &[]);
+            pass.set_bind_group(1, &io_group, &[]);
+            pass.dispatch_workgroups(count.div_ceil(STAGE_WORKGROUP), 1, 1);
+        }
+        encoder.copy_buffer_to_buffer(&out_buffer, 0, &readback, 0, out_bytes);
+        ctx.queue.submit([encoder.finish()]);
+        readback
+    })?;
+    read_buffer(ctx, &readback, out_bytes)
+}

@@ -1,0 +1,619 @@
+//! The marcher's WGSL stages, one at a time, against their CPU twins (grin-trace's f32
+//! path) on batches of states over the same baked field: `sample_field`, every
+//! integrator's step, the step controller of every policy (including the f32 floors of
+//! error control), and the step that leaves the medium (tunnelling check, Hermite and
+//! bisection exit search). Whole-image tests (gpu_vs_cpu.rs) can hide a stage that is
+//! wrong where few pixels go; here each stage's every output is compared.
+//!
+//! Where the backends' arithmetic differs. The CPU's f32 path does the integrators' vector
+//! arithmetic in f32 as the kernel does, but samples the baked grid in f64 (rounded to
+//! f32) and runs the controller's scalars (ds, tolerance, error ratio) and the exit
+//! search's parameter in f64. So states agree to a few f32 ulps, not bit for bit; the
+//! tolerances below are ~10x the worst difference measured on lavapipe, and far below
+//! what a changed constant, floor or coefficient does (tests/stages.rs's header in
+//! docs/architecture.md lists the one-line changes shown to fail).
+
+#![allow(clippy::unwrap_used)]
+
+mod harness;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::Vec3;
+use grin_field::baked::{BakedField, Interp};
+use grin_field::{FieldSample, IndexField, Real};
+use grin_gpu::stages::{Stage, StageIn, StageOut, run_stage};
+use grin_render::scene::RenderScene;
+use grin_render::settings::TraceSettings;
+use grin_scene::{ExitMethod, IntegratorKind, Scene, StepSpec, load_scene};
+use grin_trace::boundary::exit_tolerance;
+use grin_trace::integrate::{self, RayState};
+use grin_trace::step::StepController;
+use grin_trace::trace::{excursion_step, exit_medium};
+
+/// |n| agreement of a field sample (n ~ 1.4: a few f32 ulps).
+const SAMPLE_N_TOL: f32 = 2e-6;
+/// |grad n| agreement, relative to 1 + |grad n|.
+const SAMPLE_GRAD_TOL: f32 = 2e-5;
+/// End-state agreement (|r|, |T| ~ 1 in these scenes).
+const STATE_TOL: f32 = 1e-5;
+/// Relative agreement of step lengths (h).
+const LENGTH_REL_TOL: f32 = 1e-3;
+/// Relative agreement of the controller's next step: it is 0.9 (tol / err)^(1/p), and
+/// an error estimate of ~1e-7 made from f32 states is partly rounding (measured worst
+/// 3.6e-2, dopri at auto = 1e-4); SAFETY 0.8 instead of 0.9 moves it by 11%.
+const NEXT_DS_REL_TOL: f32 = 0.06;
+/// Error-controlled steps whose accept decision may flip between the backends (an
+/// error within rounding of the tolerance): at most this fraction of a batch.
+const FLIP_FRACTION: f64 = 0.02;
+/// Exits one Newton re-step apart, at most this fraction of a batch: the refinement
+/// stops when |distance| <= 4 ulps of the coordinates, and the backends' f32 cubic roots
+/// and Newton updates (f32 on the GPU, f64 on the CPU) land on either side of that in
+/// a few states (measured 7 of 256, Luneburg sharma).
+const NEWTON_FLIP_FRACTION: f64 = 0.06;
+/// States per batch.
+const BATCH: usize = 256;
+/// Bake resolution of the stage tests' grids.
+const RESOLUTION: usize = 32;
+
+fn scene_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../data/scenes/{name}.toml"))
+}
+
+/// A scene with its medium marched by `integrator` / `step` / `exit` through a bake of
+/// its field (trilinear or tricubic), as the GPU and the CPU twin both see it.
+struct Setup {
+    scene: RenderScene,
+    baked: Arc<BakedField>,
+    trace: TraceSettings,
+}
+
+fn setup(
+    name: &str,
+    integrator: IntegratorKind,
+    step: StepSpec,
+    exit: ExitMethod,
+    interp: Interp,
+) -> Setup {
+    let path = scene_path(name);
+    let mut scene: Scene = load_scene(&path).unwrap();
+    scene.render.integrator = integrator;
+    scene.render.step = step;
+    scene.render.exit = exit;
+    let dir = path.parent().unwrap();
+    let baked = harness::baked(&scene, dir, RESOLUTION).unwrap();
+    let baked = Arc::new(Arc::try_unwrap(baked).unwrap().with_interp(interp));
+    let rs =
+        RenderScene::new(&scene, dir, Some(Arc::clone(&baked) as Arc<dyn IndexField>)).unwrap();
+    let trace = rs.medium.as_ref().unwrap().trace;
+    Setup {
+        scene: rs,
+        baked,
+        trace,
+    }
+}
+
+/// A small deterministic generator (xorshift64*), uniform in [0, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32) / (1u64 << 24) as f32
+    }
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next()
+    }
+    fn unit(&mut self) -> Vec3 {
+        loop {
+            let v = Vec3::new(
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+            );
+            let l = v.length();
+            if l > 0.1 && l <= 1.0 {
+                return v / l;
+            }
+        }
+    }
+}
+
+/// States inside the medium: position in the bounds shrunk by `inner..outer` of the
+/// way from the centre to the surface, T = n(r) times a unit direction (bent outward by
+/// `outward` in [0, 1]).
+fn states(
+    setup: &Setup,
+    seed: u64,
+    inner: f32,
+    outer: f32,
+    outward: f32,
+    h: (f32, f32),
+    ds_adapt: &[f32],
+) -> Vec<StageIn> {
+    let field = setup.baked.as_ref();
+    let bounds = field.bounds();
+    let (center, half) = match bounds {
+        grin_field::Bounds::Sphere { center, radius } => {
+            (center.as_vec3(), Vec3::splat(radius as f32))
+        }
+        grin_field::Bounds::Box { min, max } => {
+            (((min + max) * 0.5).as_vec3(), ((max - min) * 0.5).as_vec3())
+        }
+    };
+    let mut rng = Rng(seed);
+    (0..BATCH)
+        .map(|i| {
+            let sphere = matches!(bounds, grin_field::Bounds::Sphere { .. });
+            let u = rng.unit();
+            let f = rng.range(inner, outer);
+            let offset = if sphere {
+                u * f
+            } else {
+                // A point of the box shell at fraction f: one axis pushed to f.
+                let mut v = Vec3::new(
+                    rng.range(-outer, outer),
+                    rng.range(-outer, outer),
+                    rng.range(-outer, outer),
+                );
+                let axis = i % 3;
+                v[axis] = f * u[axis].signum();
+                v
+            };
+            let r = center + offset * half;
+            let out = if sphere {
+                u
+            } else {
+                let mut a = Vec3::ZERO;
+                a[i % 3] = u[i % 3].signum();
+                a
+            };
+            let d = (rng.unit() * (1.0 - outward) + out * outward).normalize();
+            let n = field.sample_f32(r).n;
+            StageIn {
+                r: r.to_array(),
+                h: rng.range(h.0, h.1),
+                t: (d * n).to_array(),
+                ds_adapt: ds_adapt[i % ds_adapt.len()],
+            }
+        })
+        .collect()
+}
+
+fn gpu(setup: &Setup, stage: Stage, input: &[StageIn]) -> Option<Vec<StageOut>> {
+    let ctx = harness::context(&format!("stage {stage:?}"))?;
+    Some(run_stage(&ctx, &setup.scene, &setup.baked, stage, input).unwrap())
+}
+
+fn v(a: [f32; 3]) -> Vec3 {
+    Vec3::from_array(a)
+}
+
+fn sample(field: &dyn IndexField, r: Vec3) -> FieldSample<f32> {
+    f32::sample_field(field, r)
+}
+
+/// Differences found, one line each, with the worst of each kind for the report.
+#[derive(Default)]
+struct Report {
+    problems: Vec<String>,
+    worst_state: f32,
+    worst_len: f32,
+}
+
+impl Report {
+    fn state(&mut self, i: usize, what: &str, gpu: Vec3, cpu: Vec3) {
+        let d = (gpu - cpu).abs().max_element();
+        self.worst_state = self.worst_state.max(d);
+        if !(d <= STATE_TOL) {
+            self.problems.push(format!(
+                "state {i}: {what} GPU {gpu} vs CPU {cpu} (|d| {d:.2e})"
+            ));
+        }
+    }
+    fn length(&mut self, i: usize, what: &str, gpu: f32, cpu: f32) {
+        self.length_within(i, what, gpu, cpu, LENGTH_REL_TOL);
+    }
+    fn length_within(&mut self, i: usize, what: &str, gpu: f32, cpu: f32, tol: f32) {
+        let d = (gpu - cpu).abs() / cpu.abs().max(1e-30);
+        self.worst_len = self.worst_len.max(d);
+        if !(d <= tol) {
+            self.problems.push(format!(
+                "state {i}: {what} GPU {gpu:e} vs CPU {cpu:e} (rel {d:.2e})"
+            ));
+        }
+    }
+    fn count(&mut self, i: usize, what: &str, gpu: u32, cpu: u32) {
+        if gpu != cpu {
+            self.problems
+                .push(format!("state {i}: {what} GPU {gpu} vs CPU {cpu}"));
+        }
+    }
+    /// No difference, except accept-decision flips in at most FLIP_FRACTION of the
+    /// states when `flips` is set.
+    fn check(self, label: &str, flips: bool) {
+        let allowed = if flips {
+            (FLIP_FRACTION * BATCH as f64) as usize
+        } else {
+            0
+        };
+        let differing: std::collections::BTreeSet<&str> = self
+            .problems
+            .iter()
+            .map(|p| p.split(':').next().unwrap_or(""))
+            .collect();
+        eprintln!(
+            "{label}: worst |state| {:.2e}, worst rel length {:.2e}, {} states differ",
+            self.worst_state,
+            self.worst_len,
+            differing.len()
+        );
+        assert!(
+            differing.len() <= allowed,
+            "{label}: {} of {BATCH} states differ between the WGSL stage and its CPU twin (allowed {allowed}):\n{}",
+            differing.len(),
+            self.problems[..self.problems.len().min(12)].join("\n")
+        );
+    }
+}
+
+#[test]
+fn sample_field_matches_the_cpu_trilinear_and_tricubic_grids() {
+    for interp in [Interp::Trilinear, Interp::Tricubic] {
+        let s = setup(
+            "luneburg",
+            IntegratorKind::Sharma,
+            StepSpec::Fixed(0.05),
+            ExitMethod::Hermite,
+            interp,
+        );
+        // Points in and just beyond the grid (beyond it the field is clamped or ambient).
+        let input = states(&s, 7, 0.0, 1.1, 0.0, (0.0, 0.0), &[0.0]);
+        let Some(out) = gpu(&s, Stage::Sample, &input) else {
+            return;
+        };
+        let field = s.baked.as_ref();
+        let mut problems = Vec::new();
+        let (mut worst_n, mut worst_g) = (0.0f32, 0.0f32);
+        for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
+            let c = sample(field, v(inp.r));
+            let dn = (o.n - c.n).abs();
+            let dg = (v(o.grad_n) - c.grad_n).abs().max_element() / (1.0 + c.grad_n.length());
+            worst_n = worst_n.max(dn);
+            worst_g = worst_g.max(dg);
+            if !(dn <= SAMPLE_N_TOL && dg <= SAMPLE_GRAD_TOL) {
+                problems.push(format!(
+                    "point {i} {:?}: n GPU {} CPU {}, grad n GPU {:?} CPU {}",
+                    inp.r, o.n, c.n, o.grad_n, c.grad_n
+                ));
+            }
+        }
+        eprintln!("sample {interp:?}: worst |n| {worst_n:.2e}, worst rel grad {worst_g:.2e}");
+        assert!(
+            problems.is_empty(),
+            "sample_field {interp:?}: {} of {BATCH} points differ:\n{}",
+            problems.len(),
+            problems[..problems.len().min(12)].join("\n")
+        );
+    }
+}
+
+#[test]
+fn every_integrator_step_matches_its_cpu_twin() {
+    for kind in [
+        IntegratorKind::Euler,
+        IntegratorKind::SymplecticEuler,
+        IntegratorKind::Verlet,
+        IntegratorKind::Sharma,
+        IntegratorKind::Rk4,
+        IntegratorKind::Adaptive,
+    ] {
+        let s = setup(
+            "luneburg",
+            kind,
+            StepSpec::Fixed(0.05),
+            ExitMethod::Hermite,
+            Interp::Trilinear,
+        );
+        // Steps of 0.02..0.25 R from points well inside.
+        let input = states(&s, 11, 0.0, 0.7, 0.0, (0.02, 0.25), &[0.0]);
+        let Some(out) = gpu(&s, Stage::Integrate, &input) else {
+            return;
+        };
+        let field = s.baked.as_ref();
+        let mut rep = Report::default();
+        for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
+            let st = RayState {
+                r: v(inp.r),
+                t: v(inp.t),
+            };
+            let s0 = sample(field, st.r);
+            let c = integrate::step(kind, field, st, s0.n_grad_n(), inp.h);
+            rep.state(i, "r", v(o.r), c.state.r);
+            rep.state(i, "T", v(o.t), c.state.t);
+            rep.count(i, "evals", o.evals, c.evals);
+            if let Some((er, et)) = c.error {
+                rep.state(i, "e_r", v(o.err_r), er);
+                rep.state(i, "e_T", v(o.err_t), et);
+            }
+            if let Some(end) = c.end {
+                rep.length(i, "end n", o.n, end.n);
+            }
+        }
+        rep.check(&format!("integrate {kind:?}"), false);
+    }
+}
+
+/// Median ratio GPU / CPU of the controller's next step allowed where the tolerance is
+/// below f32 roundoff: there the error estimate is rounding noise (each state's next
+/// step differs by up to ~10% between the backends) and only the floor sets the steps'
+/// scale; a floor of 4 units of roundoff instead of 2 moves the median by 2^(1/5) - 1
+/// = 15%.
+const FLOOR_MEDIAN_TOL: f32 = 0.03;
+
+/// One controlled step on both backends from each state, the controllers started at
+/// the state's `ds_adapt`. `floor`: the tolerance is below roundoff (compared by the
+/// median of the next steps, and states where both backends took the same step).
+fn compare_take(
+    label: &str,
+    s: &Setup,
+    input: &[StageIn],
+    out: &[StageOut],
+    flips: bool,
+    floor: bool,
+) {
+    let field = s.baked.as_ref();
+    let mut rep = Report::default();
+    let mut ratios = Vec::new();
+    for (i, (inp, o)) in input.iter().zip(out).enumerate() {
+        let mut ctrl = StepController::new(s.trace.step, s.trace.integrator, field);
+        if inp.ds_adapt > 0.0 {
+            ctrl = ctrl.with_current_ds(f64::from(inp.ds_adapt));
+        }
+        let st = RayState {
+            r: v(inp.r),
+            t: v(inp.t),
+        };
+        let s0 = sample(field, st.r);
+        let c = ctrl.take::<f32>(field, st, &s0);
+        if floor {
+            ratios.push(o.ds_next / ctrl.current_ds() as f32);
+            if o.h != c.h {
+                continue;
+            }
+        }
+        rep.length(i, "h", o.h, c.h);
+        rep.state(i, "r", v(o.r), c.step.state.r);
+        rep.state(i, "T", v(o.t), c.step.state.t);
+        if !floor {
+            rep.count(i, "evals", o.evals, c.evals);
+        }
+        if !floor && matches!(s.trace.step, StepSpec::Adaptive { .. } | StepSpec::Auto(_)) {
+            rep.length_within(
+                i,
+                "next ds",
+                o.ds_next,
+                ctrl.current_ds() as f32,
+                NEXT_DS_REL_TOL,
+            );
+        }
+    }
+    if floor {
+        ratios.sort_by(f32::total_cmp);
+        let median = ratios[ratios.len() / 2];
+        eprintln!("{label}: median next-step ratio GPU/CPU {median:.4}");
+        assert!(
+            (median - 1.0).abs() <= FLOOR_MEDIAN_TOL,
+            "{label}: median next-step ratio GPU/CPU {median} (a floor differs?)"
+        );
+    }
+    rep.check(label, flips);
+}
+
+#[test]
+fn the_step_controller_of_every_policy_matches_its_cpu_twin() {
+    let cases = [
+        // (integrator, policy, controller starts)
+        (IntegratorKind::Sharma, StepSpec::Fixed(0.08), vec![0.0]),
+        (
+            IntegratorKind::Rk4,
+            StepSpec::Heuristic {
+                min: 0.01,
+                max: 0.2,
+                amplitude: None,
+            },
+            vec![0.0],
+        ),
+        // The embedded pair and step doubling, from several controller states.
+        (
+            IntegratorKind::Adaptive,
+            StepSpec::Adaptive {
+                tolerance: 1e-5,
+                initial: None,
+            },
+            vec![0.0, 0.003, 0.05, 0.3],
+        ),
+        (
+            IntegratorKind::Rk4,
+            StepSpec::Adaptive {
+                tolerance: 1e-6,
+                initial: Some(0.02),
+            },
+            vec![0.0, 0.003, 0.05, 0.3],
+        ),
+        // Below f32 roundoff: the tolerance floor and the smallest step decide.
+        (
+            IntegratorKind::Adaptive,
+            StepSpec::Adaptive {
+                tolerance: 1e-10,
+                initial: None,
+            },
+            vec![0.0, 1e-4, 0.01],
+        ),
+        (
+            IntegratorKind::Sharma,
+            StepSpec::Adaptive {
+                tolerance: 1e-12,
+                initial: None,
+            },
+            vec![0.0, 1e-4, 0.01],
+        ),
+        // Error per unit length (`auto`).
+        (
+            IntegratorKind::Verlet,
+            StepSpec::Auto(1e-3),
+            vec![0.0, 0.01, 0.1],
+        ),
+        (
+            IntegratorKind::Adaptive,
+            StepSpec::Auto(1e-4),
+            vec![0.0, 0.01, 0.1],
+        ),
+        (
+            IntegratorKind::Adaptive,
+            StepSpec::Auto(1e-7),
+            vec![0.0, 0.01, 0.1],
+        ),
+    ];
+    for (kind, step, starts) in cases {
+        let s = setup(
+            "luneburg",
+            kind,
+            step,
+            ExitMethod::Hermite,
+            Interp::Trilinear,
+        );
+        let input = states(&s, 13, 0.0, 0.9, 0.0, (0.0, 0.0), &starts);
+        let Some(out) = gpu(&s, Stage::Take, &input) else {
+            return;
+        };
+        let flips = !matches!(step, StepSpec::Fixed(_) | StepSpec::Heuristic { .. });
+        // Per-step tolerances (auto: per unit length, times steps <= 0.25 R) below the
+        // f32 floor of 2 roundoff units times R = 2.4e-7.
+        let floor = match step {
+            StepSpec::Adaptive { tolerance, .. } => tolerance < 1e-8,
+            StepSpec::Auto(a) => grin_scene::AUTO_TOL_PER_RAD * a * 0.25 < 2.4e-7,
+            _ => false,
+        };
+        compare_take(
+            &format!("take {kind:?} {step:?}"),
+            &s,
+            &input,
+            &out,
+            flips,
+            floor,
+        );
+    }
+}
+
+#[test]
+fn the_step_that_leaves_the_medium_matches_its_cpu_twin() {
+    let cases = [
+        (
+            "luneburg",
+            IntegratorKind::Sharma,
+            StepSpec::Fixed(0.1),
+            ExitMethod::Hermite,
+        ),
+        (
+            "luneburg",
+            IntegratorKind::Adaptive,
+            StepSpec::Adaptive {
+                tolerance: 1e-6,
+                initial: None,
+            },
+            ExitMethod::Hermite,
+        ),
+        (
+            "luneburg",
+            IntegratorKind::Rk4,
+            StepSpec::Fixed(0.1),
+            ExitMethod::Bisection,
+        ),
+        (
+            "grin-rod",
+            IntegratorKind::Rk4,
+            StepSpec::Fixed(0.1),
+            ExitMethod::Hermite,
+        ),
+    ];
+    for (name, kind, step, exit) in cases {
+        let s = setup(name, kind, step, exit, Interp::Trilinear);
+        // Near the surface, heading out or grazing it.
+        let input = states(&s, 17, 0.9, 0.999, 0.5, (0.0, 0.0), &[0.1, 0.25]);
+        let Some(out) = gpu(&s, Stage::Leave, &input) else {
+            return;
+        };
+        let field = s.baked.as_ref();
+        let bounds = field.bounds();
+        let mut rep = Report::default();
+        let mut codes = [0usize; 3];
+        let mut newton_flips = 0;
+        for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
+            let mut ctrl = StepController::new(s.trace.step, s.trace.integrator, field);
+            if inp.ds_adapt > 0.0 {
+                ctrl = ctrl.with_current_ds(f64::from(inp.ds_adapt));
+            }
+            let st = RayState {
+                r: v(inp.r),
+                t: v(inp.t),
+            };
+            let s0 = sample(field, st.r);
+            let mut taken = ctrl.take::<f32>(field, st, &s0);
+            let mut evals = taken.evals;
+            let mut code = 0;
+            if bounds.signed_distance(taken.step.state.r.as_dvec3()) > 0.0 {
+                code = 1;
+            } else if let Some(cut) = excursion_step(field, &s.trace, &bounds, st, &s0, &taken) {
+                evals += cut.evals;
+                taken = cut;
+                code = 2;
+            }
+            let (mut state, mut h) = (taken.step.state, taken.h);
+            if code != 0 {
+                let (es, eh, ee) = exit_medium(
+                    field,
+                    &s.trace,
+                    &bounds,
+                    st,
+                    &s0,
+                    &taken,
+                    exit_tolerance::<f32>(&bounds),
+                );
+                state = es;
+                h = eh;
+                evals += ee;
+            }
+            codes[code as usize] += 1;
+            rep.count(i, "outcome", o.code, code);
+            rep.state(i, "r", v(o.r), state.r);
+            rep.state(i, "T", v(o.t), state.t);
+            rep.length(i, "h", o.h, h);
+            // The Newton refinement stops when |distance| <= the f32 tolerance, which
+            // the GPU (f32 distance) and the CPU (f64 distance of the f32 point) may
+            // see one re-step apart: a few states may differ by one step's evaluations.
+            let per_step = integrate::step(kind, field, st, s0.n_grad_n(), 1e-3).evals;
+            if exit == ExitMethod::Hermite && o.evals != evals {
+                if o.evals.abs_diff(evals) == per_step {
+                    newton_flips += 1;
+                } else {
+                    rep.count(i, "evals", o.evals, evals);
+                }
+            }
+        }
+        let label =
+            format!("leave {name} {kind:?} {step:?} {exit:?} (inside/out/tunnelled {codes:?})");
+        assert!(
+            codes[1] >= BATCH / 4,
+            "{label}: too few steps leave to test the exit"
+        );
+        eprintln!("{label}: {newton_flips} exits one Newton re-step apart");
+        assert!(
+            newton_flips as f64 <= NEWTON_FLIP_FRACTION * BATCH as f64,
+            "{label}: {newton_flips} of {BATCH} exits differ by one Newton re-step"
+        );
+        rep.check(&label, !matches!(step, StepSpec::Fixed(_)));
+    }
+}

@@ -1,0 +1,147 @@
+// #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/medium.wgsl
+//
+// Test-only entry points: each runs one stage of the marcher on a batch of states, so the
+// stage can be held against its CPU twin in isolation (crates/grin-gpu/tests/stages.rs,
+// run by crates/grin-gpu/src/stages.rs). They read the frame parameters and the field
+// texture of the render kernel (group 0) and nothing else of it.
+//   stage_sample     sample_field                     grin_field::IndexField::sample_f32
+//   stage_integrate  integrate_step (INTEGRATOR)      grin_trace::integrate::step
+//   stage_take       take_step (STEP_POLICY)          grin_trace::step::StepController::take
+//   stage_leave      take_step, excursion_step and    grin_trace::trace::{excursion_step,
+//                    exit_medium (FLAG_EXIT_HERMITE)    exit_medium}
+
+// Keep in sync with grin_gpu::stages::StageIn.
+struct StageIn {
+    r: vec3<f32>,
+    h: f32,          // stage_integrate: the t-step
+    t: vec3<f32>,
+    ds_adapt: f32,   // stage_take, stage_leave: the controller's current step (0: its first)
+}
+
+// Keep in sync with grin_gpu::stages::StageOut.
+struct StageOut {
+    r: vec3<f32>,
+    h: f32,
+    t: vec3<f32>,
+    evals: u32,
+    grad_n: vec3<f32>,
+    n: f32,
+    err_r: vec3<f32>,
+    ds_next: f32,    // the controller's step after this one
+    err_t: vec3<f32>,
+    code: u32,       // stage_leave: 0 stayed inside, 1 the step ended outside, 2 it tunnelled
+}
+
+@group(1) @binding(0) var<storage, read> stage_in: array<StageIn>;
+@group(1) @binding(1) var<storage, read_write> stage_out: array<StageOut>;
+
+const STAGE_WORKGROUP: u32 = 64u;
+
+fn stage_blank() -> StageOut {
+    return StageOut(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u);
+}
+
+fn stage_controller(ds_adapt: f32) -> StepController {
+    var ctrl = step_controller_new(1.0);
+    if ds_adapt > 0.0 {
+        ctrl.ds_adapt = ds_adapt;
+    }
+    return ctrl;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn stage_sample(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let f = sample_field(stage_in[gid.x].r);
+    var out = stage_blank();
+    out.n = f.n;
+    out.grad_n = f.grad_n;
+    out.h = f.delta_n;
+    stage_out[gid.x] = out;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn stage_integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    let s = RayState(input.r, input.t);
+    let s0 = sample_field(s.r);
+    let step = integrate_step(s, s0.grad_n * s0.n, input.h);
+    var out = stage_blank();
+    out.r = step.state.r;
+    out.t = step.state.t;
+    out.h = input.h;
+    out.evals = step.evals;
+    out.err_r = step.err_r;
+    out.err_t = step.err_t;
+    if step.has_end {
+        out.n = step.end.n;
+        out.grad_n = step.end.grad_n;
+    }
+    stage_out[gid.x] = out;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn stage_take(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    let s = RayState(input.r, input.t);
+    let s0 = sample_field(s.r);
+    var ctrl = stage_controller(input.ds_adapt);
+    let taken = take_step(&ctrl, s, s0);
+    var out = stage_blank();
+    out.r = taken.step.state.r;
+    out.t = taken.step.state.t;
+    out.h = taken.h;
+    out.evals = taken.evals;
+    out.ds_next = ctrl.ds_adapt;
+    stage_out[gid.x] = out;
+}
+
+// One step of the march near the surface: the step, the tunnelling check, the exit
+// search (march_medium's order of them).
+@compute @workgroup_size(64, 1, 1)
+fn stage_leave(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    let s = RayState(input.r, input.t);
+    let s0 = sample_field(s.r);
+    var ctrl = stage_controller(input.ds_adapt);
+    var taken = take_step(&ctrl, s, s0);
+    var evals = taken.evals;
+    var code = 0u;
+    if bounds_signed_distance(taken.step.state.r) > 0.0 {
+        code = 1u;
+    } else {
+        let cut = excursion_step(s, s0, taken);
+        if cut.found {
+            taken = cut.taken;
+            evals += taken.evals;
+            code = 2u;
+        }
+    }
+    var state = taken.step.state;
+    var h = taken.h;
+    if code != 0u && finite3(state.r) {
+        let ex = exit_medium(s, s0, taken, exit_tolerance());
+        evals += ex.evals;
+        state = ex.state;
+        h = ex.h;
+    }
+    var out = stage_blank();
+    out.r = state.r;
+    out.t = state.t;
+    out.h = h;
+    out.evals = evals;
+    out.ds_next = ctrl.ds_adapt;
+    out.code = code;
+    stage_out[gid.x] = out;
+}
