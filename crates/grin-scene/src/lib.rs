@@ -2,6 +2,7 @@
 //! settings) parsed with serde and validated, with errors that name the file, the
 //! line/column and the key. See ../shared/ARCHITECTURE.md for the contract.
 
+mod de;
 mod error;
 mod load;
 mod span;

@@ -18,21 +18,14 @@ pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
 
 /// Parse and validate scene text; `path` is used in error messages.
 pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
-    let mut scene: Scene = toml::from_str(text).map_err(|e| {
-        let doc = Document::parse(text);
-        let mut offset = e.span().map_or(0, |s| s.start);
-        let mut key = doc
+    // TOML syntax first (located by toml's span), then the scene's shape, each error at
+    // the key path the deserializer was at (crate::de): an unknown key is pointed at
+    // itself, typed, without reading it out of a message.
+    let table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let offset = e.span().map_or(0, |s| s.start);
+        let key = Document::parse(text)
             .key_at(offset)
             .unwrap_or_else(|| "(document)".to_owned());
-        // serde reports unknown keys of buffered tables (internally tagged field kinds)
-        // at the enclosing table: point at the unknown key itself when it is there.
-        if let Some(name) = unknown_field(e.message()) {
-            let child = format!("{key}.{name}");
-            if let Some(span) = doc.exact_span_of(&child) {
-                offset = span.start;
-                key = child;
-            }
-        }
         let (line, column) = line_column(text, offset);
         SceneError::Parse {
             path: path.to_owned(),
@@ -40,6 +33,28 @@ pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
             column,
             key,
             message: one_line(e.message()),
+        }
+    })?;
+    let mut scene: Scene = crate::de::from_table(table).map_err(|e| {
+        let key = e.key();
+        let doc = Document::parse(text);
+        // An unknown key at the key; a wrong value at the value.
+        let exact = match e.kind {
+            crate::de::DeErrorKind::UnknownField { .. } => doc.exact_span_of(&key),
+            crate::de::DeErrorKind::Other(_) => doc.value_span_of(&key),
+        };
+        let offset = exact.or_else(|| doc.span_of(&key)).map_or(0, |s| s.start);
+        let (line, column) = line_column(text, offset);
+        SceneError::Parse {
+            path: path.to_owned(),
+            line,
+            column,
+            key: if key.is_empty() {
+                "(document)".to_owned()
+            } else {
+                key
+            },
+            message: one_line(&e.to_string()),
         }
     })?;
     validate(&scene).map_err(|p| {
@@ -67,12 +82,6 @@ fn normalize(scene: &mut Scene) {
             }
         }
     }
-}
-
-/// The key named by serde's "unknown field `name`, expected ..." message.
-fn unknown_field(message: &str) -> Option<&str> {
-    let rest = message.strip_prefix("unknown field `")?;
-    rest.split('`').next()
 }
 
 /// Errors are one line on stderr.

@@ -62,8 +62,21 @@ impl<'i> Document<'i> {
             .and_then(|(span, complete)| complete.then_some(span))
     }
 
+    /// Byte span of the value at exactly `path`, if all of it is present.
+    pub(crate) fn value_span_of(&self, path: &str) -> Option<Range<usize>> {
+        let (_, value, complete) = self.resolve_both(path)?;
+        complete.then_some(value)
+    }
+
     /// The span of the deepest present part of `path` and whether that is all of it.
     fn resolve(&self, path: &str) -> Option<(Range<usize>, bool)> {
+        self.resolve_both(path)
+            .map(|(key, _, complete)| (key, complete))
+    }
+
+    /// The key span and value span of the deepest present part of `path`, and whether
+    /// that is all of it.
+    fn resolve_both(&self, path: &str) -> Option<(Range<usize>, Range<usize>, bool)> {
         let root = self.root.as_ref()?;
         let segments = parse_path(path);
         let wanted = segments.len();
@@ -81,12 +94,12 @@ impl<'i> Document<'i> {
                 _ => None,
             };
             let Some((span, v)) = next else { break };
-            best = Some(span);
+            best = Some((span, v.span()));
             found += 1;
             value = Some(v.get_ref());
             table = v.get_ref().as_table();
         }
-        best.map(|span| (span, found == wanted))
+        best.map(|(key, value)| (key, value, found == wanted))
     }
 
     /// The dotted path of the deepest key whose key or value span contains byte `offset`.

@@ -482,3 +482,32 @@ fn out_of_range_numbers_are_refused() {
     );
     parse_scene(&text, Path::new("scene.toml")).expect("1024 objects");
 }
+
+/// Unknown keys come from the deserializer as a typed error at their key path (in a
+/// variant table, an array of tables, a nested step table), not read out of the text of
+/// serde's message.
+#[test]
+fn unknown_keys_are_found_by_path_not_by_message_text() {
+    let m = error_of("radius = 0.5 } }", "radius = 0.5, radiuss = 1.0 } }");
+    assert_eq!(
+        m,
+        "scene.toml:11:62: object[1].shape.sphere.radiuss: unknown field `radiuss`, expected `center` or `radius`"
+    );
+    let m = error_of("max = 0.05 }", "max = 0.05, maxx = 1.0 }");
+    assert!(
+        m.starts_with("scene.toml:25:49: render.step.heuristic.maxx: unknown field `maxx`"),
+        "{m}"
+    );
+    let de: Result<crate::Scene, _> = crate::de::from_table(
+        "[camera]\nzoom = 1\n"
+            .parse::<toml::Table>()
+            .expect("toml parses"),
+    );
+    let e = de.expect_err("unknown key");
+    assert_eq!(e.key(), "camera.zoom");
+    assert!(
+        matches!(&e.kind, crate::de::DeErrorKind::UnknownField { field, expected }
+            if field == "zoom" && expected.contains(&"fov_y_deg")),
+        "{e:?}"
+    );
+}

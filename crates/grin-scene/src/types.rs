@@ -53,7 +53,7 @@ pub struct Object {
 
 /// Geometric primitives. TOML: `shape = { sphere = { center = [..], radius = .. } }`.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Shape {
     Sphere {
         center: [f64; 3],
@@ -127,7 +127,7 @@ fn default_ambient() -> f64 {
 
 /// Medium bounds. TOML: `{ sphere = { center, radius } }` or `{ box = { min, max } }`.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum BoundsSpec {
     Sphere { center: [f64; 3], radius: f64 },
     Box { min: [f64; 3], max: [f64; 3] },
@@ -308,7 +308,7 @@ fn default_units() -> f64 {
 
 /// How a VDB grid value becomes n.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum VdbMap {
     /// The grid is n itself (`delta = false`) or n - n_ambient (`delta = true`).
     Index {
@@ -363,7 +363,7 @@ pub enum NonFinitePolicy {
 
 /// Lights. TOML: `point = { position, intensity }` or `directional = { direction, intensity }`.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Light {
     Point {
         position: [f64; 3],
@@ -378,7 +378,7 @@ pub enum Light {
 
 /// Background seen by rays that leave the scene.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Sky {
     /// A vertical gradient from `horizon` to `zenith`, `ground` below the horizon.
     Gradient {
@@ -452,7 +452,7 @@ impl IntegratorKind {
 /// How long each step is. Lengths are world lengths ds (the integrator converts to the
 /// t parameter by dt = ds / n at the step's start).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum StepSpec {
     Fixed(f64),
     /// The paper's heuristic: lerp(max, min, |dir . grad n| / amplitude); amplitude
