@@ -10,8 +10,8 @@
 //! f32) and runs the controller's scalars (ds, tolerance, error ratio) and the exit
 //! search's parameter in f64. So states agree to a few f32 ulps, not bit for bit; the
 //! tolerances below are ~10x the worst difference measured on lavapipe, and far below
-//! what a changed constant, floor or coefficient does (tests/stages.rs's header in
-//! docs/architecture.md lists the one-line changes shown to fail).
+//! what a changed constant, floor or coefficient does (docs/architecture.md, "Twins and
+//! what keeps them equal", lists the one-line changes shown to fail).
 
 #![allow(clippy::unwrap_used)]
 
@@ -195,6 +195,11 @@ fn sample(field: &dyn IndexField, r: Vec3) -> FieldSample<f32> {
     f32::sample_field(field, r)
 }
 
+/// `d <= tol`, false for NaN (a NaN output is a difference).
+fn within(d: f32, tol: f32) -> bool {
+    d <= tol
+}
+
 /// Differences found, one line each, with the worst of each kind for the report.
 #[derive(Default)]
 struct Report {
@@ -207,7 +212,7 @@ impl Report {
     fn state(&mut self, i: usize, what: &str, gpu: Vec3, cpu: Vec3) {
         let d = (gpu - cpu).abs().max_element();
         self.worst_state = self.worst_state.max(d);
-        if !(d <= STATE_TOL) {
+        if !within(d, STATE_TOL) {
             self.problems.push(format!(
                 "state {i}: {what} GPU {gpu} vs CPU {cpu} (|d| {d:.2e})"
             ));
@@ -219,7 +224,7 @@ impl Report {
     fn length_within(&mut self, i: usize, what: &str, gpu: f32, cpu: f32, tol: f32) {
         let d = (gpu - cpu).abs() / cpu.abs().max(1e-30);
         self.worst_len = self.worst_len.max(d);
-        if !(d <= tol) {
+        if !within(d, tol) {
             self.problems.push(format!(
                 "state {i}: {what} GPU {gpu:e} vs CPU {cpu:e} (rel {d:.2e})"
             ));
@@ -283,7 +288,7 @@ fn sample_field_matches_the_cpu_trilinear_and_tricubic_grids() {
             let dg = (v(o.grad_n) - c.grad_n).abs().max_element() / (1.0 + c.grad_n.length());
             worst_n = worst_n.max(dn);
             worst_g = worst_g.max(dg);
-            if !(dn <= SAMPLE_N_TOL && dg <= SAMPLE_GRAD_TOL) {
+            if !(within(dn, SAMPLE_N_TOL) && within(dg, SAMPLE_GRAD_TOL)) {
                 problems.push(format!(
                     "point {i} {:?}: n GPU {} CPU {}, grad n GPU {:?} CPU {}",
                     inp.r, o.n, c.n, o.grad_n, c.grad_n

@@ -283,7 +283,7 @@ impl<'de> de::VariantAccess<'de> for VariantDe {
     type Error = DeError;
 
     fn unit_variant(self) -> Result<(), DeError> {
-        self.within(|d| de::Deserialize::deserialize(d))
+        self.within(de::Deserialize::deserialize)
     }
 
     fn newtype_variant_seed<T: DeserializeSeed<'de>>(self, seed: T) -> Result<T::Value, DeError> {
