@@ -13,6 +13,7 @@ pub mod export;
 pub mod expr;
 pub mod field;
 pub mod grinf;
+pub mod interval;
 pub mod noise;
 pub mod real;
 pub mod vdb;
