@@ -9,6 +9,7 @@
 //   stage_take       take_step (STEP_POLICY)          grin_trace::step::StepController::take
 //   stage_leave      take_step, excursion_step and    grin_trace::trace::{excursion_step,
 //                    exit_medium (FLAG_EXIT_HERMITE)    exit_medium}
+//   stage_flight     may_fly, homogeneous_span        grin_field::IndexField::homogeneous_span
 
 // Keep in sync with grin_gpu::stages::StageIn.
 struct StageIn {
@@ -29,7 +30,8 @@ struct StageOut {
     err_r: vec3<f32>,
     ds_next: f32,    // the controller's step after this one
     err_t: vec3<f32>,
-    code: u32,       // stage_leave: 0 stayed inside, 1 the step ended outside, 2 it tunnelled
+    code: u32,       // stage_leave: 0 stayed inside, 1 the step ended outside, 2 it tunnelled;
+                     // stage_flight: may_fly
 }
 
 @group(1) @binding(0) var<storage, read> stage_in: array<StageIn>;
@@ -143,5 +145,18 @@ fn stage_leave(@builtin(global_invocation_id) gid: vec3<u32>) {
     out.evals = evals;
     out.ds_next = ctrl.ds_adapt;
     out.code = code;
+    stage_out[gid.x] = out;
+}
+
+// A straight flight from r along t: its length (h; -1 for none) and may_fly (code).
+@compute @workgroup_size(64, 1, 1)
+fn stage_flight(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    var out = stage_blank();
+    out.h = homogeneous_span(input.r, normalize_or_zero(input.t));
+    out.code = select(0u, 1u, may_fly(input.r));
     stage_out[gid.x] = out;
 }

@@ -134,7 +134,8 @@ impl Interval {
 
     /// sin over [lo, hi]: the ends and every extremum pi/2 + k pi inside.
     fn sin(a: Self) -> Self {
-        if !(a.hi - a.lo < TAU) {
+        let width = a.hi - a.lo;
+        if width.is_nan() || width >= TAU {
             return Self::hull(&[-1.0, 1.0]);
         }
         let mut v = vec![a.lo.sin(), a.hi.sin()];

@@ -1,6 +1,6 @@
 //! The marcher's stages one at a time: runs a test-only entry point of
 //! shaders/stages.wgsl (field sample, one integrator step, one controlled step, one step
-//! with the tunnelling check and the exit search) on a batch of states, with the frame
+//! with the tunnelling check and the exit search, a straight flight) on a batch of states, with the frame
 //! parameters and field texture the renderer would use for the same scene. A test
 //! instrument (tests/stages.rs holds each stage against its CPU twin): it compiles one
 //! small pipeline per call.
@@ -27,6 +27,8 @@ pub enum Stage {
     Take,
     /// `take_step`, then `excursion_step` or `exit_medium` when the step leaves.
     Leave,
+    /// `homogeneous_span` from `r` along `t` (in `h`; -1 for none) and `may_fly` (`code`).
+    Flight,
 }
 
 impl Stage {
@@ -36,6 +38,7 @@ impl Stage {
             Stage::Integrate => "stage_integrate",
             Stage::Take => "stage_take",
             Stage::Leave => "stage_leave",
+            Stage::Flight => "stage_flight",
         }
     }
 }
@@ -72,7 +75,8 @@ pub struct StageOut {
     /// Take, leave: the controller's step after this one.
     pub ds_next: f32,
     pub err_t: [f32; 3],
-    /// Leave: 0 stayed inside, 1 the step ended outside, 2 it left and came back.
+    /// Leave: 0 stayed inside, 1 the step ended outside, 2 it left and came back;
+    /// flight: 1 where `may_fly`.
     pub code: u32,
 }
 const _: () = assert!(std::mem::size_of::<StageIn>() == 2 * 16);
@@ -105,11 +109,11 @@ pub fn run_stage(
             label: Some("stages.wgsl"),
             source: wgpu::ShaderSource::Wgsl(shaders::STAGES_WGSL.into()),
         });
-        // Group 0: the render kernel's params and field texture, the only resources of
-        // it the stages read.
+        // Group 0: the render kernel's params, field texture and macro cells, the only
+        // resources of it the stages read.
         let frame_entries: Vec<_> = render_layout_entries()
             .into_iter()
-            .filter(|e| e.binding == 0 || e.binding == 3)
+            .filter(|e| matches!(e.binding, 0 | 3 | 4))
             .collect();
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("stage frame bindings"),
@@ -171,6 +175,9 @@ pub fn run_stage(
         let field_view = field
             .field
             .create_view(&wgpu::TextureViewDescriptor::default());
+        let macro_view = field
+            .macro_cells
+            .create_view(&wgpu::TextureViewDescriptor::default());
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("stage frame bindings"),
             layout: &frame_layout,
@@ -182,6 +189,10 @@ pub fn run_stage(
                 wgpu::BindGroupEntry {
                     binding: 3,
                     resource: wgpu::BindingResource::TextureView(&field_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&macro_view),
                 },
             ],
         });

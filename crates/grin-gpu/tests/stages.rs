@@ -76,8 +76,17 @@ fn setup(
     exit: ExitMethod,
     interp: Interp,
 ) -> Setup {
-    let path = scene_path(name);
-    let mut scene: Scene = load_scene(&path).unwrap();
+    setup_file(&scene_path(name), integrator, step, exit, interp)
+}
+
+fn setup_file(
+    path: &Path,
+    integrator: IntegratorKind,
+    step: StepSpec,
+    exit: ExitMethod,
+    interp: Interp,
+) -> Setup {
+    let mut scene: Scene = load_scene(path).unwrap();
     scene.render.integrator = integrator;
     scene.render.step = step;
     scene.render.exit = exit;
@@ -621,4 +630,86 @@ fn the_step_that_leaves_the_medium_matches_its_cpu_twin() {
         );
         rep.check(&label, !matches!(step, StepSpec::Fixed(_)));
     }
+}
+
+/// Straight flights through homogeneous macro cells (the paper's "infinite step"): the
+/// kernel's macro-cell walk against BakedField::homogeneous_span, from points all over
+/// the plume scene's box (cropped grid, ambient outside it) in every direction.
+#[test]
+fn straight_flights_match_the_cpu_macro_cell_walk() {
+    // Two narrow plumes in opposite corners of the box: the grid spans the box, and the
+    // space between them is homogeneous macro cells.
+    let text = std::fs::read_to_string(scene_path("plume")).unwrap();
+    let start = text.find("field = { kind = \"plume\"").unwrap();
+    let end = start + text[start..].find("] }").unwrap() + 3;
+    let text = format!(
+        "{}field = {{ kind = \"plume\", plumes = [{{ a = 6.0e-3, center = [-2.5, 0.4, 1.6], s = 0.15 }}, {{ a = 5.0e-3, center = [2.5, 0.9, 6.4], s = 0.15 }}] }}{}",
+        &text[..start],
+        &text[end..]
+    );
+    let path = std::env::temp_dir().join(format!("grin-stages-{}.toml", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    let s = setup_file(
+        &path,
+        IntegratorKind::Sharma,
+        StepSpec::Fixed(0.05),
+        ExitMethod::Hermite,
+        Interp::Trilinear,
+    );
+    std::fs::remove_file(&path).ok();
+    // Half from all over the bounds (most fly to the cropped grid), half inside the
+    // grid's box (macro-cell walks).
+    let mut input = states(&s, 19, 0.0, 0.999, 0.0, (0.0, 0.0), &[0.0]);
+    let (lo, hi) = s.baked.geometry().world_box();
+    let mut rng = Rng(23);
+    for inp in input.iter_mut().skip(BATCH / 2) {
+        let f = Vec3::new(rng.next(), rng.next(), rng.next());
+        inp.r = (lo.as_vec3() + (hi - lo).as_vec3() * f).to_array();
+    }
+    let Some(out) = gpu(&s, Stage::Flight, &input) else {
+        return;
+    };
+    let field = s.baked.as_ref();
+    let mut problems = Vec::new();
+    let (mut flights, mut walks, mut worst) = (0, 0, 0.0f64);
+    for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
+        let p = v(inp.r).as_dvec3();
+        let dir = v(inp.t).normalize().as_dvec3();
+        let cpu = field.homogeneous_span(p, dir);
+        let gpu = (o.h > 0.0).then_some(f64::from(o.h));
+        if o.code == 0 && cpu.is_some() {
+            problems.push(format!(
+                "state {i}: may_fly false but the CPU flies {cpu:?}"
+            ));
+        }
+        match (gpu, cpu) {
+            (None, None) => {}
+            (Some(g), Some(c)) => {
+                flights += 1;
+                if i >= BATCH / 2 {
+                    walks += 1;
+                }
+                let d = (g - c).abs() / c.max(1e-3);
+                worst = worst.max(d);
+                if d > 1e-3 {
+                    problems.push(format!("state {i}: span GPU {g} vs CPU {c}"));
+                }
+            }
+            _ => problems.push(format!("state {i}: span GPU {gpu:?} vs CPU {cpu:?}")),
+        }
+    }
+    eprintln!(
+        "flight: {flights} of {BATCH} states fly on both ({walks} inside the grid), worst rel span {worst:.2e}, {} differ",
+        problems.len()
+    );
+    assert!(
+        flights >= BATCH / 4 && walks >= BATCH / 16,
+        "too few flights to test: {flights}, {walks} inside the grid"
+    );
+    assert!(
+        problems.len() as f64 <= FLIP_FRACTION * BATCH as f64,
+        "straight flights: {} of {BATCH} states differ:\n{}",
+        problems.len(),
+        problems[..problems.len().min(12)].join("\n")
+    );
 }
