@@ -11,6 +11,9 @@
 //!   more than [`WRONG_DIR`] rad or [`WRONG_POS`] of the scale, or reported `exited` where the
 //!   truth is that it never leaves or meets an invalid field. A silent cell is a confident
 //!   wrong answer: the thing this matrix exists to find.
+//!
+//! Why ~650 lines: the hard cases are data (one block each, with its truth), and the
+//! classification needs all of them in view.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};

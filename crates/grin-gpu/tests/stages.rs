@@ -12,6 +12,9 @@
 //! tolerances below are ~10x the worst difference measured on lavapipe, and far below
 //! what a changed constant, floor or coefficient does (docs/architecture.md, "Twins and
 //! what keeps them equal", lists the one-line changes shown to fail).
+//!
+//! Why ~710 lines: one test per WGSL stage, each with its CPU twin's call sequence
+//! written out, sharing the state generator and the report.
 
 #![allow(clippy::unwrap_used)]
 

@@ -1,6 +1,10 @@
 //! The per-ray loop: enter the medium (refracting at its surface), step through it with
 //! the chosen integrator and step policy, find where the ray leaves, refract out (Fresnel
 //! weight, total internal reflection sends it back in), and account for the optical path.
+//!
+//! Why ~510 lines: entry, the step loop, straight flights, the tunnelling check and the
+//! exit search share the ray's state and its compensated sums; split, each part would
+//! take that state apart.
 
 use glam::DVec3;
 use grin_field::{Bounds, FieldSample, IndexField, Real, Vec3Like};
