@@ -11,11 +11,9 @@
 //! parse runs on a thread with its own large stack: no formula can overflow grin's stack
 //! or keep it busy for minutes.
 //!
-//! (~320 lines of code, the rest tests.)
-//!
-//! Why ~740 lines: the parser's guards (size, nesting, unary minus before `^`), the
-//! big-stack parse thread, the load check and the interval proof all serve one formula;
-//! about 250 are tests.
+//! Why ~740 lines: ~400 of code (the parser's guards: size, nesting, unary minus before
+//! `^`; the big-stack parse thread; the load check and its interval proof, all serving
+//! one formula), the rest tests.
 
 use exmex::prelude::*;
 use exmex::{FloatOpsFactory, MatchLiteral, literal_matcher_from_pattern};
