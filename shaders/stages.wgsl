@@ -10,6 +10,8 @@
 //   stage_leave      take_step, excursion_step and    grin_trace::trace::{excursion_step,
 //                    exit_medium (FLAG_EXIT_HERMITE)    exit_medium}
 //   stage_flight     may_fly, homogeneous_span        grin_field::IndexField::homogeneous_span
+//   stage_surface    bounds_intersect,                grin_field::Bounds::{intersect,
+//                    bounds_signed_distance, refract    signed_distance}, boundary::refract
 
 // Keep in sync with grin_gpu::stages::StageIn.
 struct StageIn {
@@ -31,7 +33,7 @@ struct StageOut {
     ds_next: f32,    // the controller's step after this one
     err_t: vec3<f32>,
     code: u32,       // stage_leave: 0 stayed inside, 1 the step ended outside, 2 it tunnelled;
-                     // stage_flight: may_fly
+                     // stage_flight: may_fly; stage_surface: bounds met, refraction transmitted
 }
 
 @group(1) @binding(0) var<storage, read> stage_in: array<StageIn>;
@@ -158,5 +160,30 @@ fn stage_flight(@builtin(global_invocation_id) gid: vec3<u32>) {
     var out = stage_blank();
     out.h = homogeneous_span(input.r, normalize_or_zero(input.t));
     out.code = select(0u, 1u, may_fly(input.r));
+    stage_out[gid.x] = out;
+}
+
+// The medium's surface: the ray (r, t)'s interval through the bounds (h = s_in, n = s_out,
+// code bit 0 = found), r's signed distance (ds_next), and the refraction of t's direction
+// at the normal err_r from n1 = input.h into n2 = input.ds_adapt (out.t = direction,
+// err_t.x = reflectance, code bit 1 = transmitted).
+@compute @workgroup_size(64, 1, 1)
+fn stage_surface(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    let d = normalize_or_zero(input.t);
+    let b = bounds_intersect(input.r, d);
+    let nrm = bounds_normal(project_to_surface(input.r));
+    let i = refract(d, nrm, input.h, input.ds_adapt);
+    var out = stage_blank();
+    out.h = b.s_in;
+    out.n = b.s_out;
+    out.ds_next = bounds_signed_distance(input.r);
+    out.t = i.dir;
+    out.err_r = nrm;
+    out.err_t = vec3<f32>(i.reflectance, 0.0, 0.0);
+    out.code = select(0u, 1u, b.found) | select(0u, 2u, i.transmitted);
     stage_out[gid.x] = out;
 }

@@ -29,6 +29,11 @@ pub enum Stage {
     Leave,
     /// `homogeneous_span` from `r` along `t` (in `h`; -1 for none) and `may_fly` (`code`).
     Flight,
+    /// The bounds' interval along (`r`, `t`) (`h`, `n`; `code` bit 0 when met), the signed
+    /// distance of `r` (`ds_next`), and `refract` of `t` at the surface normal nearest `r`
+    /// (`err_r`) from n1 = `h` into n2 = `ds_adapt` (`t`, reflectance in `err_t[0]`,
+    /// `code` bit 1 when transmitted).
+    Surface,
 }
 
 impl Stage {
@@ -39,6 +44,7 @@ impl Stage {
             Stage::Take => "stage_take",
             Stage::Leave => "stage_leave",
             Stage::Flight => "stage_flight",
+            Stage::Surface => "stage_surface",
         }
     }
 }

@@ -716,3 +716,81 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
         problems[..problems.len().min(12)].join("\n")
     );
 }
+
+/// The medium's surface: ray-bounds intervals, signed distances and Snell + Fresnel at
+/// it (sphere and box bounds), from inside and outside, into denser and thinner media
+/// (total internal reflection included).
+#[test]
+fn the_surface_stage_matches_its_cpu_twin() {
+    for name in ["luneburg", "grin-rod"] {
+        let s = setup(
+            name,
+            IntegratorKind::Sharma,
+            StepSpec::Fixed(0.05),
+            ExitMethod::Hermite,
+            Interp::Trilinear,
+        );
+        let mut input = states(&s, 29, 0.3, 1.4, 0.3, (1.0, 1.6), &[1.0, 1.33, 1.6]);
+        // Ambient rays from outside aimed anywhere: many miss, many meet the bounds.
+        for (i, inp) in input.iter_mut().enumerate() {
+            if i % 2 == 1 {
+                inp.t = (-v(inp.t)).to_array();
+            }
+        }
+        let Some(out) = gpu(&s, Stage::Surface, &input) else {
+            return;
+        };
+        let bounds = s.baked.bounds();
+        let mut rep = Report::default();
+        let (mut met, mut tir) = (0, 0);
+        for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
+            let p = v(inp.r).as_dvec3();
+            let d = v(inp.t).normalize().as_dvec3();
+            let cpu_sd = bounds.signed_distance(p) as f32;
+            rep.state(
+                i,
+                "signed distance",
+                Vec3::splat(o.ds_next),
+                Vec3::splat(cpu_sd),
+            );
+            match bounds.intersect(p, d) {
+                Some((s_in, s_out)) => {
+                    met += 1;
+                    rep.count(i, "met", o.code & 1, 1);
+                    // Relative to the distance (f32 ulps of it; the slab test divides).
+                    let rel = |x: f32, y: f64| Vec3::splat(x / (1.0 + y.abs() as f32));
+                    let cpu = |y: f64| rel(y as f32, y);
+                    rep.state(i, "s_in", rel(o.h, s_in), cpu(s_in));
+                    rep.state(i, "s_out", rel(o.n, s_out), cpu(s_out));
+                }
+                None => rep.count(i, "met", o.code & 1, 0),
+            }
+            let nrm = v(o.err_r).as_dvec3();
+            let n1 = f64::from(inp.h);
+            let n2 = f64::from(inp.ds_adapt);
+            match grin_trace::boundary::refract(d, nrm, n1, n2) {
+                grin_trace::Interface::Transmitted { dir, reflectance } => {
+                    rep.count(i, "transmitted", o.code >> 1, 1);
+                    rep.state(i, "refracted", v(o.t), dir.as_vec3());
+                    rep.state(
+                        i,
+                        "reflectance",
+                        Vec3::splat(o.err_t[0]),
+                        Vec3::splat(reflectance as f32),
+                    );
+                }
+                grin_trace::Interface::Reflected { dir } => {
+                    tir += 1;
+                    rep.count(i, "transmitted", o.code >> 1, 0);
+                    rep.state(i, "reflected", v(o.t), dir.as_vec3());
+                }
+            }
+        }
+        assert!(
+            met >= BATCH / 8 && tir >= BATCH / 32,
+            "{name}: met {met}, TIR {tir}"
+        );
+        // A ray grazing the surface or the TIR angle may fall either side in f32.
+        rep.check(&format!("surface {name} (met {met}, TIR {tir})"), true);
+    }
+}
