@@ -274,6 +274,11 @@ fn segment_excursion(seg: Segment) -> Excursion {
     return Excursion(false, 0.0);
 }
 
+// trace::segment_of_step: the step from s that `taken` made, as a segment.
+fn segment_of_step(s: RayState, taken: Taken) -> Segment {
+    return Segment(s.r, s.t, taken.step.state.r, taken.step.state.t, taken.h);
+}
+
 struct ExcursionStep {
     found: bool,
     taken: Taken,
@@ -292,7 +297,7 @@ fn excursion_step(s: RayState, s0: FieldSample, taken: Taken) -> ExcursionStep {
     if bounds_signed_distance(s.r) < -reach && bounds_signed_distance(r1) < -reach {
         return none;
     }
-    let e = segment_excursion(Segment(s.r, s.t, r1, taken.step.state.t, taken.h));
+    let e = segment_excursion(segment_of_step(s, taken));
     if !e.found {
         return none;
     }
@@ -314,7 +319,7 @@ struct ExitOut {
 fn exit_medium(s: RayState, s0: FieldSample, taken: Taken, tol: f32) -> ExitOut {
     let d0 = s0.grad_n * s0.n;
     if field_flag(FLAG_EXIT_HERMITE) {
-        let seg = Segment(s.r, s.t, taken.step.state.r, taken.step.state.t, taken.h);
+        let seg = segment_of_step(s, taken);
         // Newton steps on the integrator's own state keep its order (trace::exit_medium).
         var tau = first_crossing(seg);
         var st = integrate_step(s, d0, tau);

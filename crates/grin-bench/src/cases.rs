@@ -68,7 +68,8 @@ pub enum Suite {
     Full,
 }
 
-fn medium(toml_text: &str) -> anyhow::Result<Arc<dyn IndexField>> {
+/// The field of a `[medium]` table given as TOML text.
+pub(crate) fn medium(toml_text: &str) -> anyhow::Result<Arc<dyn IndexField>> {
     let spec: MediumSpec = toml::from_str(toml_text)?;
     Ok(grin_field::build_field(&spec, Path::new("."))?)
 }

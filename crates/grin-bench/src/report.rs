@@ -233,93 +233,115 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
         run.seconds
     );
     let _ = writeln!(s, "## References\n");
-    let _ = writeln!(s, "| case | rays | reference | numerical vs exact (rad) |");
-    let _ = writeln!(s, "|---|---|---|---|");
-    for (c, r) in run.cases.iter().zip(&run.references) {
+    let references = run.cases.iter().zip(&run.references).map(|(c, r)| {
         let kind = if c.exact.is_some() {
             "exact"
         } else {
             "dopri 1e-12 on the source"
         };
-        let _ = writeln!(
-            s,
-            "| {} | {} | {kind} | {} |",
-            c.name,
-            c.rays.len(),
-            opt(r.numeric_vs_exact, |x| format!("{x:.1e}"))
-        );
-    }
+        vec![
+            c.name.to_string(),
+            c.rays.len().to_string(),
+            kind.to_string(),
+            opt(r.numeric_vs_exact, |x| format!("{x:.1e}")),
+        ]
+    });
+    table(
+        &mut s,
+        &["case", "rays", "reference", "numerical vs exact (rad)"],
+        references,
+    );
     let _ = writeln!(
         s,
         "\n## The method to use per error decade (cheapest run meeting it)\n"
     );
-    let _ = writeln!(
-        s,
-        "| case | precision | error <= | cheapest | evals/ray | error | paper's method evals/ray | paper / cheapest |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
-    for r in decade_rows(run) {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {:.0e} | {} | {} | {} | {} | {} |",
-            r.case,
-            r.precision,
-            r.target,
+    let decades = decade_rows(run).into_iter().map(|r| {
+        vec![
+            r.case.to_string(),
+            r.precision.to_string(),
+            format!("{:.0e}", r.target),
             r.best.clone().unwrap_or_else(|| "none reaches it".into()),
             opt(r.best_evals, |x| format!("{x:.0}")),
             opt(r.best_err, |x| format!("{x:.1e}")),
             opt(r.paper_evals, |x| format!("{x:.0}")),
             opt(r.paper_ratio, |x| format!("{x:.1}x")),
-        );
-    }
+        ]
+    });
+    table(
+        &mut s,
+        &[
+            "case",
+            "precision",
+            "error <=",
+            "cheapest",
+            "evals/ray",
+            "error",
+            "paper's method evals/ray",
+            "paper / cheapest",
+        ],
+        decades,
+    );
     let _ = writeln!(
         s,
         "\n## The accuracy knob: `step = {{ auto = asked }}` (dopri and sharma, f64)\n"
     );
-    let _ = writeln!(
-        s,
-        "| case | integrator | asked (rad) | delivered | delivered / asked | evals/ray | cheapest fixed step reaching it | paper's method reaching it |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
-    for r in auto_rows(run)
-        .iter()
+    let knob = auto_rows(run)
+        .into_iter()
         .filter(|r| r.precision == "f64" && (r.integrator == "dopri" || r.integrator == "sharma"))
-    {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {:.0e} | {:.1e} | {:.2} | {:.0} | {} | {} |",
-            r.case,
-            r.integrator,
-            r.asked,
-            r.delivered,
-            r.ratio,
-            r.evals,
-            opt(r.best_fixed_evals, |x| format!("{x:.0}")),
-            opt(r.paper_evals, |x| format!("{x:.0}")),
-        );
-    }
+        .map(|r| {
+            vec![
+                r.case.to_string(),
+                r.integrator.to_string(),
+                format!("{:.0e}", r.asked),
+                format!("{:.1e}", r.delivered),
+                format!("{:.2}", r.ratio),
+                format!("{:.0}", r.evals),
+                opt(r.best_fixed_evals, |x| format!("{x:.0}")),
+                opt(r.paper_evals, |x| format!("{x:.0}")),
+            ]
+        });
+    table(
+        &mut s,
+        &[
+            "case",
+            "integrator",
+            "asked (rad)",
+            "delivered",
+            "delivered / asked",
+            "evals/ray",
+            "cheapest fixed step reaching it",
+            "paper's method reaching it",
+        ],
+        knob,
+    );
     let _ = writeln!(
         s,
         "\n## Measured convergence orders (fixed steps, smooth cases)\n"
     );
-    let _ = writeln!(
-        s,
-        "| case | integrator | exit | precision | formal | measured | points |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-    for o in &run.orders {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {} | {} |",
-            o.case,
-            o.integrator,
-            o.exit,
-            o.precision,
-            o.formal,
+    let orders = run.orders.iter().map(|o| {
+        vec![
+            o.case.to_string(),
+            o.integrator.to_string(),
+            o.exit.to_string(),
+            o.precision.to_string(),
+            o.formal.to_string(),
             opt(o.measured, |x| format!("{x:.2}")),
-            o.points_used
-        );
-    }
+            o.points_used.to_string(),
+        ]
+    });
+    table(
+        &mut s,
+        &[
+            "case",
+            "integrator",
+            "exit",
+            "precision",
+            "formal",
+            "measured",
+            "points",
+        ],
+        orders,
+    );
     let failed = run.points.iter().filter(|p| p.failed()).count();
     let _ = writeln!(
         s,
@@ -399,4 +421,13 @@ pub fn write_stability(
     ];
     commit(staged)?;
     Ok(vec!["stability.csv".into(), "stability.md".into()])
+}
+
+/// A Markdown table: the header, its separator, one line per row.
+fn table(s: &mut String, header: &[&str], rows: impl IntoIterator<Item = Vec<String>>) {
+    let _ = writeln!(s, "| {} |", header.join(" | "));
+    let _ = writeln!(s, "|{}", "---|".repeat(header.len()));
+    for row in rows {
+        let _ = writeln!(s, "| {} |", row.join(" | "));
+    }
 }

@@ -20,12 +20,12 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use grin_field::IndexField;
-use grin_scene::{ExitMethod, IntegratorKind, MediumSpec};
+use grin_scene::{ExitMethod, IntegratorKind};
 use grin_trace::{RayResult, RayStatus};
 use rayon::prelude::*;
 
 use crate::accuracy::{angle, trace};
-use crate::cases::{Exit, rod_exit};
+use crate::cases::{Exit, medium, rod_exit};
 use crate::methods::{Method, Policy, Precision};
 
 /// An `exited` ray off by more than this (rad) is a wrong answer, not a degraded one.
@@ -60,9 +60,46 @@ pub struct StabilityCase {
     pub warning: Option<String>,
 }
 
-fn medium(text: &str) -> anyhow::Result<Arc<dyn IndexField>> {
-    let spec: MediumSpec = toml::from_str(text)?;
-    Ok(grin_field::build_field(&spec, std::path::Path::new("."))?)
+/// Converged within 1e-4 (rad, and of the scale in position) unless a case says.
+const DEFAULT_TOL: f64 = 1e-4;
+/// Step cap of a cell unless a case says (trapped rays end there).
+const DEFAULT_MAX_STEPS: u32 = 1 << 18;
+
+impl StabilityCase {
+    /// A case with the default tolerance and step cap and no warning.
+    fn new(
+        name: &'static str,
+        why: &'static str,
+        field: Arc<dyn IndexField>,
+        rays: Vec<(DVec3, DVec3, Truth)>,
+        scale: f64,
+    ) -> Self {
+        StabilityCase {
+            name,
+            why,
+            field,
+            rays,
+            tol: DEFAULT_TOL,
+            scale,
+            max_steps: DEFAULT_MAX_STEPS,
+            warning: None,
+        }
+    }
+
+    fn with_tol(mut self, tol: f64) -> Self {
+        self.tol = tol;
+        self
+    }
+
+    fn with_max_steps(mut self, max_steps: u32) -> Self {
+        self.max_steps = max_steps;
+        self
+    }
+
+    fn with_warning(mut self, warning: Option<String>) -> Self {
+        self.warning = warning;
+        self
+    }
 }
 
 /// The Luneburg lens ray from `r0` along `t0` (T = n d, inside): exact exit, from the
@@ -115,16 +152,9 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
             })
             .collect();
-        v.push(StabilityCase {
-            name: "steep narrow plume",
-            why: "a plume 1% of the box wide (a = 0.05, s = 0.01) deflects rays by ~0.1 rad; a step longer than it can pass over it between samples",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 3f64.sqrt(),
-            max_steps: 1 << 18,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("steep narrow plume", "a plume 1% of the box wide (a = 0.05, s = 0.01) deflects rays by ~0.1 rad; a step longer than it can pass over it between samples", field, rays, 3f64.sqrt()),
+        );
     }
 
     // 2. An index jump inside a baked grid: a glass ball baked into a box.
@@ -152,16 +182,11 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
             })
             .collect();
-        v.push(StabilityCase {
-            name: "index jump in a baked grid",
-            why: "a 0.5 jump in n over 0.2% of the box, baked at 48^3: the grid smears the interface over a voxel",
-            field: Arc::new(baked),
-            rays,
-            tol: 1e-3,
-            scale: 3f64.sqrt(),
-            max_steps: 1 << 18,
-            warning,
-        });
+        v.push(
+            StabilityCase::new("index jump in a baked grid", "a 0.5 jump in n over 0.2% of the box, baked at 48^3: the grid smears the interface over a voxel", Arc::new(baked), rays, 3f64.sqrt())
+                .with_tol(1e-3)
+                .with_warning(warning),
+        );
     }
 
     // 3. Grazing incidence on the Luneburg lens.
@@ -181,16 +206,9 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 (DVec3::new(p, 0.0, -2.0), DVec3::Z, Truth::Exits(exit))
             })
             .collect();
-        v.push(StabilityCase {
-            name: "grazing incidence",
-            why: "Luneburg rays entering at 0.99-0.9999 R meet the surface almost tangentially, enter and leave in a short arc",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 1.0,
-            max_steps: 1 << 18,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("grazing incidence", "Luneburg rays entering at 0.99-0.9999 R meet the surface almost tangentially, enter and leave in a short arc", field, rays, 1.0),
+        );
     }
 
     // 4. Tangent to the bounds from inside.
@@ -207,16 +225,9 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 (r0, DVec3::Y, Truth::Exits(luneburg_exit(r0, t0, 1.0)))
             })
             .collect();
-        v.push(StabilityCase {
-            name: "tangent from inside",
-            why: "a ray starting just inside the surface, tangent to it: its orbit crosses r = R after a short arc",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 1.0,
-            max_steps: 1 << 18,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("tangent from inside", "a ray starting just inside the surface, tangent to it: its orbit crosses r = R after a short arc", field, rays, 1.0),
+        );
     }
 
     // 5. A turning point just below a face (tunnelling).
@@ -253,16 +264,9 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 }),
             ));
         }
-        v.push(StabilityCase {
-            name: "turning point below a face",
-            why: "a mirage ray whose turning point dips 1e-6..1e-4 below the bottom face: it must leave there, not tunnel through between step ends",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 3f64.sqrt(),
-            max_steps: 1 << 18,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("turning point below a face", "a mirage ray whose turning point dips 1e-6..1e-4 below the bottom face: it must leave there, not tunnel through between step ends", field, rays, 3f64.sqrt()),
+        );
     }
 
     // 6. A trapped orbit: total internal reflection forever inside a glass ball.
@@ -278,16 +282,10 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 Truth::Trapped,
             ),
         ];
-        v.push(StabilityCase {
-            name: "trapped orbit",
-            why: "inside n = 1.5 at incidence beyond the critical angle the ray reflects forever: `max_steps` is the truth",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 1.0,
-            max_steps: 4096,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("trapped orbit", "inside n = 1.5 at incidence beyond the critical angle the ray reflects forever: `max_steps` is the truth", field, rays, 1.0)
+                .with_max_steps(4096),
+        );
     }
 
     // 7. n approaching 0 along an on-axis ray.
@@ -309,16 +307,9 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 (o, DVec3::Z, Truth::Exits(exit))
             })
             .collect();
-        v.push(StabilityCase {
-            name: "n approaching 0",
-            why: "n falls to 0.1 along the ray: a step of fixed length is a long step in t = s/n and can reverse T",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 1.2,
-            max_steps: 1 << 18,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("n approaching 0", "n falls to 0.1 along the ray: a step of fixed length is a long step in t = s/n and can reverse T", field, rays, 1.2),
+        );
     }
 
     // (A spike of n <= 0 between the load check's grid points was case 8: an `expr`
@@ -338,16 +329,9 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
                 (o, d, Truth::Exits(rod_exit(e, d, 1.5, 0.8, 1.0)))
             })
             .collect();
-        v.push(StabilityCase {
-            name: "GRIN rod (exact)",
-            why: "a smooth field with an exact solution: every method should converge; f32 at tight tolerances hits its roundoff floor",
-            field,
-            rays,
-            tol: 1e-4,
-            scale: 1.5,
-            max_steps: 1 << 18,
-            warning: None,
-        });
+        v.push(
+            StabilityCase::new("GRIN rod (exact)", "a smooth field with an exact solution: every method should converge; f32 at tight tolerances hits its roundoff floor", field, rays, 1.5),
+        );
     }
     Ok(v)
 }

@@ -385,6 +385,17 @@ fn accumulate<R: Real>(
     }
 }
 
+/// The step from `s` that `taken` made, as a segment (its Hermite cubic in f64).
+fn segment_of_step<R: Real>(s: RayState<R>, taken: &Taken<R>) -> Segment {
+    Segment {
+        r0: s.r.to_dvec3(),
+        t0: s.t.to_dvec3(),
+        r1: taken.step.state.r.to_dvec3(),
+        t1: taken.step.state.t.to_dvec3(),
+        h: taken.h.to_f64(),
+    }
+}
+
 /// A step from `s` that ended inside: if its cubic dense output goes outside between the
 /// ends (checked only when an end is within the step's length of the surface), the step
 /// re-taken to the point farthest out, when the integrator agrees that point is outside.
@@ -408,14 +419,7 @@ pub fn excursion_step<R: Real>(
     if !(reach.is_finite() && r1.is_finite()) || (sd(r0) < -reach && sd(r1) < -reach) {
         return None;
     }
-    let seg = Segment {
-        r0,
-        t0: s.t.to_dvec3(),
-        r1,
-        t1: taken.step.state.t.to_dvec3(),
-        h,
-    };
-    let tau = seg.excursion(sd)?;
+    let tau = segment_of_step(s, taken).excursion(sd)?;
     let hm = R::from_f64(tau);
     let step = integrate::step(settings.integrator, field, s, s0.n_grad_n(), hm);
     (sd(step.state.r.to_dvec3()) > 0.0).then_some(Taken {
@@ -475,13 +479,7 @@ pub fn exit_medium<R: Real>(
             (st, hm, evals)
         }
         ExitMethod::Hermite => {
-            let seg = Segment {
-                r0: s.r.to_dvec3(),
-                t0: s.t.to_dvec3(),
-                r1: taken.step.state.r.to_dvec3(),
-                t1: taken.step.state.t.to_dvec3(),
-                h: taken.h.to_f64(),
-            };
+            let seg = segment_of_step(s, taken);
             // The cubic's root is O(h^4) off the integrator's own crossing; Newton steps
             // on the integrator's state (g = signed distance, g' = normal . T) bring it
             // to the integrator's order. Each costs one re-step; kept only if closer.

@@ -22,6 +22,10 @@ pub struct Args {
     /// Print the summary (decade table and orders) as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Only the cases whose name contains this (e.g. `luneburg`, `baked`): the full
+    /// suite is long, and one case at a time fits a CI step.
+    #[arg(long, value_name = "NAME")]
+    pub case: Option<String>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -31,8 +35,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Suite::Full
     };
     eprintln!("building the reference cases ...");
-    let cases = cases::suite(suite)?;
+    let mut cases = cases::suite(suite)?;
+    if let Some(want) = &args.case {
+        let names: Vec<String> = cases.iter().map(|c| c.name.to_string()).collect();
+        cases.retain(|c| c.name.contains(want.as_str()));
+        anyhow::ensure!(
+            !cases.is_empty(),
+            "--case {want}: no case of this suite matches (cases: {})",
+            names.join(", ")
+        );
+    }
     let bar = ProgressBar::new(1);
+    // Where stderr is not a terminal (a CI log) the bar is hidden: a line per 10% instead.
+    let log_lines = !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let logged = std::sync::atomic::AtomicU64::new(0);
+    let started = std::time::Instant::now();
     if let Ok(style) =
         ProgressStyle::with_template("runs [{bar:40}] {pos}/{len} {elapsed} (eta {eta})")
     {
@@ -41,15 +58,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let progress = |done: u64, total: u64| {
         bar.set_length(total);
         bar.set_position(done);
+        let tenth = done * 10 / total.max(1);
+        if log_lines && logged.fetch_max(tenth, std::sync::atomic::Ordering::Relaxed) < tenth {
+            eprintln!(
+                "runs: {done}/{total} ({}%) after {:.0} s",
+                tenth * 10,
+                started.elapsed().as_secs_f64()
+            );
+        }
     };
     let run = accuracy::run(cases, args.quick, &progress)?;
     bar.finish_and_clear();
-    let command = if args.quick {
-        "grin bench accuracy --quick"
-    } else {
-        "grin bench accuracy"
-    };
-    let files = report::write_accuracy(&run, &args.output, command)?;
+    let mut command = String::from("grin bench accuracy");
+    if args.quick {
+        command.push_str(" --quick");
+    }
+    if let Some(want) = &args.case {
+        command.push_str(&format!(" --case {want}"));
+    }
+    let files = report::write_accuracy(&run, &args.output, &command)?;
     let rows = report::decade_rows(&run);
     if args.json {
         let summary = serde_json::json!({
