@@ -157,6 +157,14 @@ fn quick_sweep_writes_csv_markdown_and_charts() {
 #[test]
 fn stability_matrix_verdicts() {
     let m = stability::run(false, &|_, _| {}).unwrap();
+    // The n <= 0 spike the check grid misses is refused at load, with a point in it.
+    let (_, refused) = &m.refused[0];
+    let e = refused
+        .as_deref()
+        .expect("the n <= 0 spike must be refused at load");
+    assert!(e.contains("between the check grid's nodes"), "{e}");
+    let md = stability::markdown(&m, "test");
+    assert!(md.contains("refused at load, no ray traced"), "{md}");
     let cell = |case: &str, method: &str| {
         m.cells
             .iter()
