@@ -3,7 +3,7 @@
 // Test-only entry points: each runs one stage of the marcher on a batch of states, so the
 // stage can be held against its CPU twin in isolation (crates/grin-gpu/tests/stages.rs,
 // run by crates/grin-gpu/src/stages.rs). They read the frame parameters and the field
-// texture of the render kernel (group 0) and nothing else of it.
+// texture of the render kernel (group 0), and for stage_scene its objects and sky.
 //   stage_sample     sample_field                     grin_field::IndexField::sample_f32
 //   stage_integrate  integrate_step (INTEGRATOR)      grin_trace::integrate::step
 //   stage_take       take_step (STEP_POLICY)          grin_trace::step::StepController::take
@@ -12,6 +12,8 @@
 //   stage_flight     may_fly, homogeneous_span        grin_field::IndexField::homogeneous_span
 //   stage_surface    bounds_intersect,                grin_field::Bounds::{intersect,
 //                    bounds_signed_distance, refract    signed_distance}, boundary::refract
+//   stage_scene      intersect_scene, sky_radiance    grin_render::primitives::intersect_scene,
+//                                                     grin_render::sky::SkyModel::sky_radiance
 
 // Keep in sync with grin_gpu::stages::StageIn.
 struct StageIn {
@@ -185,5 +187,24 @@ fn stage_surface(@builtin(global_invocation_id) gid: vec3<u32>) {
     out.err_r = nrm;
     out.err_t = vec3<f32>(i.reflectance, 0.0, 0.0);
     out.code = select(0u, 1u, b.found) | select(0u, 2u, i.transmitted);
+    stage_out[gid.x] = out;
+}
+
+// The scene outside the medium: the nearest object along (r, t) beyond t_min = input.h
+// (h = its distance or -1, err_r = the normal facing the ray, code = scene index + 1 or 0)
+// and the sky's radiance in t's direction (grad_n).
+@compute @workgroup_size(64, 1, 1)
+fn stage_scene(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    let d = normalize_or_zero(input.t);
+    let hit = intersect_scene(input.r, d, input.h, INF);
+    var out = stage_blank();
+    out.h = select(-1.0, hit.t, hit.found);
+    out.err_r = hit.normal;
+    out.code = select(0u, hit.object + 1u, hit.found);
+    out.grad_n = sky_radiance(d);
     stage_out[gid.x] = out;
 }

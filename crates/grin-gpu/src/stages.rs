@@ -11,7 +11,7 @@ use grin_render::scene::RenderScene;
 
 use crate::field::upload_field;
 use crate::gpu_data::PASS_ALL;
-use crate::pack::frame_params;
+use crate::pack::{env_texels, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::render::read_buffer;
 use crate::{GpuContext, GpuError, shaders};
@@ -34,6 +34,10 @@ pub enum Stage {
     /// (`err_r`) from n1 = `h` into n2 = `ds_adapt` (`t`, reflectance in `err_t[0]`,
     /// `code` bit 1 when transmitted).
     Surface,
+    /// `intersect_scene` along (`r`, `t`) beyond t_min = `h` (`h` = distance or -1,
+    /// `err_r` = normal facing the ray, `code` = scene index + 1 or 0) and `sky_radiance`
+    /// of `t`'s direction (`grad_n`).
+    Scene,
 }
 
 impl Stage {
@@ -45,6 +49,7 @@ impl Stage {
             Stage::Leave => "stage_leave",
             Stage::Flight => "stage_flight",
             Stage::Surface => "stage_surface",
+            Stage::Scene => "stage_scene",
         }
     }
 }
@@ -105,6 +110,8 @@ pub fn run_stage(
     }
     let mut params = frame_params(scene)?;
     let field = upload_field(ctx, baked, &mut params)?;
+    let (objects, _lights) = scene_arrays(scene, &mut params);
+    let env = env_texels(ctx, scene)?;
     let count = u32::try_from(input.len())
         .map_err(|_| GpuError::Unsupported("more than 2^32 stage inputs".into()))?;
     let out_bytes = (input.len() * std::mem::size_of::<StageOut>()) as u64;
@@ -115,11 +122,11 @@ pub fn run_stage(
             label: Some("stages.wgsl"),
             source: wgpu::ShaderSource::Wgsl(shaders::STAGES_WGSL.into()),
         });
-        // Group 0: the render kernel's params, field texture and macro cells, the only
-        // resources of it the stages read.
+        // Group 0: the render kernel's params, objects, field texture, macro cells and
+        // environment map, the only resources of it the stages read.
         let frame_entries: Vec<_> = render_layout_entries()
             .into_iter()
-            .filter(|e| matches!(e.binding, 0 | 3 | 4))
+            .filter(|e| matches!(e.binding, 0 | 1 | 3 | 4 | 5))
             .collect();
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("stage frame bindings"),
@@ -184,6 +191,31 @@ pub fn run_stage(
         let macro_view = field
             .macro_cells
             .create_view(&wgpu::TextureViewDescriptor::default());
+        let objects_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("stage objects"),
+            contents: bytemuck::cast_slice(&objects),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let env_tex = device.create_texture_with_data(
+            &ctx.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("stage environment map"),
+                size: wgpu::Extent3d {
+                    width: env.0,
+                    height: env.1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&env.2),
+        );
+        let env_view = env_tex.create_view(&wgpu::TextureViewDescriptor::default());
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("stage frame bindings"),
             layout: &frame_layout,
@@ -193,12 +225,20 @@ pub fn run_stage(
                     resource: params_buffer.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: objects_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
                     binding: 3,
                     resource: wgpu::BindingResource::TextureView(&field_view),
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
                     resource: wgpu::BindingResource::TextureView(&macro_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(&env_view),
                 },
             ],
         });

@@ -794,3 +794,89 @@ fn the_surface_stage_matches_its_cpu_twin() {
         rep.check(&format!("surface {name} (met {met}, TIR {tir})"), true);
     }
 }
+
+/// The scene outside the medium: nearest-object intersection (sphere, plane, box; from
+/// outside and inside them) and the gradient sky, against grin-render's functions.
+#[test]
+fn the_scene_stage_matches_its_cpu_twin() {
+    let text = std::fs::read_to_string(scene_path("luneburg"))
+        .unwrap()
+        .replace(
+            "[medium]",
+            r#"[[object]]
+shape = { sphere = { center = [1.2, 0.4, 0.5], radius = 0.6 } }
+material = "glass"
+
+[[object]]
+shape = { box = { min = [-2.0, -1.0, -0.5], max = [-1.2, 0.2, 0.7] } }
+material = "mirror"
+
+[medium]"#,
+        );
+    let path = std::env::temp_dir().join(format!("grin-stages-scene-{}.toml", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    let s = setup_file(
+        &path,
+        IntegratorKind::Sharma,
+        StepSpec::Fixed(0.05),
+        ExitMethod::Hermite,
+        Interp::Trilinear,
+    );
+    std::fs::remove_file(&path).ok();
+    let mut rng = Rng(31);
+    let input: Vec<StageIn> = (0..BATCH)
+        .map(|i| {
+            let r = Vec3::new(
+                rng.range(-2.5, 2.5),
+                rng.range(-1.5, 1.5),
+                rng.range(-3.0, 2.0),
+            );
+            // A quarter aimed near the sphere, a quarter near the box.
+            let aim = match i % 4 {
+                1 => Vec3::new(1.2, 0.4, 0.5),
+                2 => Vec3::new(-1.6, -0.4, 0.1),
+                _ => r + rng.unit(),
+            };
+            let t = ((aim - r).normalize() + rng.unit() * 0.3).normalize();
+            StageIn {
+                r: r.to_array(),
+                h: if i % 8 == 0 { 0.0 } else { 1e-3 },
+                t: t.to_array(),
+                ds_adapt: 0.0,
+            }
+        })
+        .collect();
+    let Some(out) = gpu(&s, Stage::Scene, &input) else {
+        return;
+    };
+    let rs = &s.scene;
+    let mut rep = Report::default();
+    let mut hits = [0usize; 4];
+    for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
+        let p = v(inp.r).as_dvec3();
+        let d = v(inp.t).normalize().as_dvec3();
+        match grin_render::primitives::intersect_scene(
+            &rs.objects,
+            p,
+            d,
+            f64::from(inp.h),
+            f64::INFINITY,
+        ) {
+            Some(hit) => {
+                hits[hit.object.min(3)] += 1;
+                rep.count(i, "object", o.code, hit.object as u32 + 1);
+                let rel = |x: f32, y: f64| Vec3::splat(x / (1.0 + y.abs() as f32));
+                rep.state(i, "distance", rel(o.h, hit.t), rel(hit.t as f32, hit.t));
+                rep.state(i, "normal", v(o.err_r), hit.normal.as_vec3());
+            }
+            None => rep.count(i, "object", o.code, 0),
+        }
+        rep.state(i, "sky", v(o.grad_n), rs.sky.sky_radiance(d).as_vec3());
+    }
+    assert!(
+        hits.iter().all(|&h| h >= 8),
+        "hits per object (wall, floor, sphere, box): {hits:?}"
+    );
+    // A ray grazing an edge may hit or miss in f32.
+    rep.check(&format!("scene (hits {hits:?})"), true);
+}
