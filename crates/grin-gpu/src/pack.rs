@@ -200,6 +200,30 @@ pub(crate) fn env_texels(
     Ok(env)
 }
 
+/// The environment map's texture from [`env_texels`] (call inside an error scope).
+pub(crate) fn env_texture(ctx: &GpuContext, env: &(u32, u32, Vec<[f32; 4]>)) -> wgpu::Texture {
+    use wgpu::util::DeviceExt;
+    ctx.device.create_texture_with_data(
+        &ctx.queue,
+        &wgpu::TextureDescriptor {
+            label: Some("environment map"),
+            size: wgpu::Extent3d {
+                width: env.0,
+                height: env.1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        bytemuck::cast_slice(&env.2),
+    )
+}
+
 pub(crate) fn f3(v: DVec3) -> [f32; 3] {
     v.as_vec3().to_array()
 }

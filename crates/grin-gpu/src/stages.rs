@@ -11,7 +11,7 @@ use grin_render::scene::RenderScene;
 
 use crate::field::upload_field;
 use crate::gpu_data::PASS_ALL;
-use crate::pack::{env_texels, frame_params, scene_arrays};
+use crate::pack::{env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::render::read_buffer;
 use crate::{GpuContext, GpuError, shaders};
@@ -196,25 +196,7 @@ pub fn run_stage(
             contents: bytemuck::cast_slice(&objects),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let env_tex = device.create_texture_with_data(
-            &ctx.queue,
-            &wgpu::TextureDescriptor {
-                label: Some("stage environment map"),
-                size: wgpu::Extent3d {
-                    width: env.0,
-                    height: env.1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&env.2),
-        );
+        let env_tex = env_texture(ctx, &env);
         let env_view = env_tex.create_view(&wgpu::TextureViewDescriptor::default());
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("stage frame bindings"),

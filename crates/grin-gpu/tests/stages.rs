@@ -106,6 +106,32 @@ fn setup_file(
     }
 }
 
+/// [`setup`] of scene text (sharma, fixed 0.05, Hermite exit, trilinear), read from a
+/// temporary file named by `tag`.
+fn setup_text(tag: &str, text: &str) -> Setup {
+    let path = std::env::temp_dir().join(format!("grin-stages-{tag}-{}.toml", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    let s = setup_file(
+        &path,
+        IntegratorKind::Sharma,
+        StepSpec::Fixed(0.05),
+        ExitMethod::Hermite,
+        Interp::Trilinear,
+    );
+    std::fs::remove_file(&path).ok();
+    s
+}
+
+/// The CPU twin's controller for `s`, started at the kernel's `ds_adapt` (0: its first).
+fn controller(s: &Setup, ds_adapt: f32) -> StepController {
+    let ctrl = StepController::new(s.trace.step, s.trace.integrator, s.baked.as_ref());
+    if ds_adapt > 0.0 {
+        ctrl.with_current_ds(f64::from(ds_adapt))
+    } else {
+        ctrl
+    }
+}
+
 /// A small deterministic generator (xorshift64*), uniform in [0, 1).
 struct Rng(u64);
 impl Rng {
@@ -385,10 +411,7 @@ fn compare_take(
     let mut rep = Report::default();
     let mut ratios = Vec::new();
     for (i, (inp, o)) in input.iter().zip(out).enumerate() {
-        let mut ctrl = StepController::new(s.trace.step, s.trace.integrator, field);
-        if inp.ds_adapt > 0.0 {
-            ctrl = ctrl.with_current_ds(f64::from(inp.ds_adapt));
-        }
+        let mut ctrl = controller(s, inp.ds_adapt);
         let st = RayState {
             r: v(inp.r),
             t: v(inp.t),
@@ -569,10 +592,7 @@ fn the_step_that_leaves_the_medium_matches_its_cpu_twin() {
         let mut codes = [0usize; 3];
         let mut newton_flips = 0;
         for (i, (inp, o)) in input.iter().zip(&out).enumerate() {
-            let mut ctrl = StepController::new(s.trace.step, s.trace.integrator, field);
-            if inp.ds_adapt > 0.0 {
-                ctrl = ctrl.with_current_ds(f64::from(inp.ds_adapt));
-            }
+            let mut ctrl = controller(&s, inp.ds_adapt);
             let st = RayState {
                 r: v(inp.r),
                 t: v(inp.t),
@@ -650,16 +670,7 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
         &text[..start],
         &text[end..]
     );
-    let path = std::env::temp_dir().join(format!("grin-stages-{}.toml", std::process::id()));
-    std::fs::write(&path, text).unwrap();
-    let s = setup_file(
-        &path,
-        IntegratorKind::Sharma,
-        StepSpec::Fixed(0.05),
-        ExitMethod::Hermite,
-        Interp::Trilinear,
-    );
-    std::fs::remove_file(&path).ok();
+    let s = setup_text("flights", &text);
     // Half from all over the bounds (most fly to the cropped grid), half inside the
     // grid's box (macro-cell walks).
     let mut input = states(&s, 19, 0.0, 0.999, 0.0, (0.0, 0.0), &[0.0]);
@@ -813,16 +824,7 @@ material = "mirror"
 
 [medium]"#,
         );
-    let path = std::env::temp_dir().join(format!("grin-stages-scene-{}.toml", std::process::id()));
-    std::fs::write(&path, text).unwrap();
-    let s = setup_file(
-        &path,
-        IntegratorKind::Sharma,
-        StepSpec::Fixed(0.05),
-        ExitMethod::Hermite,
-        Interp::Trilinear,
-    );
-    std::fs::remove_file(&path).ok();
+    let s = setup_text("scene", &text);
     let mut rng = Rng(31);
     let input: Vec<StageIn> = (0..BATCH)
         .map(|i| {
