@@ -1,6 +1,8 @@
 //! Medium bounds: a sphere or an axis-aligned box, with ray intersection.
 
 use glam::DVec3;
+
+use crate::real::{Real, Vec3Like};
 use grin_scene::BoundsSpec;
 
 /// The region of space a medium occupies.
@@ -66,13 +68,32 @@ impl Bounds {
     /// Exact distance for the sphere; for the box, exact outside and the (negative) distance
     /// to the nearest face inside.
     pub fn signed_distance(&self, p: DVec3) -> f64 {
+        self.signed_distance_in::<f64>(p)
+    }
+
+    /// [`Self::signed_distance`] computed in precision `R`, as the GPU kernel computes it
+    /// in f32 (`bounds_signed_distance`): the f32 trace's exit search then stops where
+    /// the kernel's does.
+    pub fn signed_distance_in<R: Real>(&self, p: R::V3) -> f64 {
         match *self {
-            Bounds::Sphere { center, radius } => (p - center).length() - radius,
+            Bounds::Sphere { center, radius } => {
+                ((p - R::V3::from_dvec3(center)).length() - R::from_f64(radius)).to_f64()
+            }
             Bounds::Box { min, max } => {
-                let c = (min + max) * 0.5;
-                let h = (max - min) * 0.5;
-                let q = (p - c).abs() - h;
-                q.max(DVec3::ZERO).length() + q.max_element().min(0.0)
+                let (lo, hi) = (R::V3::from_dvec3(min), R::V3::from_dvec3(max));
+                let half = R::from_f64(0.5);
+                let c = (lo + hi) * half;
+                let h = (hi - lo) * half;
+                let d = p - c;
+                let q = [
+                    d.x().abs() - h.x(),
+                    d.y().abs() - h.y(),
+                    d.z().abs() - h.z(),
+                ];
+                let zero = R::zero();
+                let outside = R::V3::new(q[0].max(zero), q[1].max(zero), q[2].max(zero)).length();
+                let inside = q[0].max(q[1]).max(q[2]).min(zero);
+                (outside + inside).to_f64()
             }
         }
     }

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 use grin_field::Bounds;
-use grin_field::{Real, Vec3Like};
+use grin_field::Real;
 
 /// What happens to a ray meeting an index step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -235,33 +235,6 @@ pub const EXIT_TOL_REL: f64 = 1e-12;
 /// stage tests found the CPU's f32 path taking 2 Newton re-steps more per exit than the
 /// kernel, which computes the distance in f32 and stops when it rounds to 0).
 pub const EXIT_TOL_EPS: f64 = 4.0;
-
-/// The bounds' signed distance of `p` computed in precision `R`, as the kernel computes
-/// it in f32 (`bounds_signed_distance`): the exit search's stopping test then sees what
-/// the GPU sees. In f64 it is [`Bounds::signed_distance`].
-pub fn signed_distance_in<R: Real>(bounds: &Bounds, p: R::V3) -> f64 {
-    match *bounds {
-        Bounds::Sphere { center, radius } => {
-            ((p - R::V3::from_dvec3(center)).length() - R::from_f64(radius)).to_f64()
-        }
-        Bounds::Box { min, max } => {
-            let (lo, hi) = (R::V3::from_dvec3(min), R::V3::from_dvec3(max));
-            let half = R::from_f64(0.5);
-            let c = (lo + hi) * half;
-            let h = (hi - lo) * half;
-            let d = p - c;
-            let q = [
-                d.x().abs() - h.x(),
-                d.y().abs() - h.y(),
-                d.z().abs() - h.z(),
-            ];
-            let zero = R::zero();
-            let outside = R::V3::new(q[0].max(zero), q[1].max(zero), q[2].max(zero)).length();
-            let inside = q[0].max(q[1]).max(q[2]).min(zero);
-            (outside + inside).to_f64()
-        }
-    }
-}
 
 /// The exit search's tolerance (|signed distance| of the exit point) in precision `R`.
 pub fn exit_tolerance<R: Real>(bounds: &Bounds) -> f64 {

@@ -14,7 +14,6 @@ pub use grin_render::settings::{MIN_STEP_FRACTION, TraceError, TraceSettings};
 
 use crate::boundary::{
     Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface, refract,
-    signed_distance_in,
 };
 use crate::integrate::{self, RayState, is_finite_v};
 use crate::step::{StepController, Taken};
@@ -445,7 +444,7 @@ pub fn exit_medium<R: Real>(
     let d0 = s0.n_grad_n();
     let sd = |p: DVec3| bounds.signed_distance(p);
     // The stopping tests in the trace's own precision (what the GPU computes in f32).
-    let sd_r = |p: R::V3| signed_distance_in::<R>(bounds, p);
+    let sd_r = |p: R::V3| bounds.signed_distance_in::<R>(p);
     match settings.exit {
         ExitMethod::Bisection => {
             let mut lo = 0.0;
