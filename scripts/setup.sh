@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Install the system packages grin needs (Debian): OpenVDB for vdb-sys, Mesa's lavapipe
-# for wgpu without a GPU, python3-openvdb and the OpenVDB tools for the example data.
+# for wgpu without a GPU, python3-openvdb and the OpenVDB tools for the example data, and
+# Xvfb with the X11 libraries winit loads, for `grin view` without a display.
 # Idempotent: does nothing when everything is present.
 set -euo pipefail
 pkgs=(libopenvdb-dev libboost-dev libtbb-dev libopenvdb-tools python3-openvdb
-      mesa-vulkan-drivers libvulkan1 g++ pkg-config fonts-dejavu-core)
+      mesa-vulkan-drivers libvulkan1 g++ pkg-config fonts-dejavu-core
+      xvfb xauth libx11-6 libx11-xcb1 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

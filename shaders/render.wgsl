@@ -46,11 +46,14 @@ fn render_pixel(px: u32, row: u32) -> bool {
     var steps = 0.0;
     var evals = 0.0;
     var first = PrimaryAov(0.0, vec3<f32>(0.0), 0.0, 0u, 0u, STATUS_MISSED);
-    for (var sample = 0u; sample < spp; sample++) {
+    // Samples first_sample .. first_sample + spp of spp_total: frames of consecutive
+    // ranges, averaged, are one render of spp_total samples.
+    for (var k = 0u; k < spp; k++) {
+        let sample = params.first_sample + k;
         var rng = rng_for_pixel(index, sample, params.seed);
         var sx = 0.5;
         var sy = 0.5;
-        if spp != 1u {
+        if params.spp_total != 1u {
             sx = rng_next_f32(&rng);
             sy = rng_next_f32(&rng);
         }
@@ -68,7 +71,7 @@ fn render_pixel(px: u32, row: u32) -> bool {
         rgb += path.rgb;
         steps += f32(path.aov.steps);
         evals += f32(path.aov.evals);
-        if sample == 0u {
+        if k == 0u {
             first = path.aov;
         }
     }

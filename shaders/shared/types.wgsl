@@ -39,9 +39,9 @@ struct FrameParams {
     box_min: vec3<f32>,          // box bounds
     macro_threshold: f32,        // max |grad n| of a homogeneous macro cell
     box_max: vec3<f32>,
-    _pad0: f32,
+    first_sample: u32,           // index of this dispatch's first sample (progressive frames)
     grid_origin: vec3<f32>,      // world position of grid node (0, 0, 0)
-    _pad1: f32,
+    spp_total: u32,              // samples of the accumulated image: sub-pixel positions unless 1
     grid_inv_spacing: vec3<f32>, // 1 / node spacing per axis
     _pad2: f32,
     grid_dims: vec3<u32>,        // node counts

@@ -134,10 +134,15 @@ pub struct FrameParams {
     /// Largest max |grad n| of a macro cell counted homogeneous.
     pub macro_threshold: f32,
     pub box_max: [f32; 3],
-    pub _pad0: f32,
+    /// Index of this dispatch's first sample of each pixel: frames rendered with
+    /// `first_sample` 0, spp, 2 spp, ... and averaged are one render of `spp_total`
+    /// samples (the viewer's progressive refinement).
+    pub first_sample: u32,
     /// World position of grid node (0, 0, 0).
     pub grid_origin: [f32; 3],
-    pub _pad1: f32,
+    /// Samples of the whole accumulated image (>= spp): sub-pixel positions are drawn
+    /// when it is not 1.
+    pub spp_total: u32,
     /// 1 / node spacing per axis.
     pub grid_inv_spacing: [f32; 3],
     pub _pad2: f32,
@@ -312,9 +317,9 @@ mod tests {
             box_min,
             macro_threshold,
             box_max,
-            _pad0,
+            first_sample,
             grid_origin,
-            _pad1,
+            spp_total,
             grid_inv_spacing,
             _pad2,
             grid_dims,

@@ -23,6 +23,7 @@
 //! [`BakedField`]: grin_field::baked::BakedField
 
 mod bench;
+pub mod cache;
 pub mod device;
 pub mod error;
 pub mod field;

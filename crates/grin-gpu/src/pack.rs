@@ -29,6 +29,7 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     params.width = s.width;
     params.height = s.height;
     params.spp = s.spp;
+    params.spp_total = s.spp;
     params.seed = s.seed as u32;
     params.max_depth = s.max_depth;
     params.object_count = u32::try_from(scene.objects.len())

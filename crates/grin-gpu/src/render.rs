@@ -49,6 +49,10 @@ pub struct GpuRenderer<'a> {
     pub(crate) out_buffer: wgpu::Buffer,
     pub(crate) readback: wgpu::Buffer,
     pub(crate) rows_per_band: u32,
+    /// Pixels one band's buffers hold (width x rows_per_band at creation).
+    pub(crate) band_capacity: u32,
+    /// Flags set by the field's upload and the object arrays, kept by [`Self::retarget`].
+    pub(crate) scene_flags: u32,
     pub(crate) field: FieldTextures,
     /// What the caller should tell the user about the field: a bake here over the error
     /// budget, a baked file too big for the device and baked again.
@@ -283,10 +287,61 @@ impl<'a> GpuRenderer<'a> {
                 out_buffer,
                 readback,
                 rows_per_band,
+                band_capacity: s.width * rows_per_band,
+                scene_flags: params.flags
+                    & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_MEDIUM_OBJECTS),
                 field,
                 warnings,
             }
         })
+    }
+
+    /// Aim the renderer at `scene`, the scene it was built for with another camera, image
+    /// size, samples per pixel, seed or step size / tolerance (what the viewer changes
+    /// between frames), and render samples `first_sample .. first_sample + spp` of an
+    /// image of `spp_total` samples: frames of consecutive ranges, averaged, equal one
+    /// render of `spp_total` samples. The objects, lights, sky and field on the device
+    /// are kept. `Ok(false)`, with nothing changed, when the change needs other
+    /// pipelines (integrator, step policy, flags) or bigger buffers: build a new
+    /// renderer then.
+    pub fn retarget(
+        &mut self,
+        scene: &RenderScene,
+        first_sample: u32,
+        spp_total: u32,
+    ) -> Result<bool, GpuError> {
+        let mut p = frame_params(scene)?;
+        let old = &self.params;
+        // What the field's upload and the object arrays placed in the parameters.
+        p.grid_origin = old.grid_origin;
+        p.grid_inv_spacing = old.grid_inv_spacing;
+        p.grid_dims = old.grid_dims;
+        p.macro_dims = old.macro_dims;
+        p.macro_cell_voxels = old.macro_cell_voxels;
+        p.macro_threshold = old.macro_threshold;
+        p.medium_objects_first = old.medium_objects_first;
+        p.medium_objects_count = old.medium_objects_count;
+        p.flags |= self.scene_flags;
+        if old.flags & FLAG_MACRO_CELLS == 0 {
+            p.flags &= !FLAG_MACRO_CELLS;
+        }
+        p.first_sample = first_sample;
+        p.spp_total = spp_total.max(p.spp);
+        if pipeline_constants(&p, PASS_ALL) != pipeline_constants(old, PASS_ALL)
+            || p.object_count != old.object_count
+            || p.light_count != old.light_count
+        {
+            return Ok(false);
+        }
+        let rows = (PIXELS_PER_BAND / p.width.max(1))
+            .min(self.band_capacity / p.width.max(1))
+            .min(p.height.max(1));
+        if rows == 0 {
+            return Ok(false);
+        }
+        self.params = p;
+        self.rows_per_band = rows;
+        Ok(true)
     }
 
     /// `name (backend, device type)` of the adapter.

@@ -52,12 +52,16 @@ pub struct Args {
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Bake the GPU's field grid anew instead of reading it from the user's bake cache
+    /// (and do not store it there).
+    #[arg(long)]
+    pub no_cache: bool,
 }
 
 /// Largest accepted image side: keeps `width * height * spp` and the frame buffer sane.
 const MAX_SIDE: u32 = 16_384;
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("`{s}` is not WxH (e.g. 640x360)"))?;
@@ -99,6 +103,10 @@ struct Summary {
     /// Warnings also printed on stderr: an under-resolved GPU bake, pixels stopped in
     /// the medium.
     warnings: Vec<String>,
+    /// GPU: whether the field grid came from the bake cache (`hit`), was baked and stored
+    /// (`stored`) or baked without it (`off`); absent for a baked file or no medium.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bake_cache: Option<grin_gpu::cache::CacheUse>,
     /// GPU: the baked grid the marcher sampled (a `.grinf` file as it is, else the
     /// coarsest bake meeting the error budget, at most 128 nodes per axis).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -197,6 +205,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let setup_start = Instant::now();
     let mut warnings = Vec::new();
     let mut gpu_field = None;
+    let mut bake_cache = None;
     let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
         Backend::Cpu => {
             let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -207,7 +216,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         Backend::Gpu => {
             let ctx = grin_gpu::GpuContext::new_headless()?;
-            let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, None)?;
+            let cache = (!args.no_cache)
+                .then(grin_gpu::cache::BakeCache::user_default)
+                .flatten();
+            let field = grin_gpu::cache::scene_gpu_field(
+                &rs,
+                scene.medium.as_ref(),
+                scene_dir,
+                cache.as_ref(),
+            )?;
+            let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, field.as_ref().map(|f| &f.0))?;
+            if let Some((_, field_warnings, used)) = &field {
+                bake_cache = Some(*used);
+                for w in field_warnings {
+                    bar.suspend(|| eprintln!("grin: warning: {w}"));
+                    warnings.push(w.clone());
+                }
+            }
             for w in renderer.warnings() {
                 bar.suspend(|| eprintln!("grin: warning: {w}"));
                 warnings.push(w.clone());
@@ -283,6 +308,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         exr: args.output.clone(),
         png,
         warnings,
+        bake_cache,
         gpu_field,
     };
     let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];

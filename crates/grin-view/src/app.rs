@@ -1,0 +1,794 @@
+//! The window: winit + a wgpu surface + egui. The render thread's image is shown as an
+//! egui texture beside the panel; mouse and keys move the orbit camera; the scene file is
+//! watched and reloaded. With `--frames N` the same window runs N rendered frames, writes
+//! the last one and reports frame rates (Xvfb in CI).
+//!
+//! Over 500 lines: the event loop, the panel and the headless run share the app's state
+//! and are read together.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+use grin_scene::{IntegratorKind, Interpolation};
+use winit::application::ApplicationHandler;
+use winit::dpi::PhysicalSize;
+use winit::event::WindowEvent;
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::window::{Window, WindowId};
+
+use crate::display::{self, Aov};
+use crate::settings::{StepKind, ViewSettings};
+use crate::worker::{FrameReply, Reply, Request, Worker};
+use crate::{ViewOptions, ViewSummary};
+
+/// Width of the panel (points).
+const PANEL_WIDTH: f32 = 300.0;
+/// How often the scene file's modification time is checked.
+const WATCH_PERIOD: Duration = Duration::from_millis(250);
+/// The camera counts as moving this long after its last change.
+const MOVING_FOR: Duration = Duration::from_millis(150);
+
+struct Gfx {
+    window: Arc<Window>,
+    surface: wgpu::Surface<'static>,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    config: wgpu::SurfaceConfiguration,
+    egui: egui_winit::State,
+    renderer: egui_wgpu::Renderer,
+}
+
+/// Statistics of the frames shown.
+#[derive(Debug, Default)]
+struct Stats {
+    /// Wall-clock instants at which new rendered frames were shown.
+    shown: Vec<Instant>,
+    gpu_ms: Vec<f64>,
+    ui_frames: u64,
+    ui_start: Option<Instant>,
+    rays_per_second: Vec<f64>,
+}
+
+pub(crate) struct App {
+    opts: ViewOptions,
+    worker: Worker,
+    gfx: Option<Gfx>,
+    start: Instant,
+    pub(crate) fatal: Option<String>,
+    adapter: Option<String>,
+    display_adapter: String,
+    setup_seconds: Option<f64>,
+    first_frame_seconds: Option<f64>,
+    settings: ViewSettings,
+    /// The scene file's own settings (to rebase the user's edits on reload).
+    file_settings: ViewSettings,
+    animated: bool,
+    last_sent: Option<(ViewSettings, u32, u32, bool)>,
+    last_move: Option<Instant>,
+    frame: Option<Box<FrameReply>>,
+    texture: Option<egui::TextureHandle>,
+    shown_aov: Option<(Aov, usize)>,
+    aov_scale: f32,
+    frame_error: Option<String>,
+    reload_error: Option<String>,
+    watched: Option<SystemTime>,
+    last_watch: Instant,
+    last_tick: Instant,
+    stats: Stats,
+    converged_after: Option<f64>,
+    still_since: Instant,
+    pub(crate) summary: Option<ViewSummary>,
+    frames_seen: u32,
+    image_px: (u32, u32),
+}
+
+fn mtime(p: &std::path::Path) -> Option<SystemTime> {
+    std::fs::metadata(p).and_then(|m| m.modified()).ok()
+}
+
+impl App {
+    pub(crate) fn new(opts: ViewOptions, scene: &grin_scene::Scene, worker: Worker) -> Self {
+        let mut settings = ViewSettings::from_scene(scene);
+        if let Some(spp) = opts.spp {
+            settings.spp = spp.max(1);
+        }
+        settings.max_spp = match (opts.max_spp, opts.frames) {
+            (Some(m), _) => m.max(settings.spp),
+            // A headless still: exactly the frames asked for.
+            (None, Some(n)) if opts.orbit_deg == 0.0 => n.max(1) * settings.spp,
+            _ => settings.max_spp.max(settings.spp),
+        };
+        let image_px = opts
+            .size
+            .unwrap_or((scene.render.width, scene.render.height));
+        App {
+            worker,
+            gfx: None,
+            start: Instant::now(),
+            fatal: None,
+            adapter: None,
+            display_adapter: String::new(),
+            setup_seconds: None,
+            first_frame_seconds: None,
+            file_settings: ViewSettings::from_scene(scene),
+            animated: ViewSettings::animated(scene),
+            settings,
+            last_sent: None,
+            last_move: None,
+            frame: None,
+            texture: None,
+            shown_aov: None,
+            aov_scale: 1.0,
+            frame_error: None,
+            reload_error: None,
+            watched: mtime(&opts.scene),
+            last_watch: Instant::now(),
+            last_tick: Instant::now(),
+            stats: Stats::default(),
+            converged_after: None,
+            still_since: Instant::now(),
+            summary: None,
+            frames_seen: 0,
+            image_px,
+            opts,
+        }
+    }
+
+    fn headless(&self) -> bool {
+        self.opts.frames.is_some()
+    }
+
+    fn create_gfx(&mut self, el: &ActiveEventLoop) -> Result<Gfx, String> {
+        let (w, h) = self.image_px;
+        let size = if self.headless() || self.opts.size.is_some() {
+            PhysicalSize::new(w + PANEL_WIDTH as u32 + 16, h.max(480) + 16)
+        } else {
+            PhysicalSize::new(w.max(480) + PANEL_WIDTH as u32, h.max(480))
+        };
+        let title = format!("grin view — {}", self.opts.scene.display());
+        let window = Arc::new(
+            el.create_window(
+                Window::default_attributes()
+                    .with_title(title)
+                    .with_inner_size(size),
+            )
+            .map_err(|e| format!("cannot open a window: {e}"))?,
+        );
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+        let surface = instance
+            .create_surface(window.clone())
+            .map_err(|e| format!("cannot draw into the window: {e}"))?;
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            compatible_surface: Some(&surface),
+            ..Default::default()
+        }))
+        .map_err(|e| format!("no GPU adapter can draw into the window: {e}"))?;
+        self.display_adapter = grin_gpu::describe_adapter(&adapter.get_info());
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
+                .map_err(|e| format!("{}: {e}", self.display_adapter))?;
+        let caps = surface.get_capabilities(&adapter);
+        let format = egui_wgpu::preferred_framebuffer_format(&caps.formats)
+            .map_err(|e| format!("the window's surface: {e}"))?;
+        let inner = window.inner_size();
+        let config = wgpu::SurfaceConfiguration {
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            format,
+            color_space: wgpu::SurfaceColorSpace::Auto,
+            width: inner.width.max(1),
+            height: inner.height.max(1),
+            present_mode: wgpu::PresentMode::AutoNoVsync,
+            desired_maximum_frame_latency: 2,
+            alpha_mode: caps.alpha_modes.first().copied().unwrap_or_default(),
+            view_formats: vec![],
+        };
+        surface.configure(&device, &config);
+        let ctx = egui::Context::default();
+        let egui = egui_winit::State::new(
+            ctx,
+            egui::ViewportId::ROOT,
+            &*window,
+            Some(window.scale_factor() as f32),
+            window.theme(),
+            Some(device.limits().max_texture_dimension_2d as usize),
+        );
+        let renderer =
+            egui_wgpu::Renderer::new(&device, format, egui_wgpu::RendererOptions::default());
+        Ok(Gfx {
+            window,
+            surface,
+            device,
+            queue,
+            config,
+            egui,
+            renderer,
+        })
+    }
+
+    /// Take the render thread's replies.
+    fn poll_worker(&mut self, el: &ActiveEventLoop) {
+        while let Ok(reply) = self.worker.replies.try_recv() {
+            match reply {
+                Reply::Started {
+                    adapter,
+                    setup_seconds,
+                } => {
+                    self.adapter = Some(adapter);
+                    self.setup_seconds = Some(setup_seconds);
+                }
+                Reply::Fatal(e) => {
+                    self.fatal = Some(e);
+                    el.exit();
+                }
+                Reply::Error(e) => {
+                    self.frame_error = Some(e.clone());
+                    if self.headless() {
+                        self.fatal = Some(e);
+                        el.exit();
+                    }
+                }
+                Reply::Reloaded(Ok(new_file)) => {
+                    self.settings.rebase(&self.file_settings, &new_file);
+                    self.file_settings = new_file;
+                    self.reload_error = None;
+                    self.last_sent = None;
+                }
+                Reply::Reloaded(Err(e)) => {
+                    self.reload_error = Some(e);
+                    self.last_sent = None;
+                }
+                Reply::Frame(f) => {
+                    let now = Instant::now();
+                    self.first_frame_seconds
+                        .get_or_insert_with(|| self.start.elapsed().as_secs_f64());
+                    self.stats.shown.push(now);
+                    self.stats.gpu_ms.push(f.rendered.gpu_seconds * 1e3);
+                    self.stats.rays_per_second.push(f.rendered.rays_per_second);
+                    if f.rendered.converged && self.converged_after.is_none() {
+                        self.converged_after = Some(self.still_since.elapsed().as_secs_f64());
+                    }
+                    self.frame_error = None;
+                    self.frames_seen += 1;
+                    self.frame = Some(f);
+                    self.shown_aov = None;
+                    if let Some(n) = self.opts.frames {
+                        let done = self.frames_seen >= n
+                            || self.frame.as_ref().is_some_and(|f| f.rendered.converged);
+                        if done {
+                            self.finish(el);
+                            return;
+                        }
+                        if self.opts.orbit_deg != 0.0 {
+                            self.settings.camera.orbit_degrees(self.opts.orbit_deg);
+                            self.last_move = Some(now);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Headless end: the screenshot and the summary.
+    fn finish(&mut self, el: &ActiveEventLoop) {
+        el.exit();
+        let Some(f) = &self.frame else {
+            self.fatal = Some("no frame was rendered".into());
+            return;
+        };
+        if let Some(path) = &self.opts.screenshot
+            && let Err(e) = crate::write_screenshot(path, &f.rendered.frame, f.settings.aov)
+        {
+            self.fatal = Some(format!("{e:#}"));
+            return;
+        }
+        let intervals: Vec<f64> = self
+            .stats
+            .shown
+            .windows(2)
+            .map(|w| (w[1] - w[0]).as_secs_f64())
+            .collect();
+        let fps: Vec<f64> = intervals.iter().map(|s| 1.0 / s.max(1e-9)).collect();
+        let ui_secs = self
+            .stats
+            .ui_start
+            .map_or(0.0, |s| s.elapsed().as_secs_f64());
+        self.summary = Some(ViewSummary {
+            scene: self.opts.scene.clone(),
+            adapter: self.adapter.clone().unwrap_or_default(),
+            display_adapter: self.display_adapter.clone(),
+            frames: self.frames_seen,
+            width: self.image_px.0,
+            height: self.image_px.1,
+            last_internal: [f.rendered.frame.width, f.rendered.frame.height],
+            orbit_deg_per_frame: self.opts.orbit_deg,
+            fps: crate::MinMedMax::of(&fps),
+            gpu_ms: crate::MinMedMax::of(&self.stats.gpu_ms),
+            rays_per_second: crate::MinMedMax::of(&self.stats.rays_per_second).median,
+            ui_fps: self.stats.ui_frames as f64 / ui_secs.max(1e-9),
+            setup_seconds: self.setup_seconds.unwrap_or(0.0),
+            first_frame_seconds: self.first_frame_seconds.unwrap_or(0.0),
+            samples: f.rendered.samples,
+            converged: f.rendered.converged,
+            converged_seconds: self.converged_after,
+            steps_per_ray: f.rendered.steps_per_ray,
+            evals_per_ray: f.rendered.evals_per_ray,
+            bake_cache: f.cache,
+            field_grid: f.field_grid.map(|g| g.0),
+            warnings: f.warnings.clone(),
+            screenshot: self.opts.screenshot.clone(),
+        });
+    }
+
+    /// The image size in pixels: fixed (`--size`, headless) or the central area.
+    fn request_view(&mut self, avail_px: (u32, u32)) {
+        let (w, h) = if self.headless() || self.opts.size.is_some() {
+            self.image_px
+        } else {
+            avail_px
+        };
+        if w == 0 || h == 0 {
+            return;
+        }
+        self.image_px = (w, h);
+        let moving = self.last_move.is_some_and(|t| t.elapsed() < MOVING_FOR);
+        let key = (self.settings.clone(), w, h, moving);
+        if self.last_sent.as_ref() == Some(&key) {
+            return;
+        }
+        let view_changed = self.last_sent.as_ref().is_none_or(|(s, lw, lh, _)| {
+            (s.clone().without_display(), *lw, *lh)
+                != (self.settings.clone().without_display(), w, h)
+        });
+        if view_changed && !moving {
+            self.still_since = Instant::now();
+            self.converged_after = None;
+        }
+        self.worker.send(
+            Request {
+                settings: self.settings.clone(),
+                width: w,
+                height: h,
+                moving,
+                reload: false,
+            },
+            view_changed,
+        );
+        self.last_sent = Some(key);
+    }
+
+    fn watch_scene(&mut self) {
+        if self.last_watch.elapsed() < WATCH_PERIOD {
+            return;
+        }
+        self.last_watch = Instant::now();
+        let now = mtime(&self.opts.scene);
+        if now != self.watched {
+            self.watched = now;
+            let (w, h) = self.image_px;
+            self.worker.send(
+                Request {
+                    settings: self.settings.clone(),
+                    width: w,
+                    height: h,
+                    moving: false,
+                    reload: true,
+                },
+                true,
+            );
+        }
+    }
+
+    fn redraw(&mut self, el: &ActiveEventLoop) {
+        self.poll_worker(el);
+        if self.fatal.is_some() || self.summary.is_some() {
+            return;
+        }
+        self.watch_scene();
+        // Time plays in scene seconds.
+        let dt = self.last_tick.elapsed().as_secs_f64();
+        self.last_tick = Instant::now();
+        if self.settings.playing {
+            self.settings.time += dt * self.settings.speed;
+        }
+        let Some(mut g) = self.gfx.take() else { return };
+        self.stats.ui_start.get_or_insert_with(Instant::now);
+        self.stats.ui_frames += 1;
+        let raw = g.egui.take_egui_input(&g.window);
+        let ctx = g.egui.egui_ctx().clone();
+        self.update_texture(&ctx);
+        let mut avail = (0u32, 0u32);
+        let mut out = ctx.run_ui(raw, |ui| {
+            avail = self.ui(ui);
+        });
+        g.egui
+            .handle_platform_output(&g.window, std::mem::take(&mut out.platform_output));
+        self.request_view(avail);
+        let prims = ctx.tessellate(std::mem::take(&mut out.shapes), out.pixels_per_point);
+        let sd = egui_wgpu::ScreenDescriptor {
+            size_in_pixels: [g.config.width, g.config.height],
+            pixels_per_point: out.pixels_per_point,
+        };
+        let frame = match g.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(f)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(f) => Some(f),
+            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+                g.surface.configure(&g.device, &g.config);
+                None
+            }
+            _ => None,
+        };
+        for (id, deltas) in out.textures_delta.set.drain() {
+            for d in deltas {
+                g.renderer.update_texture(&g.device, &g.queue, id, &d);
+            }
+        }
+        if let Some(frame) = frame {
+            let mut enc = g
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("egui"),
+                });
+            let user = g
+                .renderer
+                .update_buffers(&g.device, &g.queue, &mut enc, &prims, &sd);
+            let view = frame
+                .texture
+                .create_view(&wgpu::TextureViewDescriptor::default());
+            {
+                let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("egui"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                g.renderer.render(&mut pass.forget_lifetime(), &prims, &sd);
+            }
+            g.queue.submit(user.into_iter().chain([enc.finish()]));
+            g.window.pre_present_notify();
+            g.queue.present(frame);
+        }
+        for id in out.textures_delta.free.drain() {
+            g.renderer.free_texture(&id);
+        }
+        self.gfx = Some(g);
+    }
+
+    /// The shown frame as an egui texture, in the AOV the panel picks.
+    fn update_texture(&mut self, ctx: &egui::Context) {
+        let Some(f) = &self.frame else { return };
+        let id = (self.settings.aov, self.frames_seen as usize);
+        if self.shown_aov == Some(id) {
+            return;
+        }
+        let frame = &f.rendered.frame;
+        let (rgba, scale) = display::rgba(frame, self.settings.aov);
+        self.aov_scale = scale;
+        let image = egui::ColorImage::from_rgba_unmultiplied(
+            [frame.width as usize, frame.height as usize],
+            &rgba,
+        );
+        match &mut self.texture {
+            Some(t) => t.set(image, egui::TextureOptions::LINEAR),
+            None => {
+                self.texture =
+                    Some(ctx.load_texture("grin view", image, egui::TextureOptions::LINEAR));
+            }
+        }
+        self.shown_aov = Some(id);
+    }
+
+    /// The panel and the image; returns the image area in pixels.
+    fn ui(&mut self, ui: &mut egui::Ui) -> (u32, u32) {
+        egui::Panel::left("grin panel")
+            .resizable(false)
+            .exact_size(PANEL_WIDTH)
+            .show(ui, |ui| {
+                egui::ScrollArea::vertical().show(ui, |ui| self.panel(ui));
+            });
+        let mut avail = (0, 0);
+        egui::CentralPanel::no_frame().show(ui, |ui| {
+            let ppp = ui.ctx().pixels_per_point();
+            let size = ui.available_size();
+            avail = (
+                (size.x * ppp).floor().max(1.0) as u32,
+                (size.y * ppp).floor().max(1.0) as u32,
+            );
+            let shown = if self.headless() || self.opts.size.is_some() {
+                egui::vec2(self.image_px.0 as f32, self.image_px.1 as f32) / ppp
+            } else {
+                size
+            };
+            let (rect, resp) = ui.allocate_exact_size(shown, egui::Sense::click_and_drag());
+            if let Some(t) = &self.texture {
+                egui::Image::new((t.id(), shown)).paint_at(ui, rect);
+            } else {
+                ui.put(
+                    rect,
+                    egui::Label::new("baking the field and building the pipelines…"),
+                );
+            }
+            self.camera_input(ui, &resp, shown.y * ppp);
+        });
+        avail
+    }
+
+    fn camera_input(&mut self, ui: &egui::Ui, resp: &egui::Response, height_px: f32) {
+        let before = self.settings.camera.clone();
+        let ppp = ui.ctx().pixels_per_point() as f64;
+        if resp.dragged_by(egui::PointerButton::Primary) {
+            let d = resp.drag_delta();
+            self.settings
+                .camera
+                .orbit(f64::from(d.x) * ppp, f64::from(d.y) * ppp);
+        }
+        if resp.dragged_by(egui::PointerButton::Secondary)
+            || resp.dragged_by(egui::PointerButton::Middle)
+        {
+            let d = resp.drag_delta();
+            self.settings.camera.pan(
+                f64::from(d.x) * ppp,
+                f64::from(d.y) * ppp,
+                f64::from(height_px),
+            );
+        }
+        if resp.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                self.settings.camera.zoom(f64::from(scroll) / 50.0);
+            }
+        }
+        if !ui.ctx().egui_wants_keyboard_input() {
+            let (dt, keys) = ui.input(|i| {
+                let k = |key| if i.key_down(key) { 1.0 } else { 0.0 };
+                (
+                    f64::from(i.stable_dt.min(0.1)),
+                    [
+                        k(egui::Key::W) - k(egui::Key::S),
+                        k(egui::Key::D) - k(egui::Key::A),
+                        k(egui::Key::E) - k(egui::Key::Q),
+                        if i.key_pressed(egui::Key::R) {
+                            1.0
+                        } else {
+                            0.0
+                        },
+                        if i.key_pressed(egui::Key::Space) {
+                            1.0
+                        } else {
+                            0.0
+                        },
+                    ],
+                )
+            });
+            if keys[..3].iter().any(|&k| k != 0.0) {
+                self.settings
+                    .camera
+                    .fly(keys[0] * dt, keys[1] * dt, keys[2] * dt);
+            }
+            if keys[3] != 0.0 {
+                self.settings.camera = self.file_settings.camera.clone();
+            }
+            if keys[4] != 0.0 && self.animated {
+                self.settings.playing = !self.settings.playing;
+            }
+        }
+        if self.settings.camera != before {
+            self.last_move = Some(Instant::now());
+        }
+    }
+
+    fn panel(&mut self, ui: &mut egui::Ui) {
+        ui.heading("grin view");
+        ui.label(
+            self.opts
+                .scene
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+        );
+        ui.separator();
+        // Numbers.
+        let n = self.stats.shown.len();
+        let recent: Vec<f64> = self
+            .stats
+            .shown
+            .iter()
+            .rev()
+            .take(10)
+            .collect::<Vec<_>>()
+            .windows(2)
+            .map(|w| (*w[0] - *w[1]).as_secs_f64())
+            .collect();
+        let fps = if recent.is_empty() {
+            0.0
+        } else {
+            recent.len() as f64 / recent.iter().sum::<f64>().max(1e-9)
+        };
+        ui.label(format!("frames shown: {n}, {fps:.1} fps"));
+        if let Some(f) = &self.frame {
+            let r = &f.rendered;
+            ui.label(format!(
+                "GPU {:.1} ms/frame, {:.2} Mrays/s",
+                r.gpu_seconds * 1e3,
+                r.rays_per_second * 1e-6
+            ));
+            ui.label(format!(
+                "{:.1} steps, {:.1} field evals per ray",
+                r.steps_per_ray, r.evals_per_ray
+            ));
+            ui.label(format!(
+                "{}x{} ({:.0}%), {} / {} spp{}",
+                r.frame.width,
+                r.frame.height,
+                f.scale * 100.0,
+                r.samples,
+                f.settings.max_spp,
+                if r.converged { ", converged" } else { "" }
+            ));
+            if let Some((d, bytes)) = f.field_grid {
+                ui.label(format!(
+                    "field grid {}x{}x{}, {:.1} MB{}",
+                    d[0],
+                    d[1],
+                    d[2],
+                    bytes as f64 * 1e-6,
+                    match f.cache {
+                        Some(grin_gpu::cache::CacheUse::Hit) => ", from the bake cache",
+                        Some(grin_gpu::cache::CacheUse::Stored) => ", baked and cached",
+                        _ => "",
+                    }
+                ));
+            }
+            for w in &f.warnings {
+                ui.colored_label(egui::Color32::YELLOW, w);
+            }
+        }
+        ui.label(format!(
+            "render: {}",
+            self.adapter.as_deref().unwrap_or("starting…")
+        ));
+        ui.label(format!("window: {}", self.display_adapter));
+        if let Some(e) = &self.reload_error {
+            ui.colored_label(egui::Color32::LIGHT_RED, format!("scene not reloaded: {e}"));
+        }
+        if let Some(e) = &self.frame_error {
+            ui.colored_label(egui::Color32::LIGHT_RED, e);
+        }
+        ui.separator();
+        self.controls(ui);
+    }
+
+    fn controls(&mut self, ui: &mut egui::Ui) {
+        let s = &mut self.settings;
+        egui::ComboBox::from_label("integrator")
+            .selected_text(s.integrator.name())
+            .show_ui(ui, |ui| {
+                for k in IntegratorKind::ALL {
+                    ui.selectable_value(&mut s.integrator, k, k.name());
+                }
+            });
+        let mut kind = StepKind::of(&s.step);
+        let mut value = StepKind::value_of(&s.step);
+        let scale = StepKind::value_of(&self.file_settings.step);
+        egui::ComboBox::from_label("step policy")
+            .selected_text(kind.name())
+            .show_ui(ui, |ui| {
+                for k in StepKind::ALL {
+                    if ui.selectable_value(&mut kind, k, k.name()).changed() {
+                        value = k.default_value(scale);
+                    }
+                }
+            });
+        ui.add(
+            egui::Slider::new(&mut value, 1e-9..=1.0)
+                .logarithmic(true)
+                .text("step / tolerance"),
+        );
+        s.step = kind.with_value(value);
+        egui::ComboBox::from_label("interpolation")
+            .selected_text(match s.interpolation {
+                Interpolation::Trilinear => "trilinear",
+                Interpolation::Tricubic => "tricubic",
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut s.interpolation, Interpolation::Trilinear, "trilinear");
+                ui.selectable_value(&mut s.interpolation, Interpolation::Tricubic, "tricubic");
+            });
+        egui::ComboBox::from_label("shown")
+            .selected_text(s.aov.name())
+            .show_ui(ui, |ui| {
+                for a in Aov::ALL {
+                    ui.selectable_value(&mut s.aov, a, a.name());
+                }
+            });
+        if s.aov != Aov::Beauty && s.aov != Aov::Status {
+            ui.label(format!("full scale: {:.4e}", self.aov_scale));
+        }
+        ui.add(egui::Slider::new(&mut s.resolution_scale, 0.125..=1.0).text("resolution"));
+        ui.add(egui::Slider::new(&mut s.target_fps, 2.0..=60.0).text("fps while moving"));
+        ui.add(egui::Slider::new(&mut s.spp, 1..=64).text("spp per frame"));
+        ui.add(
+            egui::Slider::new(&mut s.max_spp, 1..=4096)
+                .logarithmic(true)
+                .text("spp to converge"),
+        );
+        ui.checkbox(&mut s.medium, "medium");
+        if self.animated {
+            ui.horizontal(|ui| {
+                let label = if s.playing { "pause" } else { "play" };
+                if ui.button(label).clicked() {
+                    s.playing = !s.playing;
+                }
+                ui.add(egui::Slider::new(&mut s.speed, 0.0..=10.0).text("speed"));
+            });
+            ui.add(egui::Slider::new(&mut s.time, 0.0..=60.0).text("time (s)"));
+        }
+        if ui.button("reset camera (R)").clicked() {
+            s.camera = self.file_settings.camera.clone();
+        }
+        ui.label("drag: orbit · right-drag: pan · scroll: zoom · WASD/QE: fly");
+    }
+}
+
+impl ApplicationHandler for App {
+    fn resumed(&mut self, el: &ActiveEventLoop) {
+        if self.gfx.is_some() {
+            return;
+        }
+        match self.create_gfx(el) {
+            Ok(g) => self.gfx = Some(g),
+            Err(e) => {
+                self.fatal = Some(e);
+                el.exit();
+            }
+        }
+    }
+
+    fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(g) = &mut self.gfx else { return };
+        let resp = g.egui.on_window_event(&g.window, &event);
+        match event {
+            WindowEvent::CloseRequested => el.exit(),
+            WindowEvent::Resized(s) => {
+                g.config.width = s.width.max(1);
+                g.config.height = s.height.max(1);
+                g.surface.configure(&g.device, &g.config);
+            }
+            WindowEvent::RedrawRequested => self.redraw(el),
+            _ => {}
+        }
+        if resp.repaint
+            && let Some(g) = &self.gfx
+        {
+            g.window.request_redraw();
+        }
+    }
+
+    fn about_to_wait(&mut self, el: &ActiveEventLoop) {
+        // Frames from the render thread arrive on their own: keep polling, gently.
+        if let Some(g) = &self.gfx {
+            g.window.request_redraw();
+        }
+        el.set_control_flow(ControlFlow::WaitUntil(
+            Instant::now() + Duration::from_millis(8),
+        ));
+    }
+}
+
+/// Open the window and run until it is closed (or, headless, until the frames are done).
+pub(crate) fn run_window(mut app: App) -> anyhow::Result<App> {
+    let el =
+        EventLoop::new().map_err(|e| anyhow::anyhow!("grin view cannot open a window: {e}"))?;
+    el.set_control_flow(ControlFlow::Poll);
+    el.run_app(&mut app)
+        .map_err(|e| anyhow::anyhow!("the window's event loop failed: {e}"))?;
+    Ok(app)
+}

@@ -1,0 +1,452 @@
+//! The viewer's renderer without a window: the scene file, its fields and GPU bakes, the
+//! GPU renderer and the progressive accumulation. The window's worker thread drives one;
+//! tests drive one directly, through the same [`ViewSettings`] the panel edits.
+//!
+//! Each [`Session::render`] renders the scene file with the settings applied and, when
+//! the view is the one of the last frame, adds the frame's samples to the image so far:
+//! frame k renders samples k spp .. (k+1) spp of `max_spp`, so the accumulated image is
+//! one render of that many samples (`grin render --spp max_spp`, to rounding). What a
+//! change costs is decided by comparing scenes: the camera, the image size, spp and the
+//! step's value only re-aim the renderer ([`GpuRenderer::retarget`]); the integrator,
+//! the step policy or the medium switched on or off build new pipelines; another field
+//! (time, interpolation, an edited medium) bakes its grid (memory, then the disk cache).
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::Context;
+use grin_field::IndexField;
+use grin_field::baked::{BakedField, Interp};
+use grin_gpu::cache::{BakeCache, CacheUse};
+use grin_gpu::{GpuContext, GpuRenderer};
+use grin_render::camera::PinholeCamera;
+use grin_render::image::Frame;
+use grin_render::scene::RenderScene;
+use grin_scene::{FieldSpec, Interpolation, Scene};
+
+use crate::settings::ViewSettings;
+
+/// Fields kept in memory (time steps of an animation, interpolations).
+const FIELDS_KEPT: usize = 4;
+/// Nodes along the longest axis of the bakes made while time plays (a full bake per
+/// frame would stall playback; the paused frame is baked to the error budget).
+pub const PLAYBACK_BAKE_RESOLUTION: usize = 48;
+
+/// A field and the grid the GPU marches for it.
+#[derive(Debug)]
+struct FieldEntry {
+    key: String,
+    field: Arc<dyn IndexField>,
+    /// `None`: the field is a baked file the renderer marches as it is.
+    grid: Option<Arc<BakedField>>,
+    warnings: Vec<String>,
+    cache: Option<CacheUse>,
+}
+
+/// What one [`Session::render`] produced.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// The accumulated image: mean radiance of all samples so far, steps and evaluations
+    /// averaged, the other AOVs of the accumulation's first frame.
+    pub frame: Frame,
+    /// Samples per pixel accumulated.
+    pub samples: u32,
+    /// Seconds the GPU frame took (dispatch to readback).
+    pub gpu_seconds: f64,
+    /// Seconds spent on baking, building fields and pipelines before it (0 when the
+    /// renderer was only re-aimed).
+    pub setup_seconds: f64,
+    pub rays_per_second: f64,
+    pub steps_per_ray: f64,
+    pub evals_per_ray: f64,
+    /// The accumulation reached `max_spp`.
+    pub converged: bool,
+}
+
+/// Why nothing was rendered: cancelled (a newer view is waiting), or an error to show.
+#[derive(Debug)]
+pub enum RenderFailure {
+    Cancelled,
+    Error(anyhow::Error),
+}
+
+impl<E: Into<anyhow::Error>> From<E> for RenderFailure {
+    fn from(e: E) -> Self {
+        RenderFailure::Error(e.into())
+    }
+}
+
+struct Gpu<'a> {
+    renderer: GpuRenderer<'a>,
+    scene: RenderScene,
+    /// The scene's objects, lights, sky and medium as JSON: what the renderer holds.
+    static_key: String,
+}
+
+struct Accum {
+    view_key: String,
+    samples: u32,
+    sum: Vec<[f32; 3]>,
+    steps: Vec<f32>,
+    evals: Vec<f32>,
+    first: Frame,
+}
+
+/// The viewer's scene on the GPU.
+pub struct Session<'a> {
+    ctx: &'a GpuContext,
+    path: PathBuf,
+    dir: PathBuf,
+    scene: Scene,
+    cache: Option<BakeCache>,
+    fields: VecDeque<FieldEntry>,
+    gpu: Option<Gpu<'a>>,
+    accum: Option<Accum>,
+    /// Warnings about the current field (an under-resolved bake), for the panel.
+    pub warnings: Vec<String>,
+    /// Whether the current field's GPU grid came from the disk cache.
+    pub cache_use: Option<CacheUse>,
+    /// The current field's GPU grid: node counts and bytes.
+    pub field_grid: Option<([u32; 3], u64)>,
+}
+
+impl std::fmt::Debug for Session<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Session")
+            .field("path", &self.path)
+            .field("samples", &self.accum.as_ref().map(|a| a.samples))
+            .finish_non_exhaustive()
+    }
+}
+
+/// Scene file -> scene, with the file named in the error.
+pub fn load(path: &Path) -> anyhow::Result<Scene> {
+    Ok(grin_scene::load_scene(path)?)
+}
+
+fn json<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_string(v).unwrap_or_default()
+}
+
+impl<'a> Session<'a> {
+    /// Load the scene file (errors name it). `cache`: the disk cache of GPU bakes.
+    pub fn new(ctx: &'a GpuContext, path: &Path, cache: Option<BakeCache>) -> anyhow::Result<Self> {
+        let scene = load(path)?;
+        let dir = path.parent().unwrap_or(Path::new(".")).to_owned();
+        let mut s = Session {
+            ctx,
+            path: path.to_owned(),
+            dir,
+            scene,
+            cache,
+            fields: VecDeque::new(),
+            gpu: None,
+            accum: None,
+            warnings: Vec::new(),
+            cache_use: None,
+            field_grid: None,
+        };
+        // Build the field now, so a scene whose medium cannot be built fails here.
+        let applied = ViewSettings::from_scene(&s.scene).apply(&s.scene, 1, 1);
+        s.field_for(&applied, false, Interpolation::Trilinear)?;
+        Ok(s)
+    }
+
+    /// The scene file as last loaded successfully.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Read the scene file again. On success it replaces the scene (and `Ok` holds the
+    /// new file's settings); on error the last good scene stays and the error names the
+    /// file, line and key.
+    pub fn reload(&mut self) -> anyhow::Result<ViewSettings> {
+        let scene = load(&self.path)?;
+        let applied = ViewSettings::from_scene(&scene).apply(&scene, 1, 1);
+        // The medium must build (a VDB that exists, n > 0) before the scene is taken.
+        let field = self.build_entry(&applied, false, Interpolation::Trilinear)?;
+        RenderScene::new(&applied, &self.dir, field.as_ref().map(|f| f.field.clone()))
+            .with_context(|| self.path.display().to_string())?;
+        if let Some(f) = field {
+            self.remember(f);
+        }
+        self.scene = scene;
+        self.gpu = None;
+        self.accum = None;
+        Ok(ViewSettings::from_scene(&self.scene))
+    }
+
+    /// Whether a frame of `settings` at `width` x `height` would add anything: the view
+    /// changed, or its accumulation is short of `max_spp`.
+    pub fn needs_frame(&self, settings: &ViewSettings, width: u32, height: u32) -> bool {
+        let applied = settings.apply(&self.scene, width, height);
+        match &self.accum {
+            Some(a) => a.view_key != view_key(&applied, settings) || a.samples < settings.max_spp,
+            None => true,
+        }
+    }
+
+    /// Render one frame of `settings` at `width` x `height` (the internal resolution)
+    /// and accumulate it; `cancel` stops between bands of rows.
+    pub fn render(
+        &mut self,
+        settings: &ViewSettings,
+        width: u32,
+        height: u32,
+        cancel: &AtomicBool,
+    ) -> Result<Rendered, RenderFailure> {
+        let setup = Instant::now();
+        let applied = settings.apply(&self.scene, width, height);
+        let view = view_key(&applied, settings);
+        let continuing = self
+            .accum
+            .as_ref()
+            .is_some_and(|a| a.view_key == view && a.samples < settings.max_spp);
+        let first_sample = if continuing {
+            self.accum.as_ref().map_or(0, |a| a.samples)
+        } else {
+            0
+        };
+        let spp_total = settings.max_spp.max(applied.render.spp);
+
+        let static_key = json(&(
+            &applied.objects,
+            &applied.lights,
+            &applied.sky,
+            &applied.medium,
+            settings.interpolation,
+            settings.playing,
+        ));
+        if self
+            .gpu
+            .as_ref()
+            .is_some_and(|g| g.static_key != static_key)
+        {
+            self.gpu = None;
+        }
+        let mut rebuilt = false;
+        if let Some(g) = &mut self.gpu {
+            // Same objects and field: new camera and settings into the same renderer.
+            let camera = PinholeCamera::new(&applied.camera, width, height)
+                .context("camera: the view is degenerate")?;
+            if let Some(m) = &g.scene.medium {
+                grin_render::settings::TraceSettings::from_render(&applied.render)
+                    .validate_for(&m.bounds)
+                    .context("[render]")?;
+            }
+            g.scene.camera = camera;
+            g.scene.settings = applied.render.clone();
+            if !g.renderer.retarget(&g.scene, first_sample, spp_total)? {
+                // Other pipelines (integrator, step policy, flags) or a bigger image.
+                let grid = self.fields.back().and_then(|f| f.grid.clone());
+                let mut renderer = GpuRenderer::new(self.ctx, &g.scene, grid.as_deref())?;
+                renderer.retarget(&g.scene, first_sample, spp_total)?;
+                g.renderer = renderer;
+                rebuilt = true;
+            }
+        } else {
+            let entry = self.field_for(&applied, settings.playing, settings.interpolation)?;
+            let (field, grid) = match entry {
+                Some(e) => (Some(e.field.clone()), e.grid.clone()),
+                None => (None, None),
+            };
+            let scene = RenderScene::new(&applied, &self.dir, field)
+                .with_context(|| self.path.display().to_string())?;
+            let mut renderer = GpuRenderer::new(self.ctx, &scene, grid.as_deref())?;
+            renderer.retarget(&scene, first_sample, spp_total)?;
+            self.warnings.extend(renderer.warnings().iter().cloned());
+            self.field_grid = applied
+                .medium
+                .is_some()
+                .then(|| (renderer.field_dims(), renderer.field_bytes()));
+            self.gpu = Some(Gpu {
+                renderer,
+                scene,
+                static_key,
+            });
+            rebuilt = true;
+        }
+        let setup_seconds = if rebuilt {
+            setup.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
+        let Some(g) = &self.gpu else {
+            return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
+        };
+        let start = Instant::now();
+        let frame = match g.renderer.render(&|_| {}, cancel) {
+            Ok(f) => f,
+            Err(grin_gpu::GpuError::Cancelled) => return Err(RenderFailure::Cancelled),
+            Err(e) => return Err(e.into()),
+        };
+        let gpu_seconds = start.elapsed().as_secs_f64();
+        let spp = applied.render.spp;
+        let n = frame.pixels.len();
+        let rays = n as f64 * f64::from(spp);
+        let mean = |f: fn(&grin_render::image::PixelOut) -> f32| {
+            frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / (n.max(1) as f64)
+        };
+        let (steps_per_ray, evals_per_ray) = (mean(|p| p.steps), mean(|p| p.evals));
+        let w = spp as f32;
+        let accum = match (&mut self.accum, first_sample > 0) {
+            (Some(a), true) => {
+                for (i, p) in frame.pixels.iter().enumerate() {
+                    for c in 0..3 {
+                        a.sum[i][c] += p.rgb[c] * w;
+                    }
+                    a.steps[i] += p.steps * w;
+                    a.evals[i] += p.evals * w;
+                }
+                a.samples += spp;
+                a
+            }
+            (slot, _) => slot.insert(Accum {
+                view_key: view,
+                samples: spp,
+                sum: frame.pixels.iter().map(|p| p.rgb.map(|c| c * w)).collect(),
+                steps: frame.pixels.iter().map(|p| p.steps * w).collect(),
+                evals: frame.pixels.iter().map(|p| p.evals * w).collect(),
+                first: frame,
+            }),
+        };
+        let inv = 1.0 / accum.samples as f32;
+        let mut out = accum.first.clone();
+        for (i, p) in out.pixels.iter_mut().enumerate() {
+            p.rgb = accum.sum[i].map(|c| c * inv);
+            p.steps = accum.steps[i] * inv;
+            p.evals = accum.evals[i] * inv;
+        }
+        Ok(Rendered {
+            frame: out,
+            samples: accum.samples,
+            gpu_seconds,
+            setup_seconds,
+            rays_per_second: rays / gpu_seconds.max(1e-9),
+            steps_per_ray,
+            evals_per_ray,
+            converged: accum.samples >= settings.max_spp,
+        })
+    }
+
+    fn remember(&mut self, entry: FieldEntry) {
+        self.fields.retain(|f| f.key != entry.key);
+        self.fields.push_back(entry);
+        while self.fields.len() > FIELDS_KEPT {
+            self.fields.pop_front();
+        }
+    }
+
+    /// The field of `applied`'s medium and its GPU grid: from memory, else built (and
+    /// baked through the disk cache, except for the coarse bakes made while playing).
+    fn field_for(
+        &mut self,
+        applied: &Scene,
+        playing: bool,
+        interp: Interpolation,
+    ) -> anyhow::Result<Option<&FieldEntry>> {
+        let key = json(&(&applied.medium, interp, playing));
+        if applied.medium.is_none() {
+            self.warnings.clear();
+            self.cache_use = None;
+            return Ok(None);
+        }
+        if !self.fields.iter().any(|f| f.key == key) {
+            let entry = self.build_entry(applied, playing, interp)?;
+            if let Some(e) = entry {
+                self.remember(e);
+            }
+        }
+        // Most recently used last (the retarget path reads the back).
+        if let Some(i) = self.fields.iter().position(|f| f.key == key)
+            && let Some(e) = self.fields.remove(i)
+        {
+            self.fields.push_back(e);
+        }
+        let entry = self.fields.back();
+        if let Some(e) = entry {
+            self.warnings = e.warnings.clone();
+            self.cache_use = e.cache;
+        }
+        Ok(entry)
+    }
+
+    fn build_entry(
+        &self,
+        applied: &Scene,
+        playing: bool,
+        interp: Interpolation,
+    ) -> anyhow::Result<Option<FieldEntry>> {
+        let Some(spec) = &applied.medium else {
+            return Ok(None);
+        };
+        let key = json(&(&applied.medium, interp, playing));
+        let field = grin_field::build_field(spec, &self.dir)
+            .with_context(|| format!("{}: [medium]", self.path.display()))?;
+        if field.as_baked().is_some() {
+            return Ok(Some(FieldEntry {
+                key,
+                field,
+                grid: None,
+                warnings: Vec::new(),
+                cache: None,
+            }));
+        }
+        let (grid, warnings, cache) = if playing {
+            let (g, report) =
+                grin_gpu::field::bake_for_gpu_with_report(field.as_ref(), PLAYBACK_BAKE_RESOLUTION)
+                    .map_err(|e| {
+                        anyhow::anyhow!("{}: baking the field: {e}", self.path.display())
+                    })?;
+            let mut w: Vec<String> = grin_gpu::field::bake_warning(&report).into_iter().collect();
+            w.push(format!(
+                "playing: the field is baked at {PLAYBACK_BAKE_RESOLUTION} nodes per axis; pause for the full bake"
+            ));
+            (g, w, None)
+        } else {
+            // The disk cache holds the scene file's own field (its own t); time steps of
+            // an animation are baked in memory only.
+            let file_t = crate::settings::scene_time(&self.scene);
+            let own_time = match &spec.field {
+                FieldSpec::Noise(n) => Some(n.t) == file_t,
+                FieldSpec::Expr { t, .. } => Some(*t) == file_t,
+                _ => true,
+            };
+            let key = match (&self.cache, own_time) {
+                (Some(_), true) => Some(BakeCache::key(spec, &self.dir)?),
+                _ => None,
+            };
+            let cache = self.cache.as_ref().zip(key.as_deref());
+            let (g, w, used) = grin_gpu::cache::gpu_bake_cached(field.as_ref(), cache)?;
+            (g, w, Some(used))
+        };
+        let grid = match interp {
+            Interpolation::Trilinear => grid,
+            Interpolation::Tricubic => grid.with_interp(Interp::Tricubic),
+        };
+        Ok(Some(FieldEntry {
+            key,
+            field,
+            grid: Some(Arc::new(grid)),
+            warnings,
+            cache,
+        }))
+    }
+}
+
+/// Everything that makes two frames' samples belong to one image.
+fn view_key(applied: &Scene, settings: &ViewSettings) -> String {
+    json(&(
+        applied,
+        settings.interpolation,
+        settings.playing,
+        settings.max_spp,
+    ))
+}

@@ -1,0 +1,227 @@
+//! The render thread: a [`Session`] on its own wgpu device, fed the newest view the
+//! window asks for, so the window never waits on a GPU frame. While the camera moves it
+//! renders at the internal resolution that keeps the frame budget; when it stops it
+//! refines the full-resolution image progressively until `max_spp`.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender, TryRecvError};
+use std::thread::JoinHandle;
+
+use grin_gpu::GpuContext;
+use grin_gpu::cache::BakeCache;
+
+use crate::session::{RenderFailure, Rendered, Session};
+use crate::settings::ViewSettings;
+
+/// Smallest internal resolution while moving, as a fraction of each side.
+pub const MIN_MOVING_SCALE: f64 = 0.125;
+
+/// What the window asks for.
+#[derive(Debug, Clone)]
+pub struct Request {
+    pub settings: ViewSettings,
+    /// The image's size in the window (pixels), before the resolution scale.
+    pub width: u32,
+    pub height: u32,
+    /// The camera is moving: render at the reduced resolution that keeps the budget.
+    pub moving: bool,
+    /// Read the scene file again first.
+    pub reload: bool,
+}
+
+/// What the render thread reports.
+#[derive(Debug)]
+pub enum Reply {
+    /// The device and the scene's field are ready.
+    Started {
+        adapter: String,
+        setup_seconds: f64,
+    },
+    /// The device or the scene could not be set up: the viewer ends with this error.
+    Fatal(String),
+    Frame(Box<FrameReply>),
+    /// The scene file was read again: the new file's settings, or why it was not taken.
+    Reloaded(Result<ViewSettings, String>),
+    /// A frame failed (shown in the panel; the last good frame stays).
+    Error(String),
+}
+
+/// A finished frame and what the panel shows about it.
+#[derive(Debug)]
+pub struct FrameReply {
+    pub rendered: Rendered,
+    /// The settings it was rendered with (for AOV display and screenshots).
+    pub settings: ViewSettings,
+    pub scale: f64,
+    pub warnings: Vec<String>,
+    pub cache: Option<grin_gpu::cache::CacheUse>,
+    pub field_grid: Option<([u32; 3], u64)>,
+}
+
+/// The render thread's handle.
+#[derive(Debug)]
+pub struct Worker {
+    requests: Sender<Request>,
+    pub replies: Receiver<Reply>,
+    cancel: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl Worker {
+    /// Start the thread: it creates its device and loads `scene` (the bake through
+    /// `cache`), then answers [`Request`]s.
+    pub fn start(scene: PathBuf, cache: Option<BakeCache>) -> Self {
+        let (requests, rx) = std::sync::mpsc::channel::<Request>();
+        let (tx, replies) = std::sync::mpsc::channel::<Reply>();
+        let cancel = Arc::new(AtomicBool::new(false));
+        let c = cancel.clone();
+        let handle = std::thread::Builder::new()
+            .name("grin-view render".into())
+            .spawn(move || run(scene, cache, rx, tx, c))
+            .ok();
+        Worker {
+            requests,
+            replies,
+            cancel,
+            handle,
+        }
+    }
+
+    /// Ask for a view; `interrupt` stops the frame in progress (the view changed).
+    pub fn send(&self, request: Request, interrupt: bool) {
+        if interrupt {
+            self.cancel.store(true, Ordering::Relaxed);
+        }
+        let _ = self.requests.send(request);
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
+        // Closing the channel ends the thread's loop.
+        let (dead, _) = std::sync::mpsc::channel();
+        self.requests = dead;
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+fn run(
+    scene: PathBuf,
+    cache: Option<BakeCache>,
+    rx: Receiver<Request>,
+    tx: Sender<Reply>,
+    cancel: Arc<AtomicBool>,
+) {
+    let start = std::time::Instant::now();
+    let ctx = match GpuContext::new_headless() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = tx.send(Reply::Fatal(format!("no GPU device for the viewer: {e}")));
+            return;
+        }
+    };
+    let mut session = match Session::new(&ctx, &scene, cache) {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = tx.send(Reply::Fatal(format!("{e:#}")));
+            return;
+        }
+    };
+    let _ = tx.send(Reply::Started {
+        adapter: ctx.adapter_name(),
+        setup_seconds: start.elapsed().as_secs_f64(),
+    });
+    let mut current: Option<Request> = None;
+    // Seconds per pixel-sample of the last frames (for the moving resolution).
+    let mut cost: Option<f64> = None;
+    let mut failed = false;
+    loop {
+        // The newest request; block when there is nothing left to refine.
+        let idle = failed
+            || match &current {
+                Some(r) => {
+                    let (w, h, _) = internal_size(r, cost);
+                    !session.needs_frame(&r.settings, w, h)
+                }
+                None => true,
+            };
+        if idle {
+            match rx.recv() {
+                Ok(r) => current = Some(r),
+                Err(_) => return,
+            }
+        }
+        loop {
+            match rx.try_recv() {
+                Ok(r) => {
+                    let reload = r.reload || current.as_ref().is_some_and(|c| c.reload);
+                    current = Some(Request { reload, ..r });
+                }
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => return,
+            }
+        }
+        let Some(req) = &mut current else { continue };
+        failed = false;
+        if req.reload {
+            req.reload = false;
+            let reply = session.reload().map_err(|e| format!("{e:#}"));
+            if tx.send(Reply::Reloaded(reply)).is_err() {
+                return;
+            }
+            // The window answers with the rebased settings.
+            continue;
+        }
+        let (w, h, scale) = internal_size(req, cost);
+        cancel.store(false, Ordering::Relaxed);
+        let settings = req.settings.clone();
+        match session.render(&settings, w, h, &cancel) {
+            Ok(rendered) => {
+                let samples = f64::from(w) * f64::from(h) * f64::from(settings.spp.max(1));
+                let c = rendered.gpu_seconds / samples.max(1.0);
+                cost = Some(cost.map_or(c, |old| 0.5 * old + 0.5 * c));
+                let reply = FrameReply {
+                    rendered,
+                    settings,
+                    scale,
+                    warnings: session.warnings.clone(),
+                    cache: session.cache_use,
+                    field_grid: session.field_grid,
+                };
+                if tx.send(Reply::Frame(Box::new(reply))).is_err() {
+                    return;
+                }
+            }
+            Err(RenderFailure::Cancelled) => {}
+            Err(RenderFailure::Error(e)) => {
+                failed = true;
+                if tx.send(Reply::Error(format!("{e:#}"))).is_err() {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// The internal resolution of `req`: the resolution scale, or while moving the largest
+/// one whose frame fits the frame budget at the measured cost.
+pub fn internal_size(req: &Request, cost: Option<f64>) -> (u32, u32, f64) {
+    let s = &req.settings;
+    let mut scale = s.resolution_scale.clamp(MIN_MOVING_SCALE, 1.0);
+    if req.moving
+        && let Some(c) = cost
+    {
+        let budget = 1.0 / s.target_fps.max(1.0);
+        let full = f64::from(req.width) * f64::from(req.height) * f64::from(s.spp.max(1));
+        let fit = (budget / (c * full).max(1e-12)).sqrt();
+        scale = scale.min(fit).max(MIN_MOVING_SCALE);
+    }
+    let w = ((f64::from(req.width) * scale).round() as u32).max(1);
+    let h = ((f64::from(req.height) * scale).round() as u32).max(1);
+    (w, h, scale)
+}
