@@ -1,0 +1,256 @@
+//! The viewer without a window: every panel setting, edited through the same
+//! `ViewSettings` the panel edits, changes the next frame of one running session (no
+//! restart); accumulation and hot reload behave as the window relies on. On lavapipe.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use grin_gpu::GpuContext;
+use grin_scene::{IntegratorKind, Interpolation, StepSpec};
+use grin_view::session::{Rendered, Session};
+use grin_view::settings::StepKind;
+use grin_view::worker::{Request, internal_size};
+use grin_view::{Aov, ViewSettings};
+
+const W: u32 = 48;
+const H: u32 = 32;
+
+/// A noise ball drifting upwards in front of a checker wall.
+const SCENE: &str = r#"
+[camera]
+position = [0.0, 0.0, -4.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 32.0
+
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 1.5], normal = [0.0, 0.0, -1.0] } }
+material = { checker = { color_a = [0.9, 0.9, 0.85], color_b = [0.1, 0.1, 0.15], scale = 0.2 } }
+
+[medium]
+bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }
+field = { kind = "noise", noise = "fbm", octaves = 2, frequency = 1.5, amplitude = 0.03, seed = 3, envelope = 0.3, drift = [0.0, 0.5, 0.0] }
+
+[render]
+width = 48
+height = 32
+spp = 1
+integrator = "rk4"
+step = { fixed = 0.02 }
+jitter = false
+"#;
+
+fn scene_file(dir: &Path, text: &str) -> PathBuf {
+    let p = dir.join("scene.toml");
+    std::fs::write(&p, text).expect("write scene");
+    p
+}
+
+fn render(s: &mut Session, v: &ViewSettings) -> Rendered {
+    match s.render(v, W, H, &AtomicBool::new(false)) {
+        Ok(r) => r,
+        Err(grin_view::session::RenderFailure::Error(e)) => panic!("{e:#}"),
+        Err(grin_view::session::RenderFailure::Cancelled) => panic!("cancelled"),
+    }
+}
+
+/// Mean absolute beauty difference.
+fn beauty_diff(a: &Rendered, b: &Rendered) -> f64 {
+    assert_eq!(a.frame.pixels.len(), b.frame.pixels.len());
+    a.frame
+        .pixels
+        .iter()
+        .zip(&b.frame.pixels)
+        .map(|(p, q)| (0..3).map(|c| f64::from((p.rgb[c] - q.rgb[c]).abs())).sum::<f64>())
+        .sum::<f64>()
+        / a.frame.pixels.len() as f64
+}
+
+fn max_deflection(r: &Rendered) -> f32 {
+    r.frame
+        .pixels
+        .iter()
+        .map(|p| p.deflection_deg)
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn every_panel_setting_changes_the_next_frame_of_one_session() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = scene_file(dir.path(), SCENE);
+    let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
+    let mut s = Session::new(&ctx, &path, None).expect("session");
+    let mut base = ViewSettings::from_scene(s.scene());
+    base.max_spp = 1;
+    let r0 = render(&mut s, &base);
+    assert!(max_deflection(&r0) > 0.05, "{}", max_deflection(&r0));
+
+    // Integrator: rk4 spends 4 field evaluations a step, euler 1.
+    let mut v = base.clone();
+    v.integrator = IntegratorKind::Euler;
+    let r = render(&mut s, &v);
+    assert!(
+        r.evals_per_ray < 0.5 * r0.evals_per_ray,
+        "euler {} vs rk4 {} evals/ray",
+        r.evals_per_ray,
+        r0.evals_per_ray
+    );
+
+    // Step size: a quarter of the step, about 4x the steps in the medium.
+    let mut v = base.clone();
+    v.step = StepSpec::Fixed(0.005);
+    let r = render(&mut s, &v);
+    assert!(
+        r.steps_per_ray > 2.0 * r0.steps_per_ray,
+        "{} vs {}",
+        r.steps_per_ray,
+        r0.steps_per_ray
+    );
+
+    // Step policy: the accuracy knob renders, with other steps.
+    let mut v = base.clone();
+    v.step = StepKind::Auto.with_value(1e-3);
+    let r = render(&mut s, &v);
+    assert!(
+        (r.steps_per_ray - r0.steps_per_ray).abs() > 0.5,
+        "{}",
+        r.steps_per_ray
+    );
+    assert!(beauty_diff(&r, &r0) < 0.05, "same picture, other steps");
+
+    // Interpolation: the tricubic B-spline of the same grid bends rays differently.
+    let mut v = base.clone();
+    v.interpolation = Interpolation::Tricubic;
+    let r = render(&mut s, &v);
+    let d = r
+        .frame
+        .pixels
+        .iter()
+        .zip(&r0.frame.pixels)
+        .map(|(p, q)| (p.deflection_deg - q.deflection_deg).abs())
+        .fold(0.0f32, f32::max);
+    assert!(d > 1e-4, "tricubic deflection differs by {d}");
+
+    // Medium off: no deflection, no steps; on again: back.
+    let mut v = base.clone();
+    v.medium = false;
+    let r = render(&mut s, &v);
+    assert_eq!(max_deflection(&r), 0.0);
+    assert_eq!(r.steps_per_ray, 0.0);
+    let r = render(&mut s, &base);
+    assert!(max_deflection(&r) > 0.05);
+
+    // Time: the noise drifts.
+    let mut v = base.clone();
+    v.time = 1.0;
+    let r = render(&mut s, &v);
+    assert!(beauty_diff(&r, &r0) > 1e-3, "{}", beauty_diff(&r, &r0));
+
+    // Camera: another view, and the accumulation starts again.
+    let mut v = base.clone();
+    v.camera.orbit_degrees(20.0);
+    let r = render(&mut s, &v);
+    assert_eq!(r.samples, 1);
+    assert!(beauty_diff(&r, &r0) > 1e-2);
+
+    // spp: each frame adds its samples.
+    let mut v = base.clone();
+    v.spp = 3;
+    v.max_spp = 9;
+    let samples: Vec<u32> = (0..3).map(|_| render(&mut s, &v).samples).collect();
+    assert_eq!(samples, [3, 6, 9]);
+    assert!(!s.needs_frame(&v, W, H), "converged: nothing to add");
+
+    // The AOV shown is display only: no new frame, another picture.
+    let mut shown = v.clone();
+    shown.aov = Aov::Deflection;
+    assert!(!s.needs_frame(&shown, W, H));
+    let last = render(&mut s, &base);
+    let (beauty, _) = grin_view::display::rgba(&last.frame, Aov::Beauty);
+    let (defl, scale) = grin_view::display::rgba(&last.frame, Aov::Deflection);
+    assert_ne!(beauty, defl);
+    assert!((scale - max_deflection(&last)).abs() < 1e-6);
+
+    // Resolution scale: the internal image is the scaled one.
+    let mut v = base.clone();
+    v.resolution_scale = 0.5;
+    let req = Request {
+        settings: v.clone(),
+        width: W,
+        height: H,
+        moving: false,
+        reload: false,
+    };
+    let (w, h, _) = internal_size(&req, None);
+    assert_eq!((w, h), (W / 2, H / 2));
+    let r = s
+        .render(&v, w, h, &AtomicBool::new(false))
+        .unwrap_or_else(|_| panic!("half-size frame"));
+    assert_eq!((r.frame.width, r.frame.height), (W / 2, H / 2));
+}
+
+#[test]
+fn while_moving_the_resolution_drops_to_the_frame_budget() {
+    let mut v = ViewSettings::from_scene(&grin_scene::parse_scene(SCENE, Path::new("s.toml")).expect("scene"));
+    v.target_fps = 20.0;
+    let req = |moving| Request {
+        settings: v.clone(),
+        width: 800,
+        height: 400,
+        moving,
+        reload: false,
+    };
+    // 1 us per pixel-sample: the full frame takes 0.32 s, the budget is 0.05 s.
+    let (w, h, scale) = internal_size(&req(true), Some(1e-6));
+    assert!((scale - (0.05f64 / 0.32).sqrt()).abs() < 1e-9, "{scale}");
+    assert_eq!((w, h), ((800.0 * scale).round() as u32, (400.0 * scale).round() as u32));
+    // Still: the full resolution, whatever it costs.
+    assert_eq!(internal_size(&req(false), Some(1e-6)).2, 1.0);
+}
+
+#[test]
+fn reload_follows_the_file_and_keeps_the_last_good_scene() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = scene_file(dir.path(), SCENE);
+    let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
+    let mut s = Session::new(&ctx, &path, None).expect("session");
+    // One sample a frame, no accumulation: equal views render equal frames.
+    let mut v = ViewSettings::from_scene(s.scene());
+    v.max_spp = 1;
+    let r0 = render(&mut s, &v);
+
+    // Broken: an unknown key in the wall's material. The error names file, line and key; the last
+    // good scene still renders the same image.
+    let broken = SCENE.replace("scale = 0.2 }", "scale = 0.2, shine = 1 }");
+    std::fs::write(&path, &broken).expect("write");
+    let line = broken.lines().position(|l| l.contains("shine")).expect("line") + 1;
+    let e = format!("{:#}", s.reload().expect_err("a broken scene is refused"));
+    assert!(
+        e.contains(&format!("scene.toml:{line}:")) && e.contains("shine"),
+        "{e}"
+    );
+    let r = render(&mut s, &v);
+    assert!(beauty_diff(&r, &r0) < 1e-6);
+
+    // Valid again, with another wall colour: taken, and the picture follows; the user's
+    // own edits of settings the file did not change are kept.
+    let fixed = SCENE.replace("color_a = [0.9, 0.9, 0.85]", "color_a = [0.9, 0.2, 0.1]");
+    std::fs::write(&path, &fixed).expect("write");
+    let mut new_file = s.reload().expect("valid again");
+    new_file.max_spp = 1;
+    let mut edited = v.clone();
+    edited.aov = Aov::Steps;
+    edited.integrator = IntegratorKind::Sharma;
+    edited.rebase(&v, &new_file);
+    assert_eq!(edited.integrator, IntegratorKind::Sharma);
+    assert_eq!(edited.aov, Aov::Steps);
+    let r = render(&mut s, &v);
+    assert!(beauty_diff(&r, &r0) > 1e-2, "{}", beauty_diff(&r, &r0));
+
+    // A file change to the step is taken over the user's unchanged setting.
+    let stepped = fixed.replace("step = { fixed = 0.02 }", "step = { fixed = 0.05 }");
+    std::fs::write(&path, &stepped).expect("write");
+    let newer = s.reload().expect("valid");
+    let mut mine = new_file.clone();
+    mine.rebase(&new_file, &newer);
+    assert_eq!(mine.step, StepSpec::Fixed(0.05));
+}
