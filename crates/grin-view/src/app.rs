@@ -228,19 +228,32 @@ impl App {
                     }
                 }
                 Reply::Reloaded(Ok(new_file)) => {
+                    eprintln!(
+                        "grin view: reloaded {} (frame {})",
+                        self.opts.scene.display(),
+                        self.frames_seen
+                    );
                     self.settings.rebase(&self.file_settings, &new_file);
                     self.file_settings = new_file;
                     self.reload_error = None;
                     self.last_sent = None;
                 }
                 Reply::Reloaded(Err(e)) => {
+                    eprintln!(
+                        "grin view: {} not reloaded, the last good scene stays (frame {}): {e}",
+                        self.opts.scene.display(),
+                        self.frames_seen
+                    );
                     self.reload_error = Some(e);
                     self.last_sent = None;
                 }
                 Reply::Frame(f) => {
                     let now = Instant::now();
-                    self.first_frame_seconds
-                        .get_or_insert_with(|| self.start.elapsed().as_secs_f64());
+                    if self.first_frame_seconds.is_none() {
+                        let t = self.start.elapsed().as_secs_f64();
+                        self.first_frame_seconds = Some(t);
+                        eprintln!("grin view: first frame after {t:.2} s");
+                    }
                     self.stats.shown.push(now);
                     self.stats.gpu_ms.push(f.rendered.gpu_seconds * 1e3);
                     self.stats.rays_per_second.push(f.rendered.rays_per_second);

@@ -165,13 +165,14 @@ pub fn run(opts: ViewOptions) -> anyhow::Result<Option<ViewSummary>> {
     if opts.screenshot.is_some() && opts.frames.is_none() {
         bail!("--screenshot needs --frames N (the frame to write is the N-th)");
     }
+    // The user's input first, then the machine.
+    let scene = session::load(&opts.scene)?;
     let display = std::env::var_os("DISPLAY").filter(|d| !d.is_empty());
     if display.is_none() {
         bail!(
             "grin view needs an X11 display and DISPLAY is not set (on a machine without one, run it under Xvfb: xvfb-run -a grin view ...)"
         );
     }
-    let scene = session::load(&opts.scene)?;
     let cache = (!opts.no_cache)
         .then(grin_gpu::cache::BakeCache::user_default)
         .flatten();

@@ -60,7 +60,11 @@ fn beauty_diff(a: &Rendered, b: &Rendered) -> f64 {
         .pixels
         .iter()
         .zip(&b.frame.pixels)
-        .map(|(p, q)| (0..3).map(|c| f64::from((p.rgb[c] - q.rgb[c]).abs())).sum::<f64>())
+        .map(|(p, q)| {
+            (0..3)
+                .map(|c| f64::from((p.rgb[c] - q.rgb[c]).abs()))
+                .sum::<f64>()
+        })
         .sum::<f64>()
         / a.frame.pixels.len() as f64
 }
@@ -190,7 +194,9 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
 
 #[test]
 fn while_moving_the_resolution_drops_to_the_frame_budget() {
-    let mut v = ViewSettings::from_scene(&grin_scene::parse_scene(SCENE, Path::new("s.toml")).expect("scene"));
+    let mut v = ViewSettings::from_scene(
+        &grin_scene::parse_scene(SCENE, Path::new("s.toml")).expect("scene"),
+    );
     v.target_fps = 20.0;
     let req = |moving| Request {
         settings: v.clone(),
@@ -202,7 +208,13 @@ fn while_moving_the_resolution_drops_to_the_frame_budget() {
     // 1 us per pixel-sample: the full frame takes 0.32 s, the budget is 0.05 s.
     let (w, h, scale) = internal_size(&req(true), Some(1e-6));
     assert!((scale - (0.05f64 / 0.32).sqrt()).abs() < 1e-9, "{scale}");
-    assert_eq!((w, h), ((800.0 * scale).round() as u32, (400.0 * scale).round() as u32));
+    assert_eq!(
+        (w, h),
+        (
+            (800.0 * scale).round() as u32,
+            (400.0 * scale).round() as u32
+        )
+    );
     // Still: the full resolution, whatever it costs.
     assert_eq!(internal_size(&req(false), Some(1e-6)).2, 1.0);
 }
@@ -222,7 +234,11 @@ fn reload_follows_the_file_and_keeps_the_last_good_scene() {
     // good scene still renders the same image.
     let broken = SCENE.replace("scale = 0.2 }", "scale = 0.2, shine = 1 }");
     std::fs::write(&path, &broken).expect("write");
-    let line = broken.lines().position(|l| l.contains("shine")).expect("line") + 1;
+    let line = broken
+        .lines()
+        .position(|l| l.contains("shine"))
+        .expect("line")
+        + 1;
     let e = format!("{:#}", s.reload().expect_err("a broken scene is refused"));
     assert!(
         e.contains(&format!("scene.toml:{line}:")) && e.contains("shine"),
