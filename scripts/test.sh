@@ -5,5 +5,7 @@ cd "$(dirname "$0")/.."
 # Mesa's device-select layer probes for a Wayland display on every GPU device and prints
 # "XDG_RUNTIME_DIR is invalid" on a headless machine: harmless, and off with this.
 export NODEVICE_SELECT="${NODEVICE_SELECT:-1}"
+# The GPU bake cache of this run: its own, so tests neither read nor fill the user's.
+export GRIN_CACHE_DIR="${GRIN_CACHE_DIR:-$(mktemp -d)}"
 bash scripts/setup.sh
 cargo test --workspace --locked "$@"
