@@ -240,6 +240,8 @@ fn view_follows_edits_of_the_scene_file() {
     let broken = text.replacen("[camera]", "[camera]\nzoom = 3", 1);
     std::fs::write(&scene, &broken).expect("write broken scene");
     let refused = wait_for("not reloaded", &mut seen);
+    // Frames go on with the last good scene meanwhile.
+    std::thread::sleep(Duration::from_millis(1500));
     let valid = text.replacen("[camera]", "[camera]\n# edited", 1);
     std::fs::write(&scene, &valid).expect("write valid scene");
     let taken = wait_for("grin view: reloaded", &mut seen);

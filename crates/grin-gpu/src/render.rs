@@ -168,10 +168,17 @@ impl<'a> GpuRenderer<'a> {
                 })
             };
             let (pipeline, medium_pipeline) = if split {
-                (
-                    make(PASS_FIRST, "render_main"),
-                    Some(make(PASS_MEDIUM, "render_deferred")),
-                )
+                // The two passes' pipelines compile at once (lavapipe compiles each with
+                // LLVM on the calling thread: ~1-1.5 s apiece on this VM).
+                std::thread::scope(|scope| {
+                    let medium = scope.spawn(|| make(PASS_MEDIUM, "render_deferred"));
+                    let first = make(PASS_FIRST, "render_main");
+                    let medium = match medium.join() {
+                        Ok(p) => p,
+                        Err(_) => make(PASS_MEDIUM, "render_deferred"),
+                    };
+                    (first, Some(medium))
+                })
             } else {
                 (make(PASS_ALL, "render_main"), None)
             };

@@ -27,6 +27,10 @@ const PANEL_WIDTH: f32 = 300.0;
 const WATCH_PERIOD: Duration = Duration::from_millis(250);
 /// The camera counts as moving this long after its last change.
 const MOVING_FOR: Duration = Duration::from_millis(150);
+/// Shortest time between two window redraws: on lavapipe the window's own drawing runs
+/// on the cores that render, so it redraws only for a new frame, input or playing time,
+/// at most this often.
+const MIN_REDRAW: Duration = Duration::from_millis(33);
 
 struct Gfx {
     window: Arc<Window>,
@@ -80,6 +84,9 @@ pub(crate) struct App {
     pub(crate) summary: Option<ViewSummary>,
     frames_seen: u32,
     image_px: (u32, u32),
+    /// Something to show: a reply from the render thread, input, an egui animation.
+    dirty: bool,
+    last_redraw: Instant,
 }
 
 fn mtime(p: &std::path::Path) -> Option<SystemTime> {
@@ -130,6 +137,8 @@ impl App {
             summary: None,
             frames_seen: 0,
             image_px,
+            dirty: true,
+            last_redraw: Instant::now(),
             opts,
         }
     }
@@ -208,6 +217,7 @@ impl App {
     /// Take the render thread's replies.
     fn poll_worker(&mut self, el: &ActiveEventLoop) {
         while let Ok(reply) = self.worker.replies.try_recv() {
+            self.dirty = true;
             match reply {
                 Reply::Started {
                     adapter,
@@ -254,7 +264,6 @@ impl App {
                         self.first_frame_seconds = Some(t);
                         eprintln!("grin view: first frame after {t:.2} s");
                     }
-                    self.stats.shown.push(now);
                     self.stats.gpu_ms.push(f.rendered.gpu_seconds * 1e3);
                     self.stats.rays_per_second.push(f.rendered.rays_per_second);
                     if f.rendered.converged && self.converged_after.is_none() {
@@ -332,6 +341,12 @@ impl App {
         });
     }
 
+    /// The camera moved within MOVING_FOR (a headless orbit moves it every frame).
+    fn moving(&self) -> bool {
+        (self.headless() && self.opts.orbit_deg != 0.0)
+            || self.last_move.is_some_and(|t| t.elapsed() < MOVING_FOR)
+    }
+
     /// The image size in pixels: fixed (`--size`, headless) or the central area.
     fn request_view(&mut self, avail_px: (u32, u32)) {
         let (w, h) = if self.headless() || self.opts.size.is_some() {
@@ -343,7 +358,7 @@ impl App {
             return;
         }
         self.image_px = (w, h);
-        let moving = self.last_move.is_some_and(|t| t.elapsed() < MOVING_FOR);
+        let moving = self.moving();
         let key = (self.settings.clone(), w, h, moving);
         if self.last_sent.as_ref() == Some(&key) {
             return;
@@ -396,7 +411,8 @@ impl App {
         if self.fatal.is_some() || self.summary.is_some() {
             return;
         }
-        self.watch_scene();
+        self.dirty = false;
+        self.last_redraw = Instant::now();
         // Time plays in scene seconds.
         let dt = self.last_tick.elapsed().as_secs_f64();
         self.last_tick = Instant::now();
@@ -415,6 +431,13 @@ impl App {
         });
         g.egui
             .handle_platform_output(&g.window, std::mem::take(&mut out.platform_output));
+        if out
+            .viewport_output
+            .get(&egui::ViewportId::ROOT)
+            .is_some_and(|v| v.repaint_delay.is_zero())
+        {
+            self.dirty = true;
+        }
         self.request_view(avail);
         let prims = ctx.tessellate(std::mem::take(&mut out.shapes), out.pixels_per_point);
         let sd = egui_wgpu::ScreenDescriptor {
@@ -482,6 +505,10 @@ impl App {
         let id = (self.settings.aov, self.frames_seen as usize);
         if self.shown_aov == Some(id) {
             return;
+        }
+        if self.shown_aov.is_none_or(|(_, n)| n != id.1) {
+            // A new rendered frame reaches the screen (not an AOV switch).
+            self.stats.shown.push(Instant::now());
         }
         let frame = &f.rendered.frame;
         let (rgba, scale) = display::rgba(frame, self.settings.aov);
@@ -778,20 +805,30 @@ impl ApplicationHandler for App {
             WindowEvent::RedrawRequested => self.redraw(el),
             _ => {}
         }
-        if resp.repaint
-            && let Some(g) = &self.gfx
-        {
-            g.window.request_redraw();
+        if resp.repaint {
+            self.dirty = true;
         }
     }
 
     fn about_to_wait(&mut self, el: &ActiveEventLoop) {
-        // Frames from the render thread arrive on their own: keep polling, gently.
-        if let Some(g) = &self.gfx {
+        // Frames from the render thread arrive on their own: poll for them, the scene
+        // file and the clock, and redraw when there is something to show.
+        self.poll_worker(el);
+        if self.fatal.is_some() || self.summary.is_some() {
+            return;
+        }
+        self.watch_scene();
+        // The camera stopped since the last (moving) request: one redraw sends the still
+        // one.
+        let stopped = self.last_sent.as_ref().is_some_and(|l| l.3) && !self.moving();
+        if (self.dirty || self.settings.playing || stopped)
+            && self.last_redraw.elapsed() >= MIN_REDRAW
+            && let Some(g) = &self.gfx
+        {
             g.window.request_redraw();
         }
         el.set_control_flow(ControlFlow::WaitUntil(
-            Instant::now() + Duration::from_millis(8),
+            Instant::now() + Duration::from_millis(10),
         ));
     }
 }

@@ -42,6 +42,9 @@ struct FieldEntry {
     field: Arc<dyn IndexField>,
     /// `None`: the field is a baked file the renderer marches as it is.
     grid: Option<Arc<BakedField>>,
+    /// The grid marched while the camera moves: the same nodes trilinear where `grid` is
+    /// tricubic (8 texel reads a sample instead of 64), else `grid` itself.
+    preview: Option<Arc<BakedField>>,
     warnings: Vec<String>,
     cache: Option<CacheUse>,
 }
@@ -82,6 +85,8 @@ impl<E: Into<anyhow::Error>> From<E> for RenderFailure {
 struct Gpu<'a> {
     renderer: GpuRenderer<'a>,
     scene: RenderScene,
+    /// The grid it marches (`None`: the scene's own baked file, or no medium).
+    grid: Option<Arc<BakedField>>,
     /// The scene's objects, lights, sky and medium as JSON: what the renderer holds.
     static_key: String,
 }
@@ -103,7 +108,8 @@ pub struct Session<'a> {
     scene: Scene,
     cache: Option<BakeCache>,
     fields: VecDeque<FieldEntry>,
-    gpu: Option<Gpu<'a>>,
+    /// The renderers of still frames and of preview frames (while the camera moves).
+    gpus: [Option<Gpu<'a>>; 2],
     accum: Option<Accum>,
     /// Warnings about the current field (an under-resolved bake), for the panel.
     pub warnings: Vec<String>,
@@ -143,7 +149,7 @@ impl<'a> Session<'a> {
             scene,
             cache,
             fields: VecDeque::new(),
-            gpu: None,
+            gpus: [None, None],
             accum: None,
             warnings: Vec::new(),
             cache_use: None,
@@ -178,7 +184,7 @@ impl<'a> Session<'a> {
             self.remember(f);
         }
         self.scene = scene;
-        self.gpu = None;
+        self.gpus = [None, None];
         self.accum = None;
         Ok(ViewSettings::from_scene(&self.scene))
     }
@@ -194,15 +200,23 @@ impl<'a> Session<'a> {
     }
 
     /// Render one frame of `settings` at `width` x `height` (the internal resolution)
-    /// and accumulate it; `cancel` stops between bands of rows.
+    /// and accumulate it; `cancel` stops between bands of rows. A `preview` frame (the
+    /// camera is moving) has 1 sample a pixel and marches a tricubic grid's nodes
+    /// trilinear, on a renderer of its own, so starting and stopping costs no rebuild.
     pub fn render(
         &mut self,
         settings: &ViewSettings,
         width: u32,
         height: u32,
+        preview: bool,
         cancel: &AtomicBool,
     ) -> Result<Rendered, RenderFailure> {
         let setup = Instant::now();
+        let mut settings = settings.clone();
+        if preview {
+            settings.spp = 1;
+        }
+        let settings = &settings;
         let applied = settings.apply(&self.scene, width, height);
         let view = view_key(&applied, settings);
         let continuing = self
@@ -224,15 +238,15 @@ impl<'a> Session<'a> {
             settings.interpolation,
             settings.playing,
         ));
-        if self
-            .gpu
+        let slot = usize::from(preview);
+        if self.gpus[slot]
             .as_ref()
             .is_some_and(|g| g.static_key != static_key)
         {
-            self.gpu = None;
+            self.gpus[slot] = None;
         }
         let mut rebuilt = false;
-        if let Some(g) = &mut self.gpu {
+        if let Some(g) = &mut self.gpus[slot] {
             // Same objects and field: new camera and settings into the same renderer.
             let camera = PinholeCamera::new(&applied.camera, width, height)
                 .context("camera: the view is degenerate")?;
@@ -245,8 +259,7 @@ impl<'a> Session<'a> {
             g.scene.settings = applied.render.clone();
             if !g.renderer.retarget(&g.scene, first_sample, spp_total)? {
                 // Other pipelines (integrator, step policy, flags) or a bigger image.
-                let grid = self.fields.back().and_then(|f| f.grid.clone());
-                let mut renderer = GpuRenderer::new(self.ctx, &g.scene, grid.as_deref())?;
+                let mut renderer = GpuRenderer::new(self.ctx, &g.scene, g.grid.as_deref())?;
                 renderer.retarget(&g.scene, first_sample, spp_total)?;
                 g.renderer = renderer;
                 rebuilt = true;
@@ -254,6 +267,7 @@ impl<'a> Session<'a> {
         } else {
             let entry = self.field_for(&applied, settings.playing, settings.interpolation)?;
             let (field, grid) = match entry {
+                Some(e) if preview => (Some(e.field.clone()), e.preview.clone()),
                 Some(e) => (Some(e.field.clone()), e.grid.clone()),
                 None => (None, None),
             };
@@ -262,13 +276,16 @@ impl<'a> Session<'a> {
             let mut renderer = GpuRenderer::new(self.ctx, &scene, grid.as_deref())?;
             renderer.retarget(&scene, first_sample, spp_total)?;
             self.warnings.extend(renderer.warnings().iter().cloned());
-            self.field_grid = applied
-                .medium
-                .is_some()
-                .then(|| (renderer.field_dims(), renderer.field_bytes()));
-            self.gpu = Some(Gpu {
+            if !preview || self.field_grid.is_none() {
+                self.field_grid = applied
+                    .medium
+                    .is_some()
+                    .then(|| (renderer.field_dims(), renderer.field_bytes()));
+            }
+            self.gpus[slot] = Some(Gpu {
                 renderer,
                 scene,
+                grid,
                 static_key,
             });
             rebuilt = true;
@@ -278,7 +295,7 @@ impl<'a> Session<'a> {
         } else {
             0.0
         };
-        let Some(g) = &self.gpu else {
+        let Some(g) = &self.gpus[slot] else {
             return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
         };
         let start = Instant::now();
@@ -395,6 +412,7 @@ impl<'a> Session<'a> {
                 key,
                 field,
                 grid: None,
+                preview: None,
                 warnings: Vec::new(),
                 cache: None,
             }));
@@ -431,10 +449,16 @@ impl<'a> Session<'a> {
             Interpolation::Trilinear => grid,
             Interpolation::Tricubic => grid.with_interp(Interp::Tricubic),
         };
+        let grid = Arc::new(grid);
+        let preview = match grid.interp() {
+            Interp::Tricubic => Arc::new((*grid).clone().with_interp(Interp::Trilinear)),
+            Interp::Trilinear => grid.clone(),
+        };
         Ok(Some(FieldEntry {
             key,
             field,
-            grid: Some(Arc::new(grid)),
+            grid: Some(grid),
+            preview: Some(preview),
             warnings,
             cache,
         }))

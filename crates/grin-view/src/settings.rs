@@ -130,7 +130,7 @@ impl ViewSettings {
             time: scene_time(scene).unwrap_or(0.0),
             playing: false,
             speed: 1.0,
-            target_fps: 15.0,
+            target_fps: 20.0,
         }
     }
 

@@ -180,7 +180,7 @@ fn run(
         let (w, h, scale) = internal_size(req, cost);
         cancel.store(false, Ordering::Relaxed);
         let settings = req.settings.clone();
-        match session.render(&settings, w, h, &cancel) {
+        match session.render(&settings, w, h, req.moving, &cancel) {
             Ok(rendered) => {
                 let samples = f64::from(w) * f64::from(h) * f64::from(settings.spp.max(1));
                 let c = rendered.gpu_seconds / samples.max(1.0);

@@ -46,7 +46,7 @@ fn scene_file(dir: &Path, text: &str) -> PathBuf {
 }
 
 fn render(s: &mut Session, v: &ViewSettings) -> Rendered {
-    match s.render(v, W, H, &AtomicBool::new(false)) {
+    match s.render(v, W, H, false, &AtomicBool::new(false)) {
         Ok(r) => r,
         Err(grin_view::session::RenderFailure::Error(e)) => panic!("{e:#}"),
         Err(grin_view::session::RenderFailure::Cancelled) => panic!("cancelled"),
@@ -187,7 +187,7 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     let (w, h, _) = internal_size(&req, None);
     assert_eq!((w, h), (W / 2, H / 2));
     let r = s
-        .render(&v, w, h, &AtomicBool::new(false))
+        .render(&v, w, h, false, &AtomicBool::new(false))
         .unwrap_or_else(|_| panic!("half-size frame"));
     assert_eq!((r.frame.width, r.frame.height), (W / 2, H / 2));
 }
