@@ -747,3 +747,147 @@ fn an_installed_grin_still_isolates_a_crashing_vdb() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Four frames of a hot blob rising, written by OpenVDB's own Python API (half floats,
+/// voxel size 0.04, two grids), rendered as a sequence with `--frames` (on the CPU, which
+/// samples the VDB field itself: the GPU would bake each frame): each frame equals a
+/// single render of that frame's scene, a missing frame is named before anything is
+/// rendered, and a frame pattern without --frames is a clear error.
+#[test]
+fn a_vdb_sequence_renders_frame_by_frame() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let script = dir.path().join("make.py");
+    std::fs::write(
+        &script,
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+out = sys.argv[1]
+n = 24
+ax = (np.arange(n) - n / 2 + 0.5) * 0.04
+x, y, z = np.meshgrid(ax, ax, ax, indexing="ij")
+for frame in range(1, 5):
+    cy = -0.2 + 0.1 * frame
+    hot = -0.01 * np.exp(-(x**2 + (y - cy) ** 2 + z**2) / 0.12**2)
+    t = vdb.FloatGrid()
+    t.name = "delta_n"
+    t.copyFromArray(hot.astype(np.float32), ijk=(-12, -12, -12), tolerance=1e-4)
+    t.transform = vdb.createLinearTransform(voxelSize=0.04)
+    t.saveFloatAsHalf = True
+    d = vdb.FloatGrid()
+    d.name = "density"
+    d.copyFromArray((hot < -0.005).astype(np.float32), ijk=(-12, -12, -12), tolerance=0)
+    d.transform = vdb.createLinearTransform(voxelSize=0.04)
+    vdb.write(f"{out}/blob_{frame:04d}.vdb", grids=[d, t])
+"#,
+    )
+    .expect("script");
+    let made = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .expect("python3-openvdb (installed by scripts/setup.sh)");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let scene = |path: &str, name: &str| {
+        let text = format!(
+            r#"
+[camera]
+position = [0.0, 0.0, -2.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 30.0
+[[object]]
+shape = {{ plane = {{ point = [0.0, 0.0, 1.0], normal = [0.0, 0.0, -1.0] }} }}
+material = {{ checker = {{ color_a = [0.9, 0.9, 0.9], color_b = [0.1, 0.1, 0.1], scale = 0.05 }} }}
+[medium]
+bounds = {{ box = {{ min = [-0.45, -0.45, -0.45], max = [0.45, 0.45, 0.45] }} }}
+ambient_index = 1.0
+field = {{ kind = "vdb", path = "{path}", grid = "delta_n", map = {{ index = {{ delta = true }} }} }}
+[render]
+width = 40
+height = 30
+integrator = "rk4"
+step = {{ fixed = 0.01 }}
+jitter = false
+"#
+        );
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).expect("scene");
+        p
+    };
+    let seq = scene("blob_####.vdb", "seq.toml");
+    let out = dir.path().join("out.####.exr");
+    let o = grin()
+        .env("GRIN_CACHE_DIR", dir.path())
+        .args([
+            "render",
+            "--backend",
+            "cpu",
+            "--frames",
+            "1..4",
+            "--json",
+            "-o",
+        ])
+        .arg(&out)
+        .arg(&seq)
+        .output()
+        .expect("grin");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summaries: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(summaries.as_array().map(Vec::len), Some(4), "{summaries}");
+    for f in 1..=4 {
+        assert!(dir.path().join(format!("out.{f:04}.exr")).is_file());
+    }
+    // Frame 3 alone, from a scene naming its file: the same image.
+    let single = scene("blob_0003.vdb", "frame3.toml");
+    let o = grin()
+        .env("GRIN_CACHE_DIR", dir.path())
+        .args(["render", "--backend", "cpu", "--json", "-o"])
+        .arg(dir.path().join("single3.exr"))
+        .arg("--compare")
+        .arg(dir.path().join("out.0003.exr"))
+        .arg(&single)
+        .output()
+        .expect("grin");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(s["comparison"]["max"].as_f64(), Some(0.0), "{s}");
+    // The blob moved: frames 1 and 4 differ.
+    let o = grin()
+        .env("GRIN_CACHE_DIR", dir.path())
+        .args(["render", "--backend", "cpu", "--json", "-o"])
+        .arg(dir.path().join("single3b.exr"))
+        .arg("--compare")
+        .arg(dir.path().join("out.0001.exr"))
+        .arg(&single)
+        .output()
+        .expect("grin");
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert!(s["comparison"]["max"].as_f64().expect("max") > 1e-3, "{s}");
+
+    // A missing frame is named before anything is written.
+    std::fs::remove_file(dir.path().join("blob_0002.vdb")).expect("rm");
+    let out2 = dir.path().join("again.####.exr");
+    let o = grin()
+        .args(["render", "--backend", "cpu", "--frames", "1..4", "-o"])
+        .arg(&out2)
+        .arg(&seq)
+        .output()
+        .expect("grin");
+    fails_cleanly(&o, "frame 2:", None);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("blob_0002.vdb"));
+    assert!(!dir.path().join("again.0001.exr").exists());
+
+    // The pattern without --frames: what to do, not "no such file".
+    let o = grin()
+        .args(["render", "--backend", "cpu", "-o"])
+        .arg(dir.path().join("x.exr"))
+        .arg(&seq)
+        .output()
+        .expect("grin");
+    fails_cleanly(&o, "is a frame sequence", None);
+}

@@ -40,6 +40,24 @@ pub fn build_field_capped(
             message: format!("must be finite and > 0, got {ambient}"),
         });
     }
+    // A path with a frame token names a sequence, not a file: the caller picks the frame
+    // (`Scene::at_frame`).
+    let sequence_path = match &medium.field {
+        FieldSpec::Vdb(v) => Some(&v.path),
+        FieldSpec::Baked { path, .. } => Some(path),
+        _ => None,
+    };
+    if let Some(p) = sequence_path
+        && grin_scene::frames::has_frame_token(p)
+    {
+        return Err(FieldError::Param {
+            field: "medium.field".into(),
+            param: "path".into(),
+            message: format!(
+                "`{p}` is a frame sequence (it holds a frame token): render frames of it (`grin render --frames A..B`, or an [animation] with frames = [A, B])"
+            ),
+        });
+    }
     let field: Arc<dyn IndexField> = match &medium.field {
         FieldSpec::Uniform { n } => Arc::new(Uniform::new(bounds, ambient, *n)?),
         FieldSpec::LinearN2 { n0, k, axis } => {

@@ -14,7 +14,15 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     /// Set by wgpu's callbacks when the device is lost or an error escapes a scope.
     fault: Arc<Mutex<Option<String>>>,
+    /// Render pipelines compiled on this device, by their pipeline constants: a renderer
+    /// built again with the same constants (the next frame of a sequence, the viewer
+    /// switching back) reuses them instead of compiling (seconds on lavapipe).
+    pipelines: Mutex<std::collections::HashMap<String, RenderPipelines>>,
 }
+
+/// The render kernel's pipelines: the whole-frame (or first) pass and, when the frame is
+/// split, the medium pass. Both share one bind group layout.
+pub(crate) type RenderPipelines = (wgpu::ComputePipeline, Option<wgpu::ComputePipeline>);
 
 /// One line naming an adapter: `llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)`.
 pub fn describe_adapter(info: &wgpu::AdapterInfo) -> String {
@@ -101,7 +109,32 @@ impl GpuContext {
             queue,
             info,
             fault,
+            pipelines: Mutex::new(std::collections::HashMap::new()),
         })
+    }
+
+    /// The pipelines under `key`, compiled by `compile` the first time (and kept only
+    /// when it succeeds).
+    pub(crate) fn render_pipelines(
+        &self,
+        key: &str,
+        compile: impl FnOnce() -> Result<RenderPipelines, GpuError>,
+    ) -> Result<RenderPipelines, GpuError> {
+        if let Ok(map) = self.pipelines.lock()
+            && let Some(p) = map.get(key)
+        {
+            return Ok(p.clone());
+        }
+        let p = compile()?;
+        if let Ok(mut map) = self.pipelines.lock() {
+            map.insert(key.to_owned(), p.clone());
+        }
+        Ok(p)
+    }
+
+    /// Render pipelines compiled on this device so far.
+    pub fn pipelines_compiled(&self) -> usize {
+        self.pipelines.lock().map_or(0, |m| m.len())
     }
 
     /// `name (backend, device type)` of the adapter in use.

@@ -137,51 +137,61 @@ impl<'a> GpuRenderer<'a> {
         // march, PASS_MEDIUM over the pixels whose paths reach it), unless shadow rays
         // bend through the medium: then every diffuse surface's light needs the march.
         let split = scene.medium.is_some() && !s.bend_shadow_rays;
+        // Compiled once per device and set of pipeline constants (ctx keeps them).
+        let key = format!("split={split} {:?}", pipeline_constants(&params, PASS_ALL));
+        let (pipeline, medium_pipeline) = ctx.render_pipelines(&key, || {
+            ctx.scoped("compiling the render pipelines", || {
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("render.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(shaders::RENDER_WGSL.into()),
+                });
+                let layout_entries = render_layout_entries();
+                let bind_layout =
+                    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                        label: Some("render bindings"),
+                        entries: &layout_entries,
+                    });
+                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("render"),
+                    bind_group_layouts: &[Some(&bind_layout)],
+                    immediate_size: 0,
+                });
+                let make = |pass: u32, entry: &str| {
+                    let constants = pipeline_constants(&params, pass);
+                    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(&layout),
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: &constants,
+                            zero_initialize_workgroup_memory: false,
+                        },
+                        cache: None,
+                    })
+                };
+                let (pipeline, medium_pipeline) = if split {
+                    // The two passes' pipelines compile at once (lavapipe compiles each with
+                    // LLVM on the calling thread: ~1-1.5 s apiece on this VM).
+                    std::thread::scope(|scope| {
+                        let medium = scope.spawn(|| make(PASS_MEDIUM, "render_deferred"));
+                        let first = make(PASS_FIRST, "render_main");
+                        let medium = match medium.join() {
+                            Ok(p) => p,
+                            Err(_) => make(PASS_MEDIUM, "render_deferred"),
+                        };
+                        (first, Some(medium))
+                    })
+                } else {
+                    (make(PASS_ALL, "render_main"), None)
+                };
+                (pipeline, medium_pipeline)
+            })
+        })?;
         ctx.scoped("creating the render pipeline", || {
             use wgpu::util::DeviceExt;
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("render.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(shaders::RENDER_WGSL.into()),
-            });
-            let layout_entries = render_layout_entries();
-            let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("render bindings"),
-                entries: &layout_entries,
-            });
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("render"),
-                bind_group_layouts: &[Some(&bind_layout)],
-                immediate_size: 0,
-            });
-            let make = |pass: u32, entry: &str| {
-                let constants = pipeline_constants(&params, pass);
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: Some(&layout),
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        zero_initialize_workgroup_memory: false,
-                    },
-                    cache: None,
-                })
-            };
-            let (pipeline, medium_pipeline) = if split {
-                // The two passes' pipelines compile at once (lavapipe compiles each with
-                // LLVM on the calling thread: ~1-1.5 s apiece on this VM).
-                std::thread::scope(|scope| {
-                    let medium = scope.spawn(|| make(PASS_MEDIUM, "render_deferred"));
-                    let first = make(PASS_FIRST, "render_main");
-                    let medium = match medium.join() {
-                        Ok(p) => p,
-                        Err(_) => make(PASS_MEDIUM, "render_deferred"),
-                    };
-                    (first, Some(medium))
-                })
-            } else {
-                (make(PASS_ALL, "render_main"), None)
-            };
+            // The layout the pipelines were compiled with (one for both passes).
+            let bind_layout = pipeline.get_bind_group_layout(0);
             let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("frame params"),
                 size: std::mem::size_of::<FrameParams>() as u64,

@@ -558,3 +558,40 @@ fn adaptive_steps_at_a_tolerance_below_f32_roundoff_do_not_stall() {
     );
     harness::assert_images_agree("adaptive-1e-10", &cpu, &gpu, MEAN_TOL, P99_TOL);
 }
+
+/// Pipelines are compiled once per device and set of pipeline constants: a second
+/// renderer of the same scene (the next frame of a sequence, the viewer building again)
+/// compiles nothing and renders the same image; another integrator compiles its own.
+#[test]
+fn renderers_with_the_same_constants_share_compiled_pipelines() {
+    let Some(ctx) = harness::context("renderers_with_the_same_constants_share_compiled_pipelines")
+    else {
+        return;
+    };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes");
+    let mut scene = load_scene(&dir.join("luneburg.toml")).expect("scene");
+    scene.render.width = 32;
+    scene.render.height = 18;
+    let baked = harness::baked(&scene, &dir, 32).expect("medium");
+    let field: std::sync::Arc<dyn grin_field::IndexField> = baked.clone();
+    let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field.clone())).expect("rs");
+    let render = |rs: &grin_trace::render::RenderScene| {
+        let r = grin_gpu::GpuRenderer::new(&ctx, rs, Some(&baked)).expect("renderer");
+        r.render(&|_| {}, &std::sync::atomic::AtomicBool::new(false))
+            .expect("frame")
+    };
+    let a = render(&rs);
+    assert_eq!(ctx.pipelines_compiled(), 1);
+    let b = render(&rs);
+    assert_eq!(
+        ctx.pipelines_compiled(),
+        1,
+        "the second renderer compiled again"
+    );
+    assert_eq!(a, b);
+    scene.render.integrator = IntegratorKind::Rk4;
+    let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field)).expect("rs");
+    let c = render(&rs);
+    assert_eq!(ctx.pipelines_compiled(), 2);
+    assert_eq!((c.width, c.height), (32, 18));
+}

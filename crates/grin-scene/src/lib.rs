@@ -4,6 +4,7 @@
 
 mod de;
 mod error;
+pub mod frames;
 mod load;
 mod span;
 #[cfg(test)]

@@ -21,6 +21,23 @@ pub struct Scene {
     pub sky: Sky,
     #[serde(default)]
     pub render: RenderSettings,
+    /// A frame range and rate: the medium's path may hold a frame token (`####`,
+    /// `%04d`, `$F4`), and noise / `expr` time follows the frame (`t + frame / fps`).
+    #[serde(default)]
+    pub animation: Option<Animation>,
+}
+
+/// `[animation]`: `frames = [first, last]` (inclusive) at `fps` frames per second.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Animation {
+    pub frames: [i64; 2],
+    #[serde(default = "default_fps")]
+    pub fps: f64,
+}
+
+fn default_fps() -> f64 {
+    24.0
 }
 
 /// Pinhole camera.

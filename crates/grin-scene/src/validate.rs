@@ -153,6 +153,25 @@ pub(crate) fn validate(scene: &Scene) -> Check {
         light(&format!("light[{i}]"), l)?;
     }
     sky(&scene.sky)?;
+    if let Some(a) = &scene.animation {
+        positive("animation.fps", a.fps)?;
+        let [first, last] = a.frames;
+        if last < first {
+            return fail(
+                "animation.frames",
+                format!("[{first}, {last}] ends before it starts"),
+            );
+        }
+        if last - first >= crate::frames::MAX_FRAMES {
+            return fail(
+                "animation.frames",
+                format!(
+                    "[{first}, {last}] has more than {} frames",
+                    crate::frames::MAX_FRAMES
+                ),
+            );
+        }
+    }
     render(&scene.render)
 }
 

@@ -67,6 +67,8 @@ pub(crate) struct App {
     /// The scene file's own settings (to rebase the user's edits on reload).
     file_settings: ViewSettings,
     animated: bool,
+    /// The scene's [animation] when its medium is a file sequence.
+    animation: Option<grin_scene::Animation>,
     last_sent: Option<(ViewSettings, u32, u32, bool)>,
     last_move: Option<Instant>,
     frame: Option<Box<FrameReply>>,
@@ -119,6 +121,7 @@ impl App {
             first_frame_seconds: None,
             file_settings: ViewSettings::from_scene(scene),
             animated: ViewSettings::animated(scene),
+            animation: scene.animation.filter(|_| scene.is_sequence()),
             settings,
             last_sent: None,
             last_move: None,
@@ -418,6 +421,12 @@ impl App {
         self.last_tick = Instant::now();
         if self.settings.playing {
             self.settings.time += dt * self.settings.speed;
+            // A sequence plays in a loop.
+            if let Some(a) = self.animation
+                && self.settings.time * a.fps > a.frames[1] as f64 + 0.5
+            {
+                self.settings.time = a.frames[0] as f64 / a.fps;
+            }
         }
         let Some(mut g) = self.gfx.take() else { return };
         self.stats.ui_start.get_or_insert_with(Instant::now);
@@ -733,14 +742,21 @@ impl App {
                 .text("step / tolerance"),
         );
         s.step = kind.with_value(value);
+        let interp_name = |i: Option<Interpolation>| match i {
+            None => "as baked",
+            Some(Interpolation::Trilinear) => "trilinear",
+            Some(Interpolation::Tricubic) => "tricubic",
+        };
         egui::ComboBox::from_label("interpolation")
-            .selected_text(match s.interpolation {
-                Interpolation::Trilinear => "trilinear",
-                Interpolation::Tricubic => "tricubic",
-            })
+            .selected_text(interp_name(s.interpolation))
             .show_ui(ui, |ui| {
-                ui.selectable_value(&mut s.interpolation, Interpolation::Trilinear, "trilinear");
-                ui.selectable_value(&mut s.interpolation, Interpolation::Tricubic, "tricubic");
+                for i in [
+                    None,
+                    Some(Interpolation::Trilinear),
+                    Some(Interpolation::Tricubic),
+                ] {
+                    ui.selectable_value(&mut s.interpolation, i, interp_name(i));
+                }
             });
         egui::ComboBox::from_label("shown")
             .selected_text(s.aov.name())
@@ -769,7 +785,16 @@ impl App {
                 }
                 ui.add(egui::Slider::new(&mut s.speed, 0.0..=10.0).text("speed"));
             });
-            ui.add(egui::Slider::new(&mut s.time, 0.0..=60.0).text("time (s)"));
+            match self.animation {
+                Some(a) => {
+                    let mut frame = s.sequence_frame(&a);
+                    ui.add(egui::Slider::new(&mut frame, a.frames[0]..=a.frames[1]).text("frame"));
+                    s.time = frame as f64 / a.fps;
+                }
+                None => {
+                    ui.add(egui::Slider::new(&mut s.time, 0.0..=60.0).text("time (s)"));
+                }
+            }
         }
         if ui.button("reset camera (R)").clicked() {
             s.camera = self.file_settings.camera.clone();

@@ -157,7 +157,7 @@ impl<'a> Session<'a> {
         };
         // Build the field now, so a scene whose medium cannot be built fails here.
         let applied = ViewSettings::from_scene(&s.scene).apply(&s.scene, 1, 1);
-        s.field_for(&applied, false, Interpolation::Trilinear)?;
+        s.field_for(&applied, false, None)?;
         Ok(s)
     }
 
@@ -177,7 +177,7 @@ impl<'a> Session<'a> {
         let scene = load(&self.path)?;
         let applied = ViewSettings::from_scene(&scene).apply(&scene, 1, 1);
         // The medium must build (a VDB that exists, n > 0) before the scene is taken.
-        let field = self.build_entry(&applied, false, Interpolation::Trilinear)?;
+        let field = self.build_entry(&applied, false, None)?;
         RenderScene::new(&applied, &self.dir, field.as_ref().map(|f| f.field.clone()))
             .with_context(|| self.path.display().to_string())?;
         if let Some(f) = field {
@@ -367,7 +367,7 @@ impl<'a> Session<'a> {
         &mut self,
         applied: &Scene,
         playing: bool,
-        interp: Interpolation,
+        interp: Option<Interpolation>,
     ) -> anyhow::Result<Option<&FieldEntry>> {
         let key = json(&(&applied.medium, interp, playing));
         if applied.medium.is_none() {
@@ -399,7 +399,7 @@ impl<'a> Session<'a> {
         &self,
         applied: &Scene,
         playing: bool,
-        interp: Interpolation,
+        interp: Option<Interpolation>,
     ) -> anyhow::Result<Option<FieldEntry>> {
         let Some(spec) = &applied.medium else {
             return Ok(None);
@@ -446,8 +446,9 @@ impl<'a> Session<'a> {
             (g, w, Some(used))
         };
         let grid = match interp {
-            Interpolation::Trilinear => grid,
-            Interpolation::Tricubic => grid.with_interp(Interp::Tricubic),
+            None => grid,
+            Some(Interpolation::Trilinear) => grid.with_interp(Interp::Trilinear),
+            Some(Interpolation::Tricubic) => grid.with_interp(Interp::Tricubic),
         };
         let grid = Arc::new(grid);
         let preview = match grid.interp() {

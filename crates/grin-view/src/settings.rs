@@ -89,7 +89,9 @@ pub struct ViewSettings {
     pub camera: OrbitCamera,
     pub integrator: IntegratorKind,
     pub step: StepSpec,
-    pub interpolation: Interpolation,
+    /// How the field's grid is sampled: `None` as baked (the GPU bake picks tricubic where
+    /// trilinear misses the error budget; a baked file's own or the scene's choice).
+    pub interpolation: Option<Interpolation>,
     pub aov: Aov,
     /// Internal resolution as a fraction of the window's image area (per side).
     pub resolution_scale: f64,
@@ -116,18 +118,18 @@ impl ViewSettings {
             integrator: scene.render.integrator,
             step: scene.render.step,
             interpolation: match &scene.medium.as_ref().map(|m| &m.field) {
-                Some(FieldSpec::Baked {
-                    interpolation: Some(i),
-                    ..
-                }) => *i,
-                _ => Interpolation::Trilinear,
+                Some(FieldSpec::Baked { interpolation, .. }) => *interpolation,
+                _ => None,
             },
             aov: Aov::Beauty,
             resolution_scale: 1.0,
             spp: scene.render.spp,
             max_spp: (scene.render.spp * 16).max(64),
             medium: scene.medium.is_some(),
-            time: scene_time(scene).unwrap_or(0.0),
+            time: match (scene.is_sequence(), scene.animation) {
+                (true, Some(a)) => a.frames[0] as f64 / a.fps,
+                _ => scene_time(scene).unwrap_or(0.0),
+            },
             playing: false,
             speed: 1.0,
             target_fps: 20.0,
@@ -143,6 +145,11 @@ impl ViewSettings {
         s.render.integrator = self.integrator;
         s.render.step = self.step;
         s.render.spp = self.spp.max(1);
+        // A file per frame: the frame at this time (frame = time x fps, within the
+        // [animation] range).
+        if let (true, Some(a)) = (scene.is_sequence(), scene.animation) {
+            s = s.at_frame(self.sequence_frame(&a), a.fps);
+        }
         if !self.medium {
             s.medium = None;
         }
@@ -150,7 +157,9 @@ impl ViewSettings {
             match &mut m.field {
                 FieldSpec::Noise(n) => n.t = self.time,
                 FieldSpec::Expr { t, .. } => *t = self.time,
-                FieldSpec::Baked { interpolation, .. } => *interpolation = Some(self.interpolation),
+                FieldSpec::Baked { interpolation, .. } => {
+                    *interpolation = self.interpolation.or(*interpolation)
+                }
                 _ => {}
             }
         }
@@ -187,8 +196,17 @@ impl ViewSettings {
         );
     }
 
-    /// Whether the scene's medium changes with time (noise with a drift, an `expr` in t).
+    /// The frame of a sequence shown at this time.
+    pub fn sequence_frame(&self, a: &grin_scene::Animation) -> i64 {
+        ((self.time * a.fps).round() as i64).clamp(a.frames[0], a.frames[1])
+    }
+
+    /// Whether the scene's medium changes with time (noise with a drift, an `expr` in t,
+    /// a VDB sequence).
     pub fn animated(scene: &Scene) -> bool {
+        if scene.is_sequence() && scene.animation.is_some() {
+            return true;
+        }
         match scene.medium.as_ref().map(|m| &m.field) {
             Some(FieldSpec::Noise(n)) => n.drift.iter().any(|&d| d != 0.0),
             Some(FieldSpec::Expr { n, .. }) => n

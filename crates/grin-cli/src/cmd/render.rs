@@ -56,6 +56,15 @@ pub struct Args {
     /// (and do not store it there).
     #[arg(long)]
     pub no_cache: bool,
+    /// Render frames A..B (inclusive) of the scene's sequence: the medium's path may hold a
+    /// frame token (`####`, `%04d`, `$F4`) and noise / expr time is t + frame / fps. The
+    /// output must hold a frame token too (`-o out.####.exr`). The GPU device and its
+    /// compiled pipelines are kept from frame to frame.
+    #[arg(long, value_name = "A..B", value_parser = grin_scene::frames::parse_frame_range)]
+    pub frames: Option<(i64, i64)>,
+    /// Frames per second of the sequence (default: the scene's [animation] fps, else 24).
+    #[arg(long)]
+    pub fps: Option<f64>,
 }
 
 /// Largest accepted image side: keeps `width * height * spp` and the frame buffer sane.
@@ -161,8 +170,6 @@ fn progress_bar(rows: u32) -> ProgressBar {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    // Everything that can be wrong with the input fails here, before any GPU work.
-    let png = check_output(&args.output)?;
     let mut scene = grin_scene::load_scene(&args.scene)?;
     if let Some((w, h)) = args.size {
         scene.render.width = w;
@@ -171,6 +178,94 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(spp) = args.spp {
         scene.render.spp = spp;
     }
+    let fps = args.fps.unwrap_or_else(|| scene.fps());
+    if !(fps.is_finite() && fps > 0.0) {
+        bail!("--fps must be a positive number of frames per second, got {fps}");
+    }
+    let Some((first, last)) = args.frames else {
+        if grin_scene::frames::has_frame_token(&args.output.to_string_lossy()) {
+            bail!(
+                "{}: the output holds a frame token but no --frames A..B was given",
+                args.output.display()
+            );
+        }
+        // A scene with an [animation] renders its first frame.
+        let scene = match scene.animation {
+            Some(a) => scene.at_frame(a.frames[0], fps),
+            None => scene,
+        };
+        let (summary, to_stream) = render_one(&args, scene, &args.output, None)?;
+        return print_summary(&summary, args.json, to_stream);
+    };
+    let pattern = args.output.to_string_lossy().into_owned();
+    if !grin_scene::frames::has_frame_token(&pattern) {
+        bail!(
+            "{}: with --frames the output needs a frame token, e.g. out.####.exr",
+            args.output.display()
+        );
+    }
+    if args.compare.is_some() {
+        bail!("--compare compares one frame: render the frame alone to compare it");
+    }
+    // Every frame's file must be there before any frame is rendered.
+    let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
+    let mut missing = Vec::new();
+    for f in first..=last {
+        let s = scene.at_frame(f, fps);
+        let file = match s.medium.as_ref().map(|m| &m.field) {
+            Some(grin_scene::FieldSpec::Vdb(v)) if scene.is_sequence() => Some(v.path.clone()),
+            Some(grin_scene::FieldSpec::Baked { path, .. }) if scene.is_sequence() => {
+                Some(path.clone())
+            }
+            _ => None,
+        };
+        if let Some(file) = file
+            && !scene_dir.join(&file).is_file()
+        {
+            missing.push(format!("frame {f}: {}", scene_dir.join(&file).display()));
+        }
+    }
+    if !missing.is_empty() {
+        bail!(
+            "{}: {} of frames {first}..{last} missing: {}",
+            args.scene.display(),
+            missing.len(),
+            missing.join(", ")
+        );
+    }
+    let ctx = match args.backend {
+        Backend::Gpu => Some(grin_gpu::GpuContext::new_headless()?),
+        Backend::Cpu => None,
+    };
+    let mut summaries = Vec::new();
+    for f in first..=last {
+        let out = PathBuf::from(
+            grin_scene::frames::substitute_frame(&pattern, f).unwrap_or_else(|| pattern.clone()),
+        );
+        let (summary, to_stream) = render_one(&args, scene.at_frame(f, fps), &out, ctx.as_ref())
+            .with_context(|| format!("frame {f}"))?;
+        if !args.json {
+            print_summary(&summary, false, to_stream)?;
+        }
+        summaries.push(summary);
+    }
+    if args.json {
+        outln!("{}", serde_json::to_string_pretty(&summaries)?);
+    }
+    Ok(())
+}
+
+/// Render `scene` (the scene file's, sized, at its frame) to `output`; `gpu`: a device
+/// to reuse (sequences), else one is made. Returns the summary and whether the EXR went
+/// to a stream.
+fn render_one(
+    args: &Args,
+    scene: grin_scene::Scene,
+    output: &Path,
+    gpu: Option<&grin_gpu::GpuContext>,
+) -> anyhow::Result<(Summary, bool)> {
+    // Everything that can be wrong with the input fails here, before any GPU work.
+    let png = check_output(output)?;
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
     let field = scene
         .medium
@@ -215,7 +310,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             (frame, adapter, start.elapsed().as_secs_f64())
         }
         Backend::Gpu => {
-            let ctx = grin_gpu::GpuContext::new_headless()?;
+            let owned;
+            let ctx = match gpu {
+                Some(c) => c,
+                None => {
+                    owned = grin_gpu::GpuContext::new_headless()?;
+                    &owned
+                }
+            };
             let cache = (!args.no_cache)
                 .then(grin_gpu::cache::BakeCache::user_default)
                 .flatten();
@@ -225,7 +327,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 scene_dir,
                 cache.as_ref(),
             )?;
-            let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, field.as_ref().map(|f| &f.0))?;
+            let renderer = grin_gpu::GpuRenderer::new(ctx, &rs, field.as_ref().map(|f| &f.0))?;
             if let Some((_, field_warnings, used)) = &field {
                 bake_cache = Some(*used);
                 for w in field_warnings {
@@ -255,7 +357,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The EXR, its PNG preview and the --compare difference image are staged, then put
     // in place together: a failure or a signal leaves the previous set as it was.
     let exr_to_stream = png.is_none();
-    let mut staged = vec![frame.stage_exr(&args.output)?];
+    let mut staged = vec![frame.stage_exr(output)?];
     match &png {
         Some(png) => staged.push(frame.stage_png(png)?),
         None => eprintln!(
@@ -266,9 +368,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let comparison = match &reference {
         Some(r) => {
             let (stats, diff) = diff_frames(&frame, r).context("--compare: sizes differ")?;
-            let diff_png = args.output.with_file_name(format!(
+            let diff_png = output.with_file_name(format!(
                 "{}-difference.png",
-                args.output
+                output
                     .file_stem()
                     .map_or_else(|| "out".into(), |s| s.to_string_lossy())
             ));
@@ -305,7 +407,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         evals_per_ray: mean(|p| p.evals),
         status_counts: status_counts(&frame),
         comparison,
-        exr: args.output.clone(),
+        exr: output.to_owned(),
         png,
         warnings,
         bake_cache,
@@ -320,6 +422,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("grin: warning: {w}");
         summary.warnings.push(w);
     }
+    Ok((summary, exr_to_stream))
+}
+
+/// Print a frame's summary (JSON or a few lines).
+fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::Result<()> {
     // Where the EXR itself went to a stream (it may be stdout), the summary goes to stderr.
     let report = |text: String| {
         if exr_to_stream {
@@ -328,8 +435,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             outln!("{text}");
         }
     };
-    if args.json {
-        report(serde_json::to_string_pretty(&summary)?);
+    if json {
+        report(serde_json::to_string_pretty(summary)?);
     } else {
         let wrote = match &summary.png {
             Some(png) => format!("{} and {}", summary.exr.display(), png.display()),

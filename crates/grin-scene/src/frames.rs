@@ -1,0 +1,190 @@
+//! Frame sequences: frame tokens in file paths (`fluid_####.vdb`, `fluid_%04d.vdb`,
+//! `fluid_$F4.vdb`) and the scene of one frame ([`Scene::at_frame`]).
+
+use crate::{FieldSpec, Scene};
+
+/// Most frames one `[animation]` range may hold.
+pub const MAX_FRAMES: i64 = 100_000;
+
+/// The first frame token in `s`: its byte range and zero-padded width. Tokens: a run of
+/// `#` (width = its length), `%d` / `%0Nd` (width N, 1 for `%d`), `$F` / `$FN` (Houdini;
+/// width N, 1 for `$F`).
+fn find_token(s: &str) -> Option<(usize, usize, usize)> {
+    let b = s.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        match b[i] {
+            b'#' => {
+                let start = i;
+                while i < b.len() && b[i] == b'#' {
+                    i += 1;
+                }
+                return Some((start, i, i - start));
+            }
+            b'%' => {
+                let mut j = i + 1;
+                let digits_start = j;
+                while j < b.len() && b[j].is_ascii_digit() {
+                    j += 1;
+                }
+                if j < b.len() && b[j] == b'd' {
+                    let width = s[digits_start..j].parse::<usize>().unwrap_or(1).clamp(1, 9);
+                    return Some((i, j + 1, width));
+                }
+            }
+            b'$' if b.get(i + 1) == Some(&b'F') => {
+                let mut j = i + 2;
+                let digits_start = j;
+                while j < b.len() && b[j].is_ascii_digit() {
+                    j += 1;
+                }
+                let width = s[digits_start..j].parse::<usize>().unwrap_or(1).clamp(1, 9);
+                return Some((i, j, width));
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
+}
+
+/// Whether `s` holds a frame token.
+pub fn has_frame_token(s: &str) -> bool {
+    find_token(s).is_some()
+}
+
+/// `s` with every frame token replaced by `frame`, zero-padded to the token's width;
+/// `None` when `s` has no token.
+pub fn substitute_frame(s: &str, frame: i64) -> Option<String> {
+    let mut rest = s;
+    let mut out = String::new();
+    let mut any = false;
+    while let Some((a, b, width)) = find_token(rest) {
+        any = true;
+        out.push_str(&rest[..a]);
+        out.push_str(&format!("{frame:0width$}"));
+        rest = &rest[b..];
+    }
+    any.then(|| out + rest)
+}
+
+/// `A..B` (inclusive) or a single `A`.
+pub fn parse_frame_range(s: &str) -> Result<(i64, i64), String> {
+    let bad = || format!("`{s}` is not a frame range (A..B, e.g. 1..24, or one frame)");
+    let (a, b) = match s.split_once("..") {
+        Some((a, b)) => (a.trim(), b.trim().trim_start_matches('=')),
+        None => (s.trim(), s.trim()),
+    };
+    let a: i64 = a.parse().map_err(|_| bad())?;
+    let b: i64 = b.parse().map_err(|_| bad())?;
+    if b < a {
+        return Err(format!("frame range {a}..{b} ends before it starts"));
+    }
+    if b - a >= MAX_FRAMES {
+        return Err(format!(
+            "frame range {a}..{b} has {} frames; at most {MAX_FRAMES}",
+            b - a + 1
+        ));
+    }
+    Ok((a, b))
+}
+
+impl Scene {
+    /// Frames per second of the scene's animation (24 without `[animation]`).
+    pub fn fps(&self) -> f64 {
+        self.animation.as_ref().map_or(24.0, |a| a.fps)
+    }
+
+    /// Whether the medium reads a file per frame (a frame token in its path).
+    pub fn is_sequence(&self) -> bool {
+        match self.medium.as_ref().map(|m| &m.field) {
+            Some(FieldSpec::Vdb(v)) => has_frame_token(&v.path),
+            Some(FieldSpec::Baked { path, .. }) => has_frame_token(path),
+            _ => false,
+        }
+    }
+
+    /// The scene of frame `frame` at `fps`: the frame's file where the medium's path has
+    /// a frame token, and noise / `expr` time `t + frame / fps`.
+    pub fn at_frame(&self, frame: i64, fps: f64) -> Scene {
+        let mut s = self.clone();
+        if let Some(m) = &mut s.medium {
+            let dt = frame as f64 / fps;
+            match &mut m.field {
+                FieldSpec::Vdb(v) => {
+                    if let Some(p) = substitute_frame(&v.path, frame) {
+                        v.path = p;
+                    }
+                }
+                FieldSpec::Baked { path, .. } => {
+                    if let Some(p) = substitute_frame(path, frame) {
+                        *path = p;
+                    }
+                }
+                FieldSpec::Noise(n) => n.t += dt,
+                FieldSpec::Expr { t, .. } => *t += dt,
+                _ => {}
+            }
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_token_style_is_replaced_zero_padded() {
+        assert_eq!(
+            substitute_frame("fluid_####.vdb", 7).as_deref(),
+            Some("fluid_0007.vdb")
+        );
+        assert_eq!(
+            substitute_frame("fluid_#.vdb", 12).as_deref(),
+            Some("fluid_12.vdb")
+        );
+        assert_eq!(
+            substitute_frame("f_%04d.vdb", 3).as_deref(),
+            Some("f_0003.vdb")
+        );
+        assert_eq!(substitute_frame("f_%d.vdb", 3).as_deref(), Some("f_3.vdb"));
+        assert_eq!(
+            substitute_frame("f.$F4.vdb", 42).as_deref(),
+            Some("f.0042.vdb")
+        );
+        assert_eq!(
+            substitute_frame("f.$F.vdb", 42).as_deref(),
+            Some("f.42.vdb")
+        );
+        assert_eq!(
+            substitute_frame("a_##/b_##.vdb", 5).as_deref(),
+            Some("a_05/b_05.vdb")
+        );
+        assert_eq!(substitute_frame("plain.vdb", 5), None);
+        assert_eq!(substitute_frame("100%.vdb", 5), None);
+        assert!(!has_frame_token("$HOME/x.vdb"));
+    }
+
+    #[test]
+    fn frame_ranges_parse_and_refuse_nonsense() {
+        assert_eq!(parse_frame_range("1..4"), Ok((1, 4)));
+        assert_eq!(parse_frame_range("1..=4"), Ok((1, 4)));
+        assert_eq!(parse_frame_range("7"), Ok((7, 7)));
+        assert!(
+            parse_frame_range("4..1")
+                .expect_err("refused")
+                .contains("ends before")
+        );
+        assert!(
+            parse_frame_range("a..b")
+                .expect_err("refused")
+                .contains("not a frame range")
+        );
+        assert!(
+            parse_frame_range("0..100000")
+                .expect_err("refused")
+                .contains("at most")
+        );
+    }
+}
