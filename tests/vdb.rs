@@ -869,8 +869,39 @@ jitter = false
     let s: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert!(s["comparison"]["max"].as_f64().expect("max") > 1e-3, "{s}");
 
+    // `grin bake` of the sequence: one file a frame, each the frame's field.
+    let o = grin()
+        .args([
+            "bake",
+            "--frames",
+            "2..3",
+            "--resolution",
+            "24",
+            "--error",
+            "0.5",
+            "--json",
+            "-o",
+        ])
+        .arg(dir.path().join("field.####.grinf"))
+        .arg(&seq)
+        .output()
+        .expect("grin");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let baked: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(baked.as_array().map(Vec::len), Some(2), "{baked}");
+    let bytes = |f: &str| std::fs::read(dir.path().join(f)).expect("baked file");
+    assert_ne!(bytes("field.0002.grinf"), bytes("field.0003.grinf"));
+
     // A missing frame is named before anything is written.
     std::fs::remove_file(dir.path().join("blob_0002.vdb")).expect("rm");
+    let o = grin()
+        .args(["bake", "--frames", "1..3", "-o"])
+        .arg(dir.path().join("again.####.grinf"))
+        .arg(&seq)
+        .output()
+        .expect("grin");
+    fails_cleanly(&o, "frame 2:", None);
+    assert!(!dir.path().join("again.0001.grinf").exists());
     let out2 = dir.path().join("again.####.exr");
     let o = grin()
         .args(["render", "--backend", "cpu", "--frames", "1..4", "-o"])

@@ -130,6 +130,32 @@ impl Scene {
     }
 }
 
+/// The files of frames `first..=last` of `scene`'s sequence (paths relative to
+/// `scene_dir`) that are not there, each as `frame N: PATH`; empty when every frame is
+/// there or the medium is not a sequence.
+pub fn missing_frames(
+    scene: &Scene,
+    scene_dir: &std::path::Path,
+    first: i64,
+    last: i64,
+) -> Vec<String> {
+    if !scene.is_sequence() {
+        return Vec::new();
+    }
+    let fps = scene.fps();
+    (first..=last)
+        .filter_map(|f| {
+            let s = scene.at_frame(f, fps);
+            let path = match s.medium.as_ref().map(|m| &m.field) {
+                Some(FieldSpec::Vdb(v)) => scene_dir.join(&v.path),
+                Some(FieldSpec::Baked { path, .. }) => scene_dir.join(path),
+                _ => return None,
+            };
+            (!path.is_file()).then(|| format!("frame {f}: {}", path.display()))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

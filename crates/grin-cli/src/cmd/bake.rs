@@ -40,6 +40,13 @@ pub struct Args {
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Bake frames A..B (inclusive) of the scene's sequence, one file each: the output
+    /// needs a frame token (`-o field.####.grinf`).
+    #[arg(long, value_name = "A..B", value_parser = grin_scene::frames::parse_frame_range)]
+    pub frames: Option<(i64, i64)>,
+    /// Frames per second of the sequence (default: the scene's [animation] fps, else 24).
+    #[arg(long)]
+    pub fps: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -75,13 +82,74 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = grin_scene::load_scene(&args.scene)?;
+    let fps = args.fps.unwrap_or_else(|| scene.fps());
+    if !(fps.is_finite() && fps > 0.0) {
+        anyhow::bail!("--fps must be a positive number of frames per second, got {fps}");
+    }
+    let pattern = args.output.to_string_lossy().into_owned();
+    let token = grin_scene::frames::has_frame_token(&pattern);
+    let Some((first, last)) = args.frames else {
+        if token {
+            anyhow::bail!(
+                "{}: the output holds a frame token but no --frames A..B was given",
+                args.output.display()
+            );
+        }
+        let scene = match scene.animation {
+            Some(a) => scene.at_frame(a.frames[0], fps),
+            None => scene,
+        };
+        return bake_one(&args, &scene, &args.output, args.json).map(|_| ());
+    };
+    if !token {
+        anyhow::bail!(
+            "{}: with --frames the output needs a frame token, e.g. field.####.grinf",
+            args.output.display()
+        );
+    }
+    let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
+    let missing = grin_scene::frames::missing_frames(&scene, scene_dir, first, last);
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "{}: {} of frames {first}..{last} missing: {}",
+            args.scene.display(),
+            missing.len(),
+            missing.join(", ")
+        );
+    }
+    let mut all = Vec::new();
+    for f in first..=last {
+        let out = PathBuf::from(
+            grin_scene::frames::substitute_frame(&pattern, f).unwrap_or_else(|| pattern.clone()),
+        );
+        if !args.json {
+            outln!("frame     {f}");
+        }
+        bake_one(&args, &scene.at_frame(f, fps), &out, false)
+            .with_context(|| format!("frame {f}"))
+            .map(|j| all.push(j))?;
+    }
+    if args.json {
+        outln!("{}", serde_json::to_string_pretty(&all)?);
+    }
+    Ok(())
+}
+
+/// Bake `scene`'s medium to `output`; prints the summary (JSON when `json`) unless a
+/// sequence collects it, and returns it as JSON.
+fn bake_one(
+    args: &Args,
+    scene: &grin_scene::Scene,
+    output: &Path,
+    json: bool,
+) -> anyhow::Result<serde_json::Value> {
     let medium = scene.medium.as_ref().with_context(|| {
         format!(
             "{}: the scene has no [medium] to bake",
             args.scene.display()
         )
     })?;
-    if let Some(dir) = args.output.parent()
+    if let Some(dir) = output.parent()
         && !dir.as_os_str().is_empty()
         && !dir.is_dir()
     {
@@ -129,16 +197,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let (baked, report) =
         result.with_context(|| format!("{}: bake failed", args.scene.display()))?;
-    grin_field::grinf::save(&baked, &args.output)?;
-    if args.json {
-        outln!(
-            "{}",
-            serde_json::to_string_pretty(&summary_json(&args.output, &field.describe(), &report))?
-        );
-    } else {
-        print_summary(&args.output, &field.describe(), &report);
+    grin_field::grinf::save(&baked, output)?;
+    let summary = summary_json(output, &field.describe(), &report);
+    if json {
+        outln!("{}", serde_json::to_string_pretty(&summary)?);
+    } else if !args.json {
+        print_summary(output, &field.describe(), &report);
     }
-    Ok(())
+    Ok(summary)
 }
 
 /// VDB grids have no exact gradient: difference the source at sub-voxel spacing.

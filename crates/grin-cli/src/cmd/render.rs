@@ -209,22 +209,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Every frame's file must be there before any frame is rendered.
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
-    let mut missing = Vec::new();
-    for f in first..=last {
-        let s = scene.at_frame(f, fps);
-        let file = match s.medium.as_ref().map(|m| &m.field) {
-            Some(grin_scene::FieldSpec::Vdb(v)) if scene.is_sequence() => Some(v.path.clone()),
-            Some(grin_scene::FieldSpec::Baked { path, .. }) if scene.is_sequence() => {
-                Some(path.clone())
-            }
-            _ => None,
-        };
-        if let Some(file) = file
-            && !scene_dir.join(&file).is_file()
-        {
-            missing.push(format!("frame {f}: {}", scene_dir.join(&file).display()));
-        }
-    }
+    let missing = grin_scene::frames::missing_frames(&scene, scene_dir, first, last);
     if !missing.is_empty() {
         bail!(
             "{}: {} of frames {first}..{last} missing: {}",
