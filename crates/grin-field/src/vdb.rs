@@ -23,6 +23,12 @@
 //! `catmull_rom_converges_at_third_order_in_n_and_second_in_grad` measures the orders:
 //! 3.0 in n and 1.9 in grad n (s/h = 8 -> 16).
 //! At a voxel centre the gradient equals the central difference of the mapped values.
+//! The interpolant is clamped to the range of the mapped values (background included),
+//! with a zero gradient where clamped: at a sharp edge Catmull-Rom rings past the data
+//! (n above ambient beside a hot plume, a voxel outside a blob 1e-5 off ambient where
+//! OpenVDB's own sampler gives ambient), and the clamp keeps every sample, and so every
+//! bake, within what the mapping produces (`interpolant_stays_in_the_mapped_range`).
+//! Smooth data away from its extreme voxels is unchanged (the orders below hold).
 //! Outside the grid's dense box the field is the mapped background value.
 //!
 //! Why ~620 lines of code in one file (tests after): the mapping, the crop to the active
@@ -583,8 +589,19 @@ impl IndexField for VdbField {
             idx.z - f64::from(self.bbox.min[2]),
         ];
         let (dn, g) = self.catmull_rom(u);
+        let n = self.ambient + dn;
+        // Clamped to what the mapping produced: Catmull-Rom rings at a sharp edge (air
+        // colder than ambient beside a hot plume, n past every voxel's); flat where
+        // clamped.
+        let (lo, hi) = self.n_range;
+        if n > hi || n < lo {
+            return FieldSample {
+                n: n.clamp(lo, hi),
+                grad_n: DVec3::ZERO,
+            };
+        }
         FieldSample {
-            n: self.ambient + dn,
+            n,
             grad_n: self.grad_to_world(g),
         }
     }
@@ -875,6 +892,69 @@ mod tests {
             eg = eg.max((smp.grad_n - g).length());
         }
         (en / a, eg / (a / s))
+    }
+
+    /// A step-edged block (hot: delta_n = -1e-3 inside, 0 outside): Catmull-Rom alone
+    /// rings past both ends; the field never leaves [ambient - 1e-3, ambient], is exactly
+    /// ambient one voxel outside the block, and a bake of it keeps that range.
+    #[test]
+    fn interpolant_stays_in_the_mapped_range() {
+        let xf = Transform {
+            world_from_index: [
+                [0.1, 0.0, 0.0, 0.0],
+                [0.0, 0.1, 0.0, 0.0],
+                [0.0, 0.0, 0.1, 0.0],
+            ],
+        };
+        let inside =
+            |i: i32, j: i32, k: i32| i.abs() <= 3 && (j - 1).abs() <= 3 && (k - 2).abs() <= 3;
+        let dense = cube(|i, j, k| if inside(i, j, k) { -1e-3 } else { 0.0 }, 8, xf);
+        let field = VdbField::from_dense(
+            "block".into(),
+            &dense,
+            0.0,
+            &params(Mapping::Index { delta: true }, 1.0),
+        )
+        .expect("field");
+        let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+        let mut rung = 0;
+        for i in 0..=120 {
+            for j in 0..=40 {
+                let p = DVec3::new(-0.6 + 0.01 * f64::from(i), -0.3 + 0.03 * f64::from(j), 0.2);
+                let smp = field.sample(p);
+                lo = lo.min(smp.n);
+                hi = hi.max(smp.n);
+                let (raw, _) = field.catmull_rom({
+                    let idx = field.index_from_world(p);
+                    [
+                        idx.x - f64::from(field.bbox.min[0]),
+                        idx.y - f64::from(field.bbox.min[1]),
+                        idx.z - f64::from(field.bbox.min[2]),
+                    ]
+                });
+                if raw > 0.0 || raw < -1e-3 {
+                    rung += 1;
+                }
+            }
+        }
+        assert!(rung > 0, "Catmull-Rom alone rings at the edge");
+        let floor = 1.0 + f64::from(-1e-3f32);
+        assert!(lo >= floor && hi <= 1.0, "n in [{lo}, {hi}]");
+        // One voxel and a half outside the block's face (x = 0.3): exactly ambient.
+        let out = field.sample(DVec3::new(0.45, 0.1, 0.2));
+        assert_eq!(out.n, 1.0);
+        assert_eq!(out.grad_n, DVec3::ZERO);
+        // The bake of it stays in range too.
+        let opts = crate::bake::BakeOptions {
+            resolution: Some(32),
+            ..Default::default()
+        };
+        let (baked, report) = crate::bake::bake(&field, &opts, &|_, _, _| {}).expect("bake");
+        let (blo, bhi) = crate::field::IndexField::n_range(&baked);
+        assert!(
+            blo >= floor - 1e-9 && bhi <= 1.0 + 1e-9,
+            "baked [{blo}, {bhi}], {report:?}"
+        );
     }
 
     /// The stated interpolation error: O(h^3) in n and O(h^2) in grad n (Catmull-Rom).
