@@ -404,6 +404,16 @@ impl VdbField {
             delta_n.push(n - ambient);
         }
 
+        check_data_placement(
+            &label,
+            &delta_n,
+            n_background - ambient,
+            dims,
+            dense.bbox.min,
+            &transform,
+            &params.bounds,
+        )?;
+
         let mut field = VdbField {
             label,
             bounds: params.bounds,
@@ -541,6 +551,104 @@ impl VdbField {
         }
         (v, [gx, gy, gz])
     }
+}
+
+/// Where the grid's data (voxels whose index differs from the background's by more than
+/// 1e-3 of the largest difference) lies against
+/// the medium's bounds: bounds that miss it are an error, bounds that cut it and data
+/// that changes nothing are warnings on stderr. Each names the data's world box and a
+/// `bounds` line that holds it.
+fn check_data_placement(
+    label: &str,
+    delta_n: &[f64],
+    background_delta: f64,
+    dims: [usize; 3],
+    min_index: [i32; 3],
+    transform: &vdb_sys::Transform,
+    bounds: &Bounds,
+) -> Result<(), FieldError> {
+    // Voxels within 1e-3 of the largest index change count as background (faint
+    // residue is not the data a user frames).
+    let peak = delta_n
+        .iter()
+        .map(|d| (d - background_delta).abs())
+        .fold(0.0f64, f64::max);
+    let mut lo_ijk = [usize::MAX; 3];
+    let mut hi_ijk = [0usize; 3];
+    for (off, &d) in delta_n.iter().enumerate() {
+        if peak == 0.0 || (d - background_delta).abs() <= 1e-3 * peak {
+            continue;
+        }
+        let ijk = [
+            off % dims[0],
+            (off / dims[0]) % dims[1],
+            off / (dims[0] * dims[1]),
+        ];
+        for a in 0..3 {
+            lo_ijk[a] = lo_ijk[a].min(ijk[a]);
+            hi_ijk[a] = hi_ijk[a].max(ijk[a]);
+        }
+    }
+    if lo_ijk[0] == usize::MAX {
+        eprintln!(
+            "grin: warning: {label}: every voxel maps to the background's index (a constant grid, or a mapping that changes nothing): the medium bends no ray"
+        );
+        return Ok(());
+    }
+    // The data's world box through its voxel centres (what the bounds must hold), and
+    // half a voxel out (what the suggested bounds give).
+    let world_box = |pad: f64| {
+        let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
+        for c in 0..8 {
+            let ijk: [f64; 3] = std::array::from_fn(|a| {
+                let v = if c >> a & 1 == 0 {
+                    lo_ijk[a] as f64 - pad
+                } else {
+                    hi_ijk[a] as f64 + pad
+                };
+                v + f64::from(min_index[a])
+            });
+            let w = DVec3::from_array(transform.index_to_world(ijk));
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+        (lo, hi)
+    };
+    let (lo, hi) = world_box(0.0);
+    let (plo, phi) = world_box(0.5);
+    let f = |v: DVec3| format!("[{:.4}, {:.4}, {:.4}]", v.x, v.y, v.z);
+    let fix = format!(
+        "bounds = {{ box = {{ min = {}, max = {} }} }}",
+        f(plo),
+        f(phi)
+    );
+    if !bounds.meets_box(lo, hi, 0.0) {
+        return Err(FieldError::Param {
+            field: label.to_owned(),
+            param: "bounds".into(),
+            message: format!(
+                "the [medium] bounds miss the grid's data, which lies in world box {} .. {}; to hold it: {fix}",
+                f(plo),
+                f(phi)
+            ),
+        });
+    }
+    let corners_inside = (0..8).all(|c: u32| {
+        let p = DVec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        );
+        bounds.signed_distance(p) <= 1e-9 * (1.0 + p.length())
+    });
+    if !corners_inside {
+        eprintln!(
+            "grin: warning: {label}: the [medium] bounds cut the grid's data (world box {} .. {}): rays see only the part inside; to hold it all: {fix}",
+            f(plo),
+            f(phi)
+        );
+    }
+    Ok(())
 }
 
 /// Catmull-Rom weights of the taps at offsets -1, 0, 1, 2 for fraction `t`.
@@ -955,6 +1063,40 @@ mod tests {
             blo >= floor - 1e-9 && bhi <= 1.0 + 1e-9,
             "baked [{blo}, {bhi}], {report:?}"
         );
+    }
+
+    /// Bounds that miss the data are refused with the data's world box and a bounds line
+    /// that holds it; bounds that cut it load (with a warning).
+    #[test]
+    fn bounds_that_miss_the_data_are_refused_with_where_it_is() {
+        let xf = Transform {
+            world_from_index: [
+                [0.1, 0.0, 0.0, 5.0],
+                [0.0, 0.1, 0.0, 0.0],
+                [0.0, 0.0, 0.1, 0.0],
+            ],
+        };
+        let dense = cube(|i, _, _| if i.abs() <= 2 { -1e-3 } else { 0.0 }, 4, xf);
+        let mut far = params(Mapping::Index { delta: true }, 1.0);
+        far.bounds = Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius: 1.0,
+        };
+        let msg = match VdbField::from_dense("blob".into(), &dense, 0.0, &far) {
+            Ok(_) => panic!("the bounds are far from x = 5"),
+            Err(e) => e.to_string(),
+        };
+        assert!(
+            msg.contains("miss the grid's data")
+                && msg.contains("bounds = { box = { min = [4.7500"),
+            "{msg}"
+        );
+        let mut cut = params(Mapping::Index { delta: true }, 1.0);
+        cut.bounds = Bounds::Box {
+            min: DVec3::new(4.9, -1.0, -1.0),
+            max: DVec3::new(6.0, 1.0, 1.0),
+        };
+        assert!(VdbField::from_dense("blob".into(), &dense, 0.0, &cut).is_ok());
     }
 
     /// The stated interpolation error: O(h^3) in n and O(h^2) in grad n (Catmull-Rom).
