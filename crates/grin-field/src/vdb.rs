@@ -1040,7 +1040,7 @@ mod tests {
                         idx.z - f64::from(field.bbox.min[2]),
                     ]
                 });
-                if raw > 0.0 || raw < -1e-3 {
+                if !(-1e-3..=0.0).contains(&raw) {
                     rung += 1;
                 }
             }
