@@ -32,13 +32,16 @@ pub fn build_field_capped(
     max_dense_bytes: u64,
 ) -> Result<Arc<dyn IndexField>, FieldError> {
     let bounds = Bounds::from_spec(&medium.bounds);
-    let ambient = medium.ambient_index;
-    if !(ambient.is_finite() && ambient > 0.0) {
-        return Err(FieldError::Param {
-            field: "medium".into(),
-            param: "ambient_index".into(),
-            message: format!("must be finite and > 0, got {ambient}"),
-        });
+    let ambient_param = |message: String| FieldError::Param {
+        field: "medium".into(),
+        param: "ambient_index".into(),
+        message,
+    };
+    let fixed_ambient = medium.ambient();
+    if let Some(a) = fixed_ambient
+        && !(a.is_finite() && a > 0.0)
+    {
+        return Err(ambient_param(format!("must be finite and > 0, got {a}")));
     }
     // A path with a frame token names a sequence, not a file: the caller picks the frame
     // (`Scene::at_frame`).
@@ -58,6 +61,18 @@ pub fn build_field_capped(
             ),
         });
     }
+    let ambient = match (fixed_ambient, &medium.field) {
+        (Some(a), _) => a,
+        // The VDB field finds its own ambient (the background's index).
+        (None, FieldSpec::Vdb(_)) => f64::NAN,
+        (None, _) => {
+            return Err(ambient_param(
+                "\"auto\" takes the index a VDB grid's background maps to; give a number for \
+                 this field"
+                    .into(),
+            ));
+        }
+    };
     let field: Arc<dyn IndexField> = match &medium.field {
         FieldSpec::Uniform { n } => Arc::new(Uniform::new(bounds, ambient, *n)?),
         FieldSpec::LinearN2 { n0, k, axis } => {

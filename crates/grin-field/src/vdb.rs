@@ -38,7 +38,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use grin_scene::{MediumSpec, NonFinitePolicy, VdbMap, VdbSpec};
+use grin_scene::{MediumSpec, NonFinitePolicy, UpAxis, VdbMap, VdbSpec};
 use vdb_sys::{DenseGrid, IndexBox, VdbError, VdbFile};
 
 use crate::bounds::Bounds;
@@ -105,6 +105,14 @@ impl Mapping {
                 r_specific,
             }),
         }
+    }
+
+    /// True where n is an offset from the ambient index (`index` with `delta`, `linear`).
+    pub fn is_relative(&self) -> bool {
+        matches!(
+            self,
+            Mapping::Index { delta: true } | Mapping::Linear { .. }
+        )
     }
 
     /// n for one grid value; `Err(T_K)` for a non-positive absolute temperature.
@@ -176,11 +184,71 @@ pub struct VdbFieldParams {
     /// Metres per VDB world unit.
     pub units: f64,
     pub non_finite: NonFinitePolicy,
-    /// The medium's bounds (world) and the index outside them.
+    /// The medium's bounds (world) and the index outside them; `None` takes the index the
+    /// grid's background maps to (`ambient_index = "auto"`).
     pub bounds: Bounds,
-    pub ambient: f64,
+    pub ambient: Option<f64>,
     /// Cap on the bytes the dense copy may use.
     pub max_bytes: u64,
+    /// Where the grid (in metres, after `units`) goes in the scene: [`placement`] of the
+    /// scene's `up`, `scale`, `rotate_deg` and `translate`; [`IDENTITY`] for none.
+    pub placement: [[f64; 4]; 3],
+}
+
+/// The affine map that changes nothing.
+pub const IDENTITY: [[f64; 4]; 3] = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+];
+
+/// The scene's placement of a VDB grid (world = placement * grid metres): first the up
+/// axis (a Z-up cache, as Blender writes, is turned so its +z is the scene's +y and its +y
+/// the scene's -z), then the uniform `scale`, then rotations by `rotate_deg` about the
+/// scene's x, then y, then z axes (right-handed, degrees), then `translate` (metres).
+pub fn placement(
+    up: UpAxis,
+    scale: f64,
+    rotate_deg: [f64; 3],
+    translate: [f64; 3],
+) -> [[f64; 4]; 3] {
+    let up_m = match up {
+        UpAxis::Y => IDENTITY,
+        UpAxis::Z => [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, -1.0, 0.0, 0.0],
+        ],
+    };
+    let scaled = IDENTITY.map(|row| row.map(|v| v * scale));
+    let rot = |axis: usize, deg: f64| {
+        let (s, c) = deg.to_radians().sin_cos();
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut m = IDENTITY;
+        m[a][a] = c;
+        m[a][b] = -s;
+        m[b][a] = s;
+        m[b][b] = c;
+        m
+    };
+    let mut m = compose(&scaled, &up_m);
+    for (axis, &deg) in rotate_deg.iter().enumerate() {
+        m = compose(&rot(axis, deg), &m);
+    }
+    for (row, t) in m.iter_mut().zip(translate) {
+        row[3] += t;
+    }
+    m
+}
+
+/// The affine map `a` after `b` (a * b).
+pub fn compose(a: &[[f64; 4]; 3], b: &[[f64; 4]; 3]) -> [[f64; 4]; 3] {
+    std::array::from_fn(|r| {
+        std::array::from_fn(|c| {
+            let lin: f64 = (0..3).map(|k| a[r][k] * b[k][c]).sum();
+            if c == 3 { lin + a[r][3] } else { lin }
+        })
+    })
 }
 
 /// An OpenVDB grid mapped to n, sampled by tricubic Catmull-Rom interpolation.
@@ -189,12 +257,11 @@ pub struct VdbField {
     label: String,
     bounds: Bounds,
     ambient: f64,
-    /// delta_n = n - ambient at the voxels of `bbox`, x fastest.
+    /// delta_n = n - ambient at the voxels of `bbox`, x fastest; 0 outside it (the
+    /// background is the ambient, see `from_dense`).
     delta_n: Vec<f64>,
     bbox: IndexBox,
     dims: [usize; 3],
-    /// delta_n outside the dense box (the mapped background).
-    background_delta: f64,
     /// index = grid_from_world * (p, 1), p in scene metres.
     grid_from_world: [[f64; 4]; 3],
     /// world = world_from_grid * (ijk, 1), in scene metres.
@@ -223,8 +290,9 @@ impl VdbField {
             units: spec.units,
             non_finite: spec.non_finite,
             bounds: Bounds::from_spec(&medium.bounds),
-            ambient: medium.ambient_index,
+            ambient: medium.ambient(),
             max_bytes,
+            placement: placement(spec.up, spec.scale, spec.rotate_deg, spec.translate),
         };
         let path = resolve(base_dir, &spec.path);
         Self::load(&path, &spec.grid, &params)
@@ -310,20 +378,39 @@ impl VdbField {
             )));
         }
 
-        let mut world_from_grid = dense.world_from_index.world_from_index;
-        for row in &mut world_from_grid {
+        let mut in_metres = dense.world_from_index.world_from_index;
+        for row in &mut in_metres {
             for v in row.iter_mut() {
                 *v *= params.units;
             }
         }
+        let world_from_grid = compose(&params.placement, &in_metres);
         let inverse = vdb_sys::Transform {
             world_from_index: world_from_grid,
         }
         .inverse()
         .ok_or_else(|| FieldError::Other(format!("{label}: the grid transform is singular")))?;
 
-        let ambient = params.ambient;
         let mapping = params.mapping;
+        // "auto": the index the background maps to. A relative mapping (`index` with
+        // `delta`, `linear`) gives n as an offset from the ambient, so there "auto" is 1.0
+        // and its background offset must be within the tolerance like any other ambient.
+        let ambient = match params.ambient {
+            Some(a) => a,
+            None if mapping.is_relative() => 1.0,
+            None => mapping.n(background, 1.0).map_err(|t| {
+                param_err(
+                    "map",
+                    format!("the grid background {background} maps to T = {t} K <= 0"),
+                )
+            })?,
+        };
+        if !(ambient.is_finite() && ambient > 0.0) {
+            return Err(param_err(
+                "ambient_index",
+                format!("the grid background {background} maps to n = {ambient}, not > 0"),
+            ));
+        }
         let n_background = mapping.n(background, ambient).map_err(|t| {
             param_err(
                 "map",
@@ -336,10 +423,15 @@ impl VdbField {
                 format!(
                     "the grid background {background} maps to n = {n_background:.9}, but the \
                      medium's ambient_index is {ambient}; set [medium] ambient_index = \
-                     {n_background:.9} so rays do not refract at the medium boundary"
+                     {n_background:.9} (or \"auto\") so rays do not refract at the medium \
+                     boundary"
                 ),
             ));
         }
+        // Within the tolerance the background is taken as the ambient: every mapped index
+        // moves by this (<= 1e-6), so the medium's box does not refract and the data's
+        // crop sees only the voxels that differ from the background.
+        let shift = ambient - n_background;
 
         let transform = vdb_sys::Transform {
             world_from_index: world_from_grid,
@@ -373,7 +465,7 @@ impl VdbField {
         }
 
         let mut delta_n = Vec::with_capacity(dense.values.len());
-        let (mut lo, mut hi) = (n_background, n_background);
+        let (mut lo, mut hi) = (ambient, ambient);
         for (off, &v) in dense.values.iter().enumerate() {
             if !v.is_finite() {
                 delta_n.push(0.0);
@@ -388,7 +480,7 @@ impl VdbField {
                         p[0], p[1], p[2]
                     ),
                 )
-            })?;
+            })? + shift;
             if n <= 0.0 || !n.is_finite() {
                 let p = world_of(off);
                 return Err(FieldError::NonPositive {
@@ -407,21 +499,24 @@ impl VdbField {
         check_data_placement(
             &label,
             &delta_n,
-            n_background - ambient,
             dims,
             dense.bbox.min,
-            &transform,
+            &world_from_grid,
             &params.bounds,
         )?;
+
+        // Keep only the voxels that change the index (and PAD_VOXELS of background around
+        // them): a cache's active box is often its whole domain. Exact: what is dropped is
+        // background, which the field returns outside its box anyway.
+        let (delta_n, bbox, dims) = crop_to_change(delta_n, dense.bbox, dims);
 
         let mut field = VdbField {
             label,
             bounds: params.bounds,
             ambient,
             delta_n,
-            bbox: dense.bbox,
+            bbox,
             dims,
-            background_delta: n_background - ambient,
             grid_from_world: inverse.world_from_index,
             world_from_grid,
             n_range: (lo, hi),
@@ -475,11 +570,11 @@ impl VdbField {
     fn node(&self, i: i64, j: i64, k: i64) -> f64 {
         let d = &self.dims;
         if i < 0 || j < 0 || k < 0 {
-            return self.background_delta;
+            return 0.0;
         }
         let (i, j, k) = (i as usize, j as usize, k as usize);
         if i >= d[0] || j >= d[1] || k >= d[2] {
-            return self.background_delta;
+            return 0.0;
         }
         self.delta_n[i + d[0] * (j + d[1] * k)]
     }
@@ -525,7 +620,7 @@ impl VdbField {
             .zip(self.dims.iter())
             .any(|(&b, &d)| !(b >= -3.0 && b <= d as f64 + 2.0));
         if far {
-            return (self.background_delta, [0.0; 3]);
+            return (0.0, [0.0; 3]);
         }
         let b = base.map(|v| v as i64);
         let (mut v, mut gx, mut gy, mut gz) = (0.0, 0.0, 0.0, 0.0);
@@ -553,83 +648,159 @@ impl VdbField {
     }
 }
 
-/// Where the grid's data (voxels whose index differs from the background's by more than
-/// 1e-3 of the largest difference) lies against
-/// the medium's bounds: bounds that miss it are an error, bounds that cut it and data
-/// that changes nothing are warnings on stderr. Each names the data's world box and a
-/// `bounds` line that holds it.
-fn check_data_placement(
-    label: &str,
-    delta_n: &[f64],
-    background_delta: f64,
+/// `delta_n` over `bbox` cut down to the voxels that are not background, plus
+/// [`PAD_VOXELS`] (within `bbox`); unchanged when nothing is cut.
+fn crop_to_change(
+    delta_n: Vec<f64>,
+    bbox: IndexBox,
     dims: [usize; 3],
-    min_index: [i32; 3],
-    transform: &vdb_sys::Transform,
-    bounds: &Bounds,
-) -> Result<(), FieldError> {
-    // Voxels within 1e-3 of the largest index change count as background (faint
-    // residue is not the data a user frames).
-    let peak = delta_n
-        .iter()
-        .map(|d| (d - background_delta).abs())
-        .fold(0.0f64, f64::max);
-    let mut lo_ijk = [usize::MAX; 3];
-    let mut hi_ijk = [0usize; 3];
-    for (off, &d) in delta_n.iter().enumerate() {
-        if peak == 0.0 || (d - background_delta).abs() <= 1e-3 * peak {
-            continue;
-        }
-        let ijk = [
-            off % dims[0],
-            (off / dims[0]) % dims[1],
-            off / (dims[0] * dims[1]),
-        ];
-        for a in 0..3 {
-            lo_ijk[a] = lo_ijk[a].min(ijk[a]);
-            hi_ijk[a] = hi_ijk[a].max(ijk[a]);
+) -> (Vec<f64>, IndexBox, [usize; 3]) {
+    let Some(data) = DataBox::find_above(&delta_n, dims, bbox.min, 0.0) else {
+        return (delta_n, bbox, dims);
+    };
+    let pad = i64::from(PAD_VOXELS);
+    let min: [i32; 3] =
+        std::array::from_fn(|a| (data.min[a] - pad).max(i64::from(bbox.min[a])) as i32);
+    let max: [i32; 3] =
+        std::array::from_fn(|a| (data.max[a] + pad).min(i64::from(bbox.max[a])) as i32);
+    if min == bbox.min && max == bbox.max {
+        return (delta_n, bbox, dims);
+    }
+    let cut = IndexBox { min, max };
+    let new_dims = cut.dims().map(|d| d as usize);
+    let off: [usize; 3] = std::array::from_fn(|a| (min[a] - bbox.min[a]) as usize);
+    let mut out = Vec::with_capacity(new_dims.iter().product());
+    for k in 0..new_dims[2] {
+        for j in 0..new_dims[1] {
+            let row = off[0] + dims[0] * (off[1] + j + dims[1] * (off[2] + k));
+            out.extend_from_slice(&delta_n[row..row + new_dims[0]]);
         }
     }
-    if lo_ijk[0] == usize::MAX {
-        eprintln!(
-            "grin: warning: {label}: every voxel maps to the background's index (a constant grid, or a mapping that changes nothing): the medium bends no ray"
-        );
-        return Ok(());
+    (out, cut, new_dims)
+}
+
+/// Voxels whose change from the background is at most this fraction of the largest change
+/// count as background when framing the data (faint residue is not what a user frames).
+pub const DATA_FRACTION: f64 = 1e-3;
+
+/// The index box of a grid's data: the voxels whose change from the background is above
+/// [`DATA_FRACTION`] of the largest change.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DataBox {
+    /// Inclusive index bounds (the grid's own index space).
+    pub min: [i64; 3],
+    pub max: [i64; 3],
+}
+
+impl DataBox {
+    /// The data box of `change` (|value - background| per voxel, x fastest over `dims`,
+    /// starting at index `min_index`); `None` when no voxel changes anything.
+    pub fn find(change: &[f64], dims: [usize; 3], min_index: [i32; 3]) -> Option<DataBox> {
+        Self::find_above(change, dims, min_index, DATA_FRACTION)
     }
-    // The data's world box through its voxel centres (what the bounds must hold), and
-    // half a voxel out (what the suggested bounds give).
-    let world_box = |pad: f64| {
+
+    /// The box of the voxels whose change is above `fraction` of the largest (0: every
+    /// voxel that changes anything).
+    pub fn find_above(
+        change: &[f64],
+        dims: [usize; 3],
+        min_index: [i32; 3],
+        fraction: f64,
+    ) -> Option<DataBox> {
+        let peak = change
+            .iter()
+            .filter(|d| d.is_finite())
+            .fold(0.0f64, |a, d| a.max(d.abs()));
+        if peak == 0.0 {
+            return None;
+        }
+        let mut lo = [usize::MAX; 3];
+        let mut hi = [0usize; 3];
+        for (off, &d) in change.iter().enumerate() {
+            // NaN compares false: not data.
+            if d.abs().partial_cmp(&(fraction * peak)) != Some(std::cmp::Ordering::Greater) {
+                continue;
+            }
+            let ijk = [
+                off % dims[0],
+                (off / dims[0]) % dims[1],
+                off / (dims[0] * dims[1]),
+            ];
+            for a in 0..3 {
+                lo[a] = lo[a].min(ijk[a]);
+                hi[a] = hi[a].max(ijk[a]);
+            }
+        }
+        (lo[0] != usize::MAX).then(|| DataBox {
+            min: std::array::from_fn(|a| lo[a] as i64 + i64::from(min_index[a])),
+            max: std::array::from_fn(|a| hi[a] as i64 + i64::from(min_index[a])),
+        })
+    }
+
+    /// World box of the box's voxel centres widened by `pad` voxels, through the affine
+    /// `world_from_index`.
+    pub fn world(&self, world_from_index: &[[f64; 4]; 3], pad: f64) -> (DVec3, DVec3) {
         let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
         for c in 0..8 {
             let ijk: [f64; 3] = std::array::from_fn(|a| {
-                let v = if c >> a & 1 == 0 {
-                    lo_ijk[a] as f64 - pad
+                if c >> a & 1 == 0 {
+                    self.min[a] as f64 - pad
                 } else {
-                    hi_ijk[a] as f64 + pad
-                };
-                v + f64::from(min_index[a])
+                    self.max[a] as f64 + pad
+                }
             });
-            let w = DVec3::from_array(transform.index_to_world(ijk));
+            let w = DVec3::from_array(apply(world_from_index, ijk));
             lo = lo.min(w);
             hi = hi.max(w);
         }
         (lo, hi)
+    }
+
+    /// The `bounds` line of a scene that holds the data (half a voxel past the centres).
+    pub fn bounds_line(&self, world_from_index: &[[f64; 4]; 3]) -> String {
+        let (lo, hi) = self.world(world_from_index, 0.5);
+        format!(
+            "bounds = {{ box = {{ min = {}, max = {} }} }}",
+            fmt3(lo),
+            fmt3(hi)
+        )
+    }
+}
+
+fn fmt3(v: DVec3) -> String {
+    format!("[{:.4}, {:.4}, {:.4}]", v.x, v.y, v.z)
+}
+
+/// Where the grid's data ([`DataBox`]) lies against the medium's bounds: bounds that miss
+/// it are an error, bounds that cut it and data that changes nothing are warnings on
+/// stderr. Each names the data's world box and a `bounds` line that holds it.
+fn check_data_placement(
+    label: &str,
+    delta_n: &[f64],
+    dims: [usize; 3],
+    min_index: [i32; 3],
+    world_from_index: &[[f64; 4]; 3],
+    bounds: &Bounds,
+) -> Result<(), FieldError> {
+    let Some(data) = DataBox::find(delta_n, dims, min_index) else {
+        eprintln!(
+            "grin: warning: {label}: every voxel maps to the background's index (a constant grid, or a mapping that changes nothing): the medium bends no ray"
+        );
+        return Ok(());
     };
-    let (lo, hi) = world_box(0.0);
-    let (plo, phi) = world_box(0.5);
-    let f = |v: DVec3| format!("[{:.4}, {:.4}, {:.4}]", v.x, v.y, v.z);
-    let fix = format!(
-        "bounds = {{ box = {{ min = {}, max = {} }} }}",
-        f(plo),
-        f(phi)
-    );
+    // The data's world box through its voxel centres (what the bounds must hold), and
+    // half a voxel out (what the suggested bounds give).
+    let (lo, hi) = data.world(world_from_index, 0.0);
+    let (plo, phi) = data.world(world_from_index, 0.5);
+    let fix = data.bounds_line(world_from_index);
     if !bounds.meets_box(lo, hi, 0.0) {
         return Err(FieldError::Param {
             field: label.to_owned(),
             param: "bounds".into(),
             message: format!(
                 "the [medium] bounds miss the grid's data, which lies in world box {} .. {}; to hold it: {fix}",
-                f(plo),
-                f(phi)
+                fmt3(plo),
+                fmt3(phi)
             ),
         });
     }
@@ -644,8 +815,8 @@ fn check_data_placement(
     if !corners_inside {
         eprintln!(
             "grin: warning: {label}: the [medium] bounds cut the grid's data (world box {} .. {}): rays see only the part inside; to hold it all: {fix}",
-            f(plo),
-            f(phi)
+            fmt3(plo),
+            fmt3(phi)
         );
     }
     Ok(())
@@ -726,13 +897,18 @@ impl IndexField for VdbField {
         self.n_range
     }
 
-    /// Two voxels (the shortest column of the grid-to-world transform).
+    /// Two voxels.
     fn feature_size(&self) -> Option<f64> {
+        self.source_spacing().map(|h| 2.0 * h)
+    }
+
+    /// The voxel size: the shortest column of the grid-to-world transform.
+    fn source_spacing(&self) -> Option<f64> {
         let m = &self.world_from_grid;
         let voxel = (0..3)
             .map(|c| DVec3::new(m[0][c], m[1][c], m[2][c]).length())
             .fold(f64::INFINITY, f64::min);
-        (voxel > 0.0 && voxel.is_finite()).then_some(2.0 * voxel)
+        (voxel > 0.0 && voxel.is_finite()).then_some(voxel)
     }
     fn max_grad_n(&self) -> f64 {
         self.max_grad
@@ -771,8 +947,9 @@ mod tests {
                 center: DVec3::ZERO,
                 radius: 10.0,
             },
-            ambient,
+            ambient: Some(ambient),
             max_bytes: DEFAULT_MAX_DENSE_BYTES,
+            placement: IDENTITY,
         }
     }
 
@@ -1119,5 +1296,111 @@ mod tests {
             n10 < 5e-4 && g10 < 2e-2,
             "s/h = 10: n {n10:.2e}, grad {g10:.2e}"
         );
+    }
+
+    /// The placement: a Z-up point turns to +y, a 90 degree turn about +y takes +x to -z
+    /// (right-handed), scale and translate come after; composed on the grid's transform.
+    #[test]
+    fn placement_turns_scales_rotates_then_translates() {
+        let at = |m: &[[f64; 4]; 3], p: [f64; 3]| DVec3::from_array(apply(m, p));
+        let close = |a: DVec3, b: DVec3| (a - b).length() < 1e-12;
+        let up = placement(UpAxis::Z, 1.0, [0.0; 3], [0.0; 3]);
+        assert!(close(at(&up, [0.0, 0.0, 1.0]), DVec3::Y));
+        assert!(close(at(&up, [0.0, 1.0, 0.0]), -DVec3::Z));
+        assert!(close(at(&up, [1.0, 0.0, 0.0]), DVec3::X));
+        let m = placement(UpAxis::Y, 2.0, [0.0, 90.0, 0.0], [1.0, 2.0, 3.0]);
+        assert!(close(at(&m, [1.0, 0.0, 0.0]), DVec3::new(1.0, 2.0, 1.0)));
+        assert!(close(at(&m, [0.0, 1.0, 0.0]), DVec3::new(1.0, 4.0, 3.0)));
+        let rz = placement(UpAxis::Y, 1.0, [0.0, 0.0, 90.0], [0.0; 3]);
+        assert!(close(at(&rz, [1.0, 0.0, 0.0]), DVec3::Y));
+        let rx = placement(UpAxis::Y, 1.0, [90.0, 0.0, 0.0], [0.0; 3]);
+        assert!(close(at(&rx, [0.0, 1.0, 0.0]), DVec3::Z));
+        // x first, then y: (0, 1, 0) -> (0, 0, 1) -> (1, 0, 0).
+        let rxy = placement(UpAxis::Y, 1.0, [90.0, 90.0, 0.0], [0.0; 3]);
+        assert!(close(at(&rxy, [0.0, 1.0, 0.0]), DVec3::X));
+
+        // Through a field: the voxel at index 0 of a unit grid, placed, lands there.
+        let xf = Transform {
+            world_from_index: IDENTITY,
+        };
+        let dense = cube(
+            |i, j, k| if (i, j, k) == (0, 0, 0) { 1e-3 } else { 0.0 },
+            3,
+            xf,
+        );
+        let mut prm = params(Mapping::Index { delta: true }, 1.0);
+        prm.placement = placement(UpAxis::Z, 0.5, [0.0, 0.0, 0.0], [10.0, 0.0, 0.0]);
+        prm.bounds = Bounds::Sphere {
+            center: DVec3::new(10.0, 0.0, 0.0),
+            radius: 5.0,
+        };
+        let field = VdbField::from_dense("placed".into(), &dense, 0.0, &prm).expect("field");
+        assert!((field.n(DVec3::new(10.0, 0.0, 0.0)) - (1.0 + 1e-3)).abs() < 1e-9);
+        assert!(close(
+            field.world_from_index(DVec3::new(0.0, 0.0, 2.0)),
+            DVec3::new(10.0, 1.0, 0.0)
+        ));
+    }
+
+    /// "auto" takes the background's index; an explicit ambient within the tolerance is
+    /// taken as the background (the data moves by the difference): outside the data the
+    /// field is the ambient exactly, and the dense copy keeps only the voxels that change
+    /// the index (plus padding), not the cache's whole active box.
+    #[test]
+    fn ambient_auto_and_near_ambient_leave_the_background_exactly_ambient() {
+        let xf = Transform {
+            world_from_index: [
+                [0.1, 0.0, 0.0, 0.0],
+                [0.0, 0.1, 0.0, 0.0],
+                [0.0, 0.0, 0.1, 0.0],
+            ],
+        };
+        // A hot core in a big box of background (0 = ambient temperature).
+        let dense = cube(
+            |i, j, k| {
+                if i.abs() <= 1 && (j - 1).abs() <= 1 && (k - 2).abs() <= 1 {
+                    1.0
+                } else {
+                    0.0
+                }
+            },
+            12,
+            xf,
+        );
+        let gd = Mapping::GladstoneDale(gd_default());
+        let n_bg = gd.n(0.0, 1.0).expect("n");
+        let mut auto = params(gd, 1.0);
+        auto.ambient = None;
+        let field = VdbField::from_dense("auto".into(), &dense, 0.0, &auto).expect("field");
+        assert_eq!(field.ambient_index(), n_bg);
+        let far = DVec3::new(0.9, 0.9, 0.9);
+        assert_eq!(field.n(far), n_bg);
+        let b = field.index_box();
+        assert_eq!(
+            (b.min, b.max),
+            ([-3, -2, -1], [3, 4, 5]),
+            "cropped to the core + 2"
+        );
+        assert_eq!(field.dims, [7, 7, 7]);
+        let core = field.n(DVec3::new(0.0, 0.1, 0.2));
+        assert!((core - gd.n(1.0, 1.0).expect("n")).abs() < 1e-12, "{core}");
+
+        // 5e-7 off the background's index: accepted, and taken as that index.
+        let near = params(gd, n_bg + 5e-7);
+        let field = VdbField::from_dense("near".into(), &dense, 0.0, &near).expect("field");
+        assert_eq!(field.n(far), n_bg + 5e-7);
+        assert_eq!(field.sample(DVec3::new(0.6, 0.1, 0.2)).grad_n, DVec3::ZERO);
+        let core = field.n(DVec3::new(0.0, 0.1, 0.2));
+        assert!((core - (gd.n(1.0, 1.0).expect("n") + 5e-7)).abs() < 1e-12);
+        // 2e-6 off: refused, naming the value to use.
+        let e = VdbField::from_dense("far".into(), &dense, 0.0, &params(gd, n_bg + 2e-6))
+            .expect_err("refused");
+        assert!(e.to_string().contains("ambient_index = 1.000272"), "{e}");
+
+        // A relative mapping: "auto" is 1.0.
+        let mut rel = params(Mapping::Linear { k: 1e-4 }, 1.0);
+        rel.ambient = None;
+        let field = VdbField::from_dense("rel".into(), &dense, 0.0, &rel).expect("field");
+        assert_eq!(field.ambient_index(), 1.0);
     }
 }

@@ -2,6 +2,7 @@
 //! settings) parsed with serde and validated, with errors that name the file, the
 //! line/column and the key. See ../shared/ARCHITECTURE.md for the contract.
 
+mod ambient;
 mod de;
 mod error;
 pub mod frames;
@@ -12,6 +13,7 @@ mod tests;
 mod types;
 mod validate;
 
+pub use ambient::AmbientIndex;
 pub use error::SceneError;
 pub use load::{load_scene, locate_key, parse_scene};
 pub use types::*;

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use crate::{FieldSpec, Material, SceneError, Shape, parse_scene};
+use crate::{FieldSpec, Material, Scene, SceneError, Shape, UpAxis, parse_scene};
 
 /// A valid scene; tests replace one line to break it.
 const BASE: &str = r#"[camera]
@@ -257,6 +257,67 @@ fn medium_errors() {
     assert_eq!(
         m,
         "scene.toml:16:1: medium.ambient_index: must be > 0, got inf"
+    );
+    // "auto" is the index of a VDB grid's background: refused for a formula field.
+    let m = error_of("ambient_index = 1.0", "ambient_index = \"auto\"");
+    assert!(
+        m.starts_with("scene.toml:16:1: medium.ambient_index: \"auto\" takes the index a VDB"),
+        "{m}"
+    );
+    let m = error_of("ambient_index = 1.0", "ambient_index = \"warm\"");
+    assert!(m.contains("a number or \"auto\""), "{m}");
+}
+
+/// `ambient_index`: a number, "auto", or left out (1.0; "auto" for VDB media); the VDB
+/// placement keys parse and are checked.
+#[test]
+fn ambient_index_and_vdb_placement() {
+    let vdb = "field = { kind = \"vdb\", path = \"a.vdb\", grid = \"t\", map = { index = {} } }";
+    let with = |ambient: &str, field: &str| -> Result<Scene, SceneError> {
+        let text = BASE
+            .replacen("ambient_index = 1.0", ambient, 1)
+            .lines()
+            .map(|l| if l.starts_with("field = ") { field } else { l })
+            .collect::<Vec<_>>()
+            .join("\n");
+        parse_scene(&text, Path::new("scene.toml"))
+    };
+    let medium = |s: Result<Scene, SceneError>| s.expect("valid").medium.expect("medium");
+    assert_eq!(medium(with("", vdb)).ambient(), None);
+    assert_eq!(
+        medium(with("ambient_index = \"auto\"", vdb)).ambient(),
+        None
+    );
+    assert_eq!(
+        medium(with("ambient_index = 1.0003", vdb)).ambient(),
+        Some(1.0003)
+    );
+    assert_eq!(medium(with("ambient_index = 2", vdb)).ambient(), Some(2.0));
+    let plain = BASE
+        .lines()
+        .find(|l| l.starts_with("field = "))
+        .expect("field line");
+    assert_eq!(medium(with("", plain)).ambient(), Some(1.0));
+
+    let placed = "field = { kind = \"vdb\", path = \"a.vdb\", grid = \"t\", map = { index = {} }, up = \"z\", scale = 0.01, rotate_deg = [0.0, 90.0, 0.0], translate = [1.0, 2.0, 3.0] }";
+    match medium(with("", placed)).field {
+        FieldSpec::Vdb(v) => {
+            assert_eq!(v.up, UpAxis::Z);
+            assert_eq!(
+                (v.scale, v.rotate_deg, v.translate),
+                (0.01, [0.0, 90.0, 0.0], [1.0, 2.0, 3.0])
+            );
+        }
+        f => panic!("{f:?}"),
+    }
+    let bad = placed.replace("scale = 0.01", "scale = 0.0");
+    let e = with("", &bad).expect_err("scale 0").to_string();
+    assert!(e.contains("medium.field.scale: must be > 0"), "{e}");
+    let bad = placed.replace("up = \"z\"", "up = \"x\"");
+    let e = with("", &bad).expect_err("up x").to_string();
+    assert!(
+        e.contains("unknown variant `x`, expected `y` or `z`"),
+        "{e}"
     );
 }
 

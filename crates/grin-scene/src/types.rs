@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::ambient::AmbientIndex;
+
 /// A whole scene file.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -128,18 +130,14 @@ impl Default for Material {
 }
 
 /// The medium: a region of space (the bounds) where n varies, set in ambient space of
-/// index `ambient_index`.
+/// index `ambient_index` (a number or `"auto"`; see [`AmbientIndex`]).
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MediumSpec {
     pub bounds: BoundsSpec,
-    #[serde(default = "default_ambient")]
-    pub ambient_index: f64,
+    #[serde(default, skip_serializing_if = "AmbientIndex::is_unset")]
+    pub ambient_index: AmbientIndex,
     pub field: FieldSpec,
-}
-
-fn default_ambient() -> f64 {
-    1.0
 }
 
 /// Medium bounds. TOML: `{ sphere = { center, radius } }` or `{ box = { min, max } }`.
@@ -317,6 +315,28 @@ pub struct VdbSpec {
     /// What to do with NaN/Inf voxels.
     #[serde(default)]
     pub non_finite: NonFinitePolicy,
+    /// The cache's up axis: `"y"` (grin, Houdini) or `"z"` (Blender), turned to the
+    /// scene's +y.
+    #[serde(default)]
+    pub up: UpAxis,
+    /// Uniform scale about the scene origin, after `units` and `up`.
+    #[serde(default = "default_units")]
+    pub scale: f64,
+    /// Rotations in degrees about the scene's x, then y, then z axes, after `scale`.
+    #[serde(default)]
+    pub rotate_deg: [f64; 3],
+    /// Translation in scene metres, last.
+    #[serde(default)]
+    pub translate: [f64; 3],
+}
+
+/// Which axis of a VDB cache points up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpAxis {
+    #[default]
+    Y,
+    Z,
 }
 
 fn default_units() -> f64 {

@@ -3,8 +3,8 @@
 //! dotted key path of the offending value; the loader turns that into file:line:column.
 
 use crate::{
-    BoundsSpec, Camera, FieldSpec, Light, Material, MediumSpec, NoiseSpec, Object, RenderSettings,
-    Scene, Shape, Sky, StepSpec, VdbMap, VdbSpec,
+    AmbientIndex, BoundsSpec, Camera, FieldSpec, Light, Material, MediumSpec, NoiseSpec, Object,
+    RenderSettings, Scene, Shape, Sky, StepSpec, VdbMap, VdbSpec,
 };
 
 /// Largest image side accepted (16K): bigger is almost certainly a typo, and the frame
@@ -254,7 +254,15 @@ fn medium(m: &MediumSpec) -> Check {
         }
         BoundsSpec::Box { min, max } => min_max("medium.bounds.box", min, max)?,
     }
-    positive("medium.ambient_index", m.ambient_index)?;
+    match m.ambient_index {
+        AmbientIndex::Value(v) => positive("medium.ambient_index", v)?,
+        AmbientIndex::Auto if !matches!(m.field, FieldSpec::Vdb(_)) => fail(
+            "medium.ambient_index",
+            "\"auto\" takes the index a VDB grid's background maps to; give a number for \
+             this field",
+        )?,
+        AmbientIndex::Auto | AmbientIndex::Unset => {}
+    }
     field(&m.field)
 }
 
@@ -348,6 +356,9 @@ fn vdb(s: &VdbSpec) -> Check {
     non_empty(&k("path"), &s.path)?;
     non_empty(&k("grid"), &s.grid)?;
     positive(&k("units"), s.units)?;
+    positive(&k("scale"), s.scale)?;
+    finite3(&k("rotate_deg"), s.rotate_deg)?;
+    finite3(&k("translate"), s.translate)?;
     match s.map {
         VdbMap::Index { .. } => Ok(()),
         VdbMap::Linear { k: slope } => finite(&k("map.linear.k"), slope),

@@ -18,7 +18,7 @@ const BEAM: usize = 64;
 fn field(spec: FieldSpec, bounds: BoundsSpec) -> Arc<dyn IndexField> {
     let medium = MediumSpec {
         bounds,
-        ambient_index: 1.0,
+        ambient_index: 1.0.into(),
         field: spec,
     };
     match grin_field::build_field(&medium, Path::new(".")) {

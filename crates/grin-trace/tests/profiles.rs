@@ -17,7 +17,7 @@ use grin_trace::{Control, RayStatus, Segment, TraceSettings, trace_ray, trace_ra
 fn build(field: FieldSpec, bounds: BoundsSpec, ambient_index: f64) -> Arc<dyn IndexField> {
     let medium = MediumSpec {
         bounds,
-        ambient_index,
+        ambient_index: ambient_index.into(),
         field,
     };
     match grin_field::build_field(&medium, Path::new(".")) {

@@ -125,7 +125,7 @@ fn uniform_medium_at_ambient_index_is_invisible() {
         let mut with_medium = plain.clone();
         with_medium.medium = Some(MediumSpec {
             bounds: spec,
-            ambient_index: 1.0,
+            ambient_index: 1.0.into(),
             field: FieldSpec::Uniform { n: 1.0 },
         });
         let field: Arc<dyn IndexField> = Arc::new(ConstantField {
@@ -176,7 +176,7 @@ fn constant_n_ball_matches_snell() {
             center: c.to_array(),
             radius: r,
         },
-        ambient_index: 1.0,
+        ambient_index: 1.0.into(),
         field: FieldSpec::Uniform { n },
     });
     let field: Arc<dyn IndexField> = Arc::new(ConstantField {
