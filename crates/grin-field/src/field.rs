@@ -76,6 +76,13 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// The spacing (scene metres) of the samples this field interpolates, where it is a
+    /// grid of data (a VDB's voxel size, a baked grid's spacing): a bake finer than it
+    /// resolves the interpolation, not the data. `None` for fields given by a formula.
+    fn source_spacing(&self) -> Option<f64> {
+        None
+    }
+
     /// The grid itself when this field is a baked one (a `.grinf` file): the GPU
     /// uploads it as it is instead of baking the field again.
     fn as_baked(&self) -> Option<&crate::baked::BakedField> {

@@ -29,8 +29,10 @@ pub struct Args {
     #[arg(long, value_parser = parse_bytes)]
     pub max_memory: Option<u64>,
     /// Interpolation stored as the file's default (and used to measure the error).
-    #[arg(long, value_enum, default_value_t = InterpArg::Trilinear)]
-    pub interp: InterpArg,
+    /// Default: trilinear, and for a VDB grid whose own voxel size misses the budget,
+    /// tricubic at it and on grids 2x and 4x finer (within --max-memory).
+    #[arg(long, value_enum)]
+    pub interp: Option<InterpArg>,
     /// Storage (default: i16 when its rounding fits the budget, else f32).
     #[arg(long, value_enum)]
     pub storage: Option<StorageArg>,
@@ -167,9 +169,10 @@ fn bake_one(
         error_budget: args.error,
         max_memory: args.max_memory.unwrap_or(bake::DEFAULT_MAX_MEMORY),
         interp: match args.interp {
-            InterpArg::Trilinear => Interp::Trilinear,
-            InterpArg::Tricubic => Interp::Tricubic,
+            None | Some(InterpArg::Trilinear) => Interp::Trilinear,
+            Some(InterpArg::Tricubic) => Interp::Tricubic,
         },
+        cubic_past_source: args.interp.is_none(),
         storage: args.storage.map(|s| match s {
             StorageArg::F32 => Storage::F32,
             StorageArg::I16 => Storage::I16,
@@ -198,6 +201,21 @@ fn bake_one(
     let (baked, report) =
         result.with_context(|| format!("{}: bake failed", args.scene.display()))?;
     grin_field::grinf::save(&baked, output)?;
+    if report.source_limited {
+        eprintln!(
+            "grin: warning: {}: the budget {:.1e} is not met by the grids tried at and past \
+             the source's own voxel size (best: relative error {:.2e}, {} nodes on the \
+             longest axis, {}): what is left is that interpolation against grin's \
+             Catmull-Rom between the same voxels, not missing data; the bake is kept. Less: \
+             --max-memory above {} bytes for a finer tricubic grid, or --resolution N",
+            args.scene.display(),
+            report.budget,
+            report.relative_error,
+            report.resolution,
+            report.interp.name(),
+            opts.max_memory
+        );
+    }
     let summary = summary_json(output, &field.describe(), &report);
     if json {
         outln!("{}", serde_json::to_string_pretty(&summary)?);
@@ -244,7 +262,13 @@ fn print_summary(out: &Path, source: &str, r: &BakeReport) {
         r.relative_error,
         r.delta_n_range,
         r.budget,
-        if r.meets_budget { ", met" } else { ", NOT met" }
+        if r.meets_budget {
+            ", met"
+        } else if r.source_limited {
+            ", not met at or past the source's voxel size"
+        } else {
+            ", NOT met"
+        }
     );
     outln!(
         "          grad n: max {:.3e} rms {:.3e} ({} random points)",
@@ -284,10 +308,12 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
         "relative_error": r.relative_error,
         "budget": r.budget,
         "meets_budget": r.meets_budget,
+        "source_limited": r.source_limited,
         "trials": r.trials.iter().map(|t| serde_json::json!({
             "resolution": t.resolution,
             "dims": t.dims,
             "storage": t.storage.name(),
+            "interp": t.interp.name(),
             "relative_error": t.relative_error,
         })).collect::<Vec<_>>(),
         "seconds": r.seconds,

@@ -92,16 +92,28 @@ pub fn bake_for_gpu_auto(field: &dyn IndexField) -> Result<(BakedField, BakeRepo
         let res = DEFAULT_GPU_BAKE_RESOLUTION as f64;
         let wanted = res * (rel / goal).powf(1.0 / order) * 1.1;
         let fits = res * (GPU_BAKE_MAX_BYTES as f64 / best.1.bytes.max(1) as f64).cbrt();
-        let finer = wanted.min(fits).floor() as usize;
-        if finer <= DEFAULT_GPU_BAKE_RESOLUTION + 8 {
-            return Ok(best);
-        }
-        let fine = bake_for_gpu_interp(field, finer, best.1.interp)?;
-        return Ok(if fine.1.relative_error < rel {
-            fine
-        } else {
+        // No finer than a grid source's own spacing (a VDB's voxels): past it the bake
+        // resolves the source's interpolation, not its data.
+        let spacing = grid_spacing(&best.1);
+        let at_source = field
+            .source_spacing()
+            .map_or(f64::INFINITY, |h| (res * spacing / h).ceil());
+        let finer = wanted.min(fits).min(at_source).floor() as usize;
+        let mut chosen = if finer <= DEFAULT_GPU_BAKE_RESOLUTION + 8 {
             best
-        });
+        } else {
+            let fine = bake_for_gpu_interp(field, finer, best.1.interp)?;
+            if fine.1.relative_error < rel {
+                fine
+            } else {
+                best
+            }
+        };
+        chosen.1.source_limited = chosen.1.relative_error > DEFAULT_ERROR_BUDGET
+            && field
+                .source_spacing()
+                .is_some_and(|h| grid_spacing(&chosen.1) <= h * 1.0001);
+        return Ok(chosen);
     }
     let predicted = if rel > 0.0 {
         DEFAULT_GPU_BAKE_RESOLUTION as f64 * (rel / goal).sqrt()
@@ -130,11 +142,18 @@ pub fn bake_warning(report: &BakeReport) -> Option<String> {
         return None;
     }
     let [nx, ny, nz] = report.dims;
-    let spacing = (report.grid_max.x - report.grid_min.x) / (nx.max(2) - 1) as f64;
+    let spacing = grid_spacing(report);
     let interp = match report.interp {
         Interp::Trilinear => "trilinear",
         Interp::Tricubic => "tricubic",
     };
+    if report.source_limited {
+        return Some(format!(
+            "the GPU field bake ({nx}x{ny}x{nz} nodes {interp}, spacing {spacing:.3}) is at the source grid's own voxel size; its max |n error| {:.3e} = {:.2}% of the delta_n range is {interp} against grin's Catmull-Rom between the same voxels, not missing data: GPU and CPU images differ by that much at sharp edges of the data",
+            report.errors.max_err_n,
+            report.relative_error * 100.0,
+        ));
+    }
     Some(format!(
         "the GPU field bake ({nx}x{ny}x{nz} nodes {interp}, spacing {spacing:.3}) has max |n error| {:.3e} = {:.2}% of the delta_n range {:.3e} ({:.0}x the budget of {}%): the field is under-resolved and the GPU image will differ from the CPU's; shrink the medium's bounds to where the field matters, or bake a finer grid (`grin bake SCENE --resolution N -o field.grinf`) and use it (`field = {{ kind = \"baked\", path = \"field.grinf\" }}`)",
         report.errors.max_err_n,
@@ -143,6 +162,11 @@ pub fn bake_warning(report: &BakeReport) -> Option<String> {
         report.relative_error / DEFAULT_ERROR_BUDGET,
         DEFAULT_ERROR_BUDGET * 100.0,
     ))
+}
+
+/// The node spacing of a bake's grid (cubic cells).
+fn grid_spacing(report: &BakeReport) -> f64 {
+    (report.grid_max.x - report.grid_min.x) / (report.dims[0].max(2) - 1) as f64
 }
 
 #[cfg(test)]

@@ -81,6 +81,10 @@ pub struct BakeOptions {
     pub storage: Option<Storage>,
     /// Crop to the region where |n - ambient| is above the threshold.
     pub crop: bool,
+    /// For a source with its own spacing (a VDB grid) whose grid at that spacing misses
+    /// the budget: go on with tricubic grids at it, 2x and 4x finer (memory cap allowing)
+    /// before reporting `source_limited`.
+    pub cubic_past_source: bool,
     pub gradient: GradientMode,
     pub error_points: usize,
     /// Seed of the random error points.
@@ -96,6 +100,7 @@ impl Default for BakeOptions {
             interp: Interp::Trilinear,
             storage: None,
             crop: true,
+            cubic_past_source: true,
             gradient: GradientMode::Exact,
             error_points: DEFAULT_ERROR_POINTS,
             seed: 1,
@@ -157,6 +162,7 @@ pub struct Trial {
     pub resolution: usize,
     pub dims: [usize; 3],
     pub storage: Storage,
+    pub interp: Interp,
     pub relative_error: f64,
 }
 
@@ -180,6 +186,12 @@ pub struct BakeReport {
     pub relative_error: f64,
     pub budget: f64,
     pub meets_budget: bool,
+    /// The automatic search reached the source's own spacing (a VDB's voxel size) and,
+    /// past it, the finest tricubic grid it may try, without meeting the budget: the
+    /// error left is the baked interpolation against the source's (Catmull-Rom) one
+    /// between the same data, not missing data. The bake is kept (the most accurate one
+    /// tried); a larger memory cap or a fixed `--resolution` reduce it.
+    pub source_limited: bool,
     pub trials: Vec<Trial>,
     pub seconds: f64,
     /// Source evaluations spent on grid nodes (all trials).
@@ -220,15 +232,32 @@ pub fn bake(
     let evals = AtomicU64::new(0);
 
     let mut trials = Vec::new();
-    let candidates: Vec<usize> = match opts.resolution {
-        Some(n) => vec![n],
-        None => CANDIDATE_RESOLUTIONS.to_vec(),
+    let mut candidates: Vec<(usize, Interp)> = match opts.resolution {
+        Some(n) => vec![(n, opts.interp)],
+        None => candidate_resolutions(crop_hi - crop_lo, source.source_spacing())
+            .into_iter()
+            .map(|r| (r, opts.interp))
+            .collect(),
     };
+    // The finest candidate when it is the source's own spacing: past it a grid resolves
+    // the source's interpolation between the same data, so the search goes on there
+    // only with `cubic_past_source` (tricubic, 2x and 4x finer, within the memory cap).
+    let source_resolution = match (opts.resolution, source.source_spacing()) {
+        (None, Some(_)) => candidates.last().map(|c| c.0),
+        _ => None,
+    };
+    if let Some(r) = source_resolution
+        && opts.cubic_past_source
+    {
+        let at_source = (opts.interp == Interp::Trilinear).then_some((r, Interp::Tricubic));
+        candidates.extend(at_source);
+        candidates.extend([2, 4].map(|f| (f * (r - 1) + 1, Interp::Tricubic)));
+    }
     let mut best: Option<(BakedField, ErrorStats, f64, f64, usize)> = None;
-    for (ci, &res) in candidates.iter().enumerate() {
-        let geometry = grid_geometry(crop_lo, crop_hi, res, grid_margin(opts.interp));
+    for (ci, &(res, interp)) in candidates.iter().enumerate() {
+        let geometry = grid_geometry(crop_lo, crop_hi, res, grid_margin(interp));
         let storage_guess = opts.storage.unwrap_or(Storage::I16);
-        let need = memory_bytes(&geometry, storage_guess, opts.interp);
+        let need = memory_bytes(&geometry, storage_guess, interp);
         if need > opts.max_memory {
             if opts.resolution.is_some() || trials.is_empty() {
                 let [nx, ny, nz] = geometry.dims;
@@ -246,7 +275,7 @@ pub fn bake(
             "bake {}x{}x{}",
             geometry.dims[0], geometry.dims[1], geometry.dims[2]
         );
-        let shell = grid_margin(opts.interp) as f64 * geometry.spacing.max_element();
+        let shell = grid_margin(interp) as f64 * geometry.spacing.max_element();
         let raw = sample_grid(
             source,
             &geometry,
@@ -260,7 +289,7 @@ pub fn bake(
         let storage = opts
             .storage
             .unwrap_or_else(|| choose_storage(range, opts.error_budget));
-        let need = memory_bytes(&geometry, storage, opts.interp);
+        let need = memory_bytes(&geometry, storage, interp);
         if need > opts.max_memory {
             if opts.resolution.is_some() || trials.is_empty() {
                 let [nx, ny, nz] = geometry.dims;
@@ -286,7 +315,7 @@ pub fn bake(
         let field = BakedField::new(
             geometry,
             voxels,
-            opts.interp,
+            interp,
             outside,
             bounds,
             ambient,
@@ -308,10 +337,13 @@ pub fn bake(
             resolution: res,
             dims: geometry.dims,
             storage,
+            interp,
             relative_error: rel,
         });
         let met = rel <= opts.error_budget * BUDGET_SAFETY;
-        best = Some((field, errors, range, rel, res));
+        if best.as_ref().is_none_or(|b| rel <= b.3) {
+            best = Some((field, errors, range, rel, res));
+        }
         if met || ci + 1 == candidates.len() || opts.resolution.is_some() {
             break;
         }
@@ -319,7 +351,8 @@ pub fn bake(
     let Some((mut field, errors, range, rel, res)) = best else {
         return Err(BakeError::Option("no resolution was tried".into()));
     };
-    if opts.resolution.is_none() && rel > opts.error_budget {
+    let source_limited = source_resolution.is_some_and(|r| res >= r) && rel > opts.error_budget;
+    if opts.resolution.is_none() && rel > opts.error_budget && !source_limited {
         return Err(BakeError::BudgetNotMet {
             budget: opts.error_budget,
             cap: opts.max_memory,
@@ -349,12 +382,33 @@ pub fn bake(
         relative_error: rel,
         budget: opts.error_budget,
         meets_budget: rel <= opts.error_budget,
+        source_limited,
         trials,
         seconds: start.elapsed().as_secs_f64(),
         source_evals: evals.load(Ordering::Relaxed),
         homogeneous_cells: field.macro_grid().homogeneous_fraction(),
     };
     Ok((field, report))
+}
+
+/// The resolutions the automatic search tries for a crop of size `extent`: the
+/// [`CANDIDATE_RESOLUTIONS`], and for a source with its own sample spacing (a VDB grid)
+/// only those coarser than it, then the one at that spacing (when within the largest
+/// candidate).
+pub fn candidate_resolutions(extent: DVec3, source_spacing: Option<f64>) -> Vec<usize> {
+    let all = CANDIDATE_RESOLUTIONS.to_vec();
+    let Some(h) = source_spacing.filter(|h| *h > 0.0 && h.is_finite()) else {
+        return all;
+    };
+    let longest = extent.max_element();
+    let at_source = (longest / h - 1e-9).ceil().max(1.0) as usize + 1;
+    let largest = CANDIDATE_RESOLUTIONS[CANDIDATE_RESOLUTIONS.len() - 1];
+    if at_source > largest {
+        return all;
+    }
+    let mut out: Vec<usize> = all.into_iter().filter(|&r| r < at_source).collect();
+    out.push(at_source.max(2));
+    out
 }
 
 /// Memory of a baked field in use: voxels, plus spline coefficients for tricubic.

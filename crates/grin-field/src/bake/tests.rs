@@ -369,3 +369,23 @@ fn automatic_resolution_meets_the_budget_on_real_fields() {
         }
     }
 }
+
+/// A grid source's search stops at its own spacing: every candidate coarser, the last at
+/// it; a formula field gets the whole list, and so does a source finer than the list.
+#[test]
+fn candidate_resolutions_stop_at_the_source_spacing() {
+    let extent = DVec3::new(1.15, 1.95, 1.15);
+    assert_eq!(
+        candidate_resolutions(extent, Some(0.05)),
+        vec![12, 16, 24, 32, 40]
+    );
+    assert_eq!(
+        candidate_resolutions(extent, None),
+        CANDIDATE_RESOLUTIONS.to_vec()
+    );
+    assert_eq!(
+        candidate_resolutions(extent, Some(1e-4)),
+        CANDIDATE_RESOLUTIONS.to_vec()
+    );
+    assert_eq!(candidate_resolutions(extent, Some(10.0)), vec![2]);
+}

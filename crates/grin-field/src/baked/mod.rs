@@ -686,6 +686,10 @@ impl IndexField for BakedField {
     fn feature_size(&self) -> Option<f64> {
         Some(2.0 * self.geometry.spacing.min_element())
     }
+
+    fn source_spacing(&self) -> Option<f64> {
+        Some(self.geometry.spacing.min_element())
+    }
     fn max_grad_n(&self) -> f64 {
         self.max_grad
     }
