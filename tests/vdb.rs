@@ -394,8 +394,9 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
         units: 1.0,
         non_finite: NonFinitePolicy::Reject,
         bounds,
-        ambient: 1.0,
+        ambient: Some(1.0),
         max_bytes: DEFAULT_MAX_DENSE_BYTES,
+        placement: grin_field::vdb::IDENTITY,
     };
     let vdb = VdbField::load(&data("test/gaussian.vdb"), "delta_n", &params).expect("load");
 
@@ -586,8 +587,9 @@ fn vdb_field_places_voxels_at_their_world_positions() {
             center: DVec3::ZERO,
             radius: 10.0,
         },
-        ambient: 1.0,
+        ambient: Some(1.0),
         max_bytes: DEFAULT_MAX_DENSE_BYTES,
+        placement: grin_field::vdb::IDENTITY,
     };
     let field = VdbField::load(&data("test/aniso.vdb"), "value", &params).expect("load");
     let nx = dims[0] as usize;
@@ -696,7 +698,10 @@ step = {{ fixed = 0.01 }}
     let n = opl / length;
     // The grid stores the value as f32; the exact map of that value:
     let t_k = t_amb + scale * f64::from(value);
-    let n_exact = 1.0 + 2.26e-4 * 101_325.0 / (287.05 * t_k);
+    // The scene's ambient (9 digits) is taken as the background's index: the data moves
+    // by the difference (data/vdb/README.md, "Ambient").
+    let n_background = 1.0 + 2.26e-4 * 101_325.0 / (287.05 * t_amb);
+    let n_exact = 1.0 + 2.26e-4 * 101_325.0 / (287.05 * t_k) + (N_AIR_20C - n_background);
     assert!((n - n_exact).abs() < 1e-12, "n {n} vs {n_exact}");
     assert!(
         (n - 1.0 - 0.80e-4).abs() < 0.005e-4,
@@ -921,4 +926,314 @@ jitter = false
         .output()
         .expect("grin");
     fails_cleanly(&o, "is a frame sequence", None);
+}
+
+/// One cache written twice by OpenVDB's python API (half-float temperature, a second grid,
+/// voxel size 0.04, a Gaussian plume and a sharp-edged hot block): Y-up, and Z-up as
+/// Blender writes it (the same voxels, turned). Placed with `up = "z"`, the Z-up file
+/// traces exactly as the Y-up one; placed with `rotate_deg` and `translate`, the Y-up one
+/// traces as the same rays moved by that transform. `ambient_index` is left out: "auto",
+/// the index of the background (air at 20 C). `grin info --up z` finds the data where the
+/// Y-up file has it, and its `[medium]` block is a scene that traces.
+#[test]
+fn a_z_up_cache_placed_with_up_z_traces_as_the_y_up_one() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let script = d.join("make.py");
+    std::fs::write(
+        &script,
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+out = sys.argv[1]
+h, n = 0.04, 26
+ax = np.arange(n) * h
+x, y, z = np.meshgrid(ax - 0.5, ax, ax - 0.5, indexing="ij")
+plume = 1.5 * np.exp(-((x - 0.05) ** 2 + (y - 0.35) ** 2 + (z + 0.1) ** 2) / 0.12 ** 2)
+block = 0.8 * ((abs(x + 0.2) < 0.1) & (abs(y - 0.7) < 0.08) & (abs(z - 0.15) < 0.1))
+yup = (plume + block).astype(np.float32)
+# Z-up (Blender): voxel (i, j, k) at (x, y, z) = h (i, j, k) + (-0.5, -0.5, 0) holds what
+# the Y-up file has at scene (x, z, -y).
+zup = np.ascontiguousarray(yup[:, :, ::-1].transpose(0, 2, 1))
+def write(path, values, origin):
+    m = [[h, 0, 0, 0], [0, h, 0, 0], [0, 0, h, 0], [origin[0], origin[1], origin[2], 1]]
+    t = vdb.FloatGrid()
+    t.name = "temperature"
+    t.copyFromArray(values, ijk=(0, 0, 0), tolerance=0)
+    t.transform = vdb.createLinearTransform(m)
+    t.saveFloatAsHalf = True
+    d = vdb.FloatGrid()
+    d.name = "density"
+    d.copyFromArray((values > 0.5).astype(np.float32), ijk=(0, 0, 0), tolerance=0)
+    d.transform = vdb.createLinearTransform(m)
+    vdb.write(path, grids=[d, t])
+write(f"{out}/yup.vdb", yup, (-0.5, 0.0, -0.5))
+write(f"{out}/zup.vdb", zup, (-0.5, -0.5, 0.0))
+"#,
+    )
+    .expect("script");
+    let made = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(d)
+        .output()
+        .expect("python3-openvdb (installed by scripts/setup.sh)");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+
+    let scene = |name: &str, file: &str, bounds: &str, place: &str| {
+        let text = format!(
+            r#"
+[camera]
+position = [0.0, 0.5, -3.0]
+look_at = [0.0, 0.5, 0.0]
+[medium]
+bounds = {{ box = {bounds} }}
+field = {{ kind = "vdb", path = "{file}", grid = "temperature", map = {{ gladstone-dale = {{ scale_k = 300.0 }} }}{place} }}
+[render]
+integrator = "rk4"
+step = {{ fixed = 0.004 }}
+"#
+        );
+        let p = d.join(name);
+        std::fs::write(&p, text).expect("scene");
+        p
+    };
+    let held = "{ min = [-0.52, -0.02, -0.52], max = [0.52, 1.02, 0.52] }";
+    let y_up = scene("yup.toml", "yup.vdb", held, "");
+    let z_up = scene("zup.toml", "zup.vdb", held, ", up = \"z\"");
+    let moved = scene(
+        "moved.toml",
+        "yup.vdb",
+        "{ min = [1.48, -0.02, -0.52], max = [2.52, 1.02, 0.52] }",
+        ", rotate_deg = [0.0, 90.0, 0.0], translate = [2.0, 0.0, 0.0]",
+    );
+
+    // Rays along +z and along +x through the plume and the block.
+    let mut rays = vec![];
+    for &x in &[-0.25, -0.15, 0.0, 0.05, 0.12] {
+        for &y in &[0.3, 0.35, 0.45, 0.68, 0.75] {
+            rays.push(([x, y, -1.0], [0.0, 0.0, 1.0]));
+            rays.push(([-1.0, y, x], [1.0, 0.0, 0.0]));
+        }
+    }
+    // The move: rotation by 90 degrees about +y ((x, y, z) -> (z, y, -x)), then +2 in x.
+    let turn = |v: [f64; 3]| [v[2], v[1], -v[0]];
+    let shift = |p: [f64; 3]| {
+        let t = turn(p);
+        [t[0] + 2.0, t[1], t[2]]
+    };
+    let table = |name: &str, rays: &[([f64; 3], [f64; 3])]| {
+        let mut text = String::from("ox,oy,oz,dx,dy,dz\n");
+        for (o, v) in rays {
+            text += &format!("{},{},{},{},{},{}\n", o[0], o[1], o[2], v[0], v[1], v[2]);
+        }
+        let p = d.join(name);
+        std::fs::write(&p, text).expect("rays");
+        p
+    };
+    let plain = table("rays.csv", &rays);
+    let moved_rays: Vec<_> = rays.iter().map(|(o, v)| (shift(*o), turn(*v))).collect();
+    let moved_table = table("moved-rays.csv", &moved_rays);
+    let trace = |scene: &Path, rays: &Path| -> Vec<std::collections::HashMap<String, String>> {
+        let out_csv = d.join(format!(
+            "{}.out.csv",
+            scene.file_stem().expect("stem").to_string_lossy()
+        ));
+        let out = run(&[
+            "trace",
+            scene.to_str().expect("utf8"),
+            "--rays",
+            rays.to_str().expect("utf8"),
+            "-o",
+            out_csv.to_str().expect("utf8"),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = std::fs::read_to_string(&out_csv).expect("table");
+        let mut lines = text.lines();
+        let header: Vec<String> = lines
+            .next()
+            .expect("header")
+            .split(',')
+            .map(str::to_owned)
+            .collect();
+        lines
+            .map(|l| {
+                header
+                    .iter()
+                    .cloned()
+                    .zip(l.split(',').map(str::to_owned))
+                    .collect()
+            })
+            .collect()
+    };
+    let num = |row: &std::collections::HashMap<String, String>, k: &str| -> f64 {
+        row[k].parse().expect("number")
+    };
+    let a = trace(&y_up, &plain);
+    let b = trace(&z_up, &plain);
+    let c = trace(&moved, &moved_table);
+    assert_eq!(a.len(), rays.len());
+    let mut bent = 0;
+    for ((ra, rb), rc) in a.iter().zip(&b).zip(&c) {
+        assert_eq!(ra["status"], "exited", "{ra:?}");
+        assert_eq!(rb["status"], "exited", "{rb:?}");
+        assert_eq!(rc["status"], "exited", "{rc:?}");
+        let p = ["px", "py", "pz"].map(|k| num(ra, k));
+        let q = ["qx", "qy", "qz"].map(|k| num(ra, k));
+        for (k, v) in ["px", "py", "pz", "qx", "qy", "qz", "opl"].iter().zip(0..) {
+            let _ = v;
+            assert!(
+                (num(ra, k) - num(rb, k)).abs() < 1e-9,
+                "Z-up vs Y-up {k}: {} vs {}",
+                num(ra, k),
+                num(rb, k)
+            );
+        }
+        let (pm, qm) = (shift(p), turn(q));
+        for (i, k) in ["px", "py", "pz"].iter().enumerate() {
+            assert!(
+                (num(rc, k) - pm[i]).abs() < 1e-9,
+                "moved {k}: {rc:?} vs {pm:?}"
+            );
+        }
+        for (i, k) in ["qx", "qy", "qz"].iter().enumerate() {
+            assert!(
+                (num(rc, k) - qm[i]).abs() < 1e-9,
+                "moved {k}: {rc:?} vs {qm:?}"
+            );
+        }
+        let d_in = if num(ra, "dz") > 0.5 {
+            [0.0, 0.0, 1.0]
+        } else {
+            [1.0, 0.0, 0.0]
+        };
+        let turned = (0..3).map(|i| (q[i] - d_in[i]).powi(2)).sum::<f64>().sqrt();
+        if turned > 1e-5 {
+            bent += 1;
+        }
+    }
+    assert!(
+        bent >= rays.len() / 2,
+        "only {bent} of {} rays bent",
+        rays.len()
+    );
+
+    // grin info --up z locates the Z-up data where the Y-up file's is, and its [medium]
+    // block (ambient "auto") is a scene that traces.
+    let info = |file: &str, up: &str| -> serde_json::Value {
+        let out = run(&[
+            "info",
+            d.join(file).to_str().expect("utf8"),
+            "--up",
+            up,
+            "--json",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        v["grids"]
+            .as_array()
+            .expect("grids")
+            .iter()
+            .find(|g| g["name"] == "temperature")
+            .expect("temperature")
+            .clone()
+    };
+    let (gy, gz) = (info("yup.vdb", "y"), info("zup.vdb", "z"));
+    for side in ["min", "max"] {
+        for i in 0..3 {
+            let (u, v) = (
+                gy["data_world_box"][side][i].as_f64().expect("box"),
+                gz["data_world_box"][side][i].as_f64().expect("box"),
+            );
+            assert!((u - v).abs() < 1e-9, "{side}[{i}]: {u} vs {v}");
+        }
+    }
+    let block = gz["medium_toml"].as_str().expect("medium block");
+    assert!(
+        block.contains("up = \"z\"") && block.contains("ambient_index = \"auto\""),
+        "{block}"
+    );
+    let pasted = d.join("pasted.toml");
+    std::fs::write(
+        &pasted,
+        format!("[camera]\nposition = [0.0, 0.5, -3.0]\nlook_at = [0.0, 0.5, 0.0]\n{block}\n"),
+    )
+    .expect("scene");
+    let p = trace(&pasted, &plain);
+    assert!(p.iter().all(|r| r["status"] == "exited"), "{p:?}");
+}
+
+/// The default bake of the example fire cache meets the default budget: the search stops
+/// at the cache's own voxel size (40 nodes) for trilinear, then goes on with tricubic at
+/// it and 2x and 4x finer. Under a memory cap that stops it earlier, the most accurate
+/// grid it reached is written and a warning says why the budget is missed and what to
+/// change.
+#[test]
+fn the_default_bake_of_the_fire_example_meets_its_budget() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out_file = dir.path().join("fire.grinf");
+    let scene = data("fire-haze.toml");
+    let out = run(&[
+        "bake",
+        scene.to_str().expect("utf8"),
+        "-o",
+        out_file.to_str().expect("utf8"),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
+    assert_eq!(v["meets_budget"], true, "{v}");
+    assert_eq!(v["source_limited"], false, "{v}");
+    let trials = v["trials"].as_array().expect("trials");
+    let finest_trilinear = trials
+        .iter()
+        .filter(|t| t["interp"] == "trilinear")
+        .filter_map(|t| t["resolution"].as_u64())
+        .max()
+        .expect("a trilinear trial");
+    // 1.95 m tall at 0.05 m voxels: 40 nodes reach the voxel size; no trilinear grid past it.
+    assert_eq!(finest_trilinear, 40, "{v}");
+    assert!(v["resolution"].as_u64().expect("res") <= 157, "{v}");
+
+    let capped = dir.path().join("capped.grinf");
+    let out = run(&[
+        "bake",
+        scene.to_str().expect("utf8"),
+        "-o",
+        capped.to_str().expect("utf8"),
+        "--max-memory",
+        "4M",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
+    assert_eq!(v["meets_budget"], false, "{v}");
+    assert_eq!(v["source_limited"], true, "{v}");
+    assert!(capped.exists());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("not met by the grids tried at and past the source's own voxel size")
+            && err.contains("--max-memory above"),
+        "{err}"
+    );
 }

@@ -16,6 +16,17 @@ pub struct Args {
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
+    /// A `.vdb`'s up axis for the world boxes and `[medium]` blocks shown: `z` for a Z-up
+    /// cache (Blender), turned to the scene's +y as the medium's `up = "z"` does.
+    #[arg(long, value_enum, default_value = "y")]
+    pub up: UpArg,
+}
+
+/// The up axis of a VDB cache.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum UpArg {
+    Y,
+    Z,
 }
 
 /// The formats `grin info` reads.
@@ -53,7 +64,7 @@ fn detect(path: &Path) -> anyhow::Result<Format> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match detect(&args.path)? {
-        Format::Vdb => crate::cmd::info_vdb::run(&args.path, args.json),
+        Format::Vdb => crate::cmd::info_vdb::run(&args.path, args.json, args.up),
         Format::Grinf => info_grinf(&args.path, args.json),
     }
 }

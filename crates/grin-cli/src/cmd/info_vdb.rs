@@ -2,14 +2,106 @@
 
 use std::path::Path;
 
+use grin_field::vdb::{DATA_FRACTION, DataBox, compose, placement};
+use grin_scene::UpAxis;
 use serde_json::{Value, json};
 use vdb_sys::{GridInfo, Meta, MetaValue, VdbFile};
 
+use crate::cmd::info::UpArg;
+
+/// Largest dense read (bytes of f32) `grin info` makes to find where a grid's data is.
+const DATA_READ_CAP: u64 = 1 << 30;
+
+/// Where one scalar grid's data is, in the scene frame of `--up`.
+struct DataPlace {
+    data: DataBox,
+    /// Scene-from-index of the grid (its transform, then the up-axis turn).
+    world_from_index: [[f64; 4]; 3],
+}
+
+impl DataPlace {
+    /// A `[medium]` block that holds the data, for a scene beside `path`'s directory.
+    fn medium_block(&self, path: &Path, g: &GridInfo, up: UpArg) -> String {
+        let file = path.file_name().map_or_else(
+            || path.display().to_string(),
+            |f| f.to_string_lossy().into_owned(),
+        );
+        let name = g.name.to_ascii_lowercase();
+        let (map, note) = if name.contains("temp") || name.contains("heat") {
+            (
+                "{ gladstone-dale = { ambient_temperature_k = 293.15, scale_k = 300.0 } }",
+                "# map: air by Gladstone-Dale, T = 293.15 K + scale_k * value: set scale_k to the kelvin per unit of this cache",
+            )
+        } else if name.contains("index") || name == "n" || name.contains("ior") {
+            ("{ index = {} }", "# map: the grid holds n itself")
+        } else {
+            (
+                "{ linear = { k = 1e-4 } }",
+                "# map: n = ambient + k * value: set k to the index change per unit of this grid",
+            )
+        };
+        let up = match up {
+            UpArg::Y => "",
+            UpArg::Z => ", up = \"z\"",
+        };
+        format!(
+            "[medium]\n{note}\n{}\nambient_index = \"auto\"\nfield = {{ kind = \"vdb\", path = \"{file}\", grid = \"{}\", map = {map}{up} }}",
+            self.data.bounds_line(&self.world_from_index),
+            g.name
+        )
+    }
+
+    fn world(&self) -> (glam::DVec3, glam::DVec3) {
+        self.data.world(&self.world_from_index, 0.0)
+    }
+}
+
+/// Read a scalar grid's active box and find its data ([`DataBox`]); `Ok(None)` for a grid
+/// whose values never leave the background; `Err` says why it was not looked at.
+fn data_place(file: &VdbFile, g: &GridInfo, up: UpArg) -> Result<Option<DataPlace>, String> {
+    if !g.kind.is_scalar() {
+        return Err("not a scalar grid".into());
+    }
+    let Some(bbox) = g.active_bbox else {
+        return Ok(None);
+    };
+    let dense = file
+        .read_scalar(&g.name, bbox, DATA_READ_CAP)
+        .map_err(|e| e.to_string())?;
+    let change: Vec<f64> = dense
+        .values
+        .iter()
+        .map(|&v| {
+            let d = (f64::from(v) - g.background).abs();
+            if d.is_finite() { d } else { 0.0 }
+        })
+        .collect();
+    let dims = bbox.dims().map(|d| d as usize);
+    let turn = placement(
+        match up {
+            UpArg::Y => UpAxis::Y,
+            UpArg::Z => UpAxis::Z,
+        },
+        1.0,
+        [0.0; 3],
+        [0.0; 3],
+    );
+    Ok(
+        DataBox::find(&change, dims, bbox.min).map(|data| DataPlace {
+            data,
+            world_from_index: compose(&turn, &g.transform.world_from_index),
+        }),
+    )
+}
+
 /// Print the grids of `path` (text, or JSON on stdout with `json`).
-pub fn run(path: &Path, json: bool) -> anyhow::Result<()> {
+pub fn run(path: &Path, json: bool, up: UpArg) -> anyhow::Result<()> {
     let file = VdbFile::open(path)?;
     if json {
-        outln!("{}", serde_json::to_string_pretty(&to_json(&file))?);
+        outln!(
+            "{}",
+            serde_json::to_string_pretty(&to_json(&file, path, up))?
+        );
         return Ok(());
     }
     outln!(
@@ -22,6 +114,36 @@ pub fn run(path: &Path, json: bool) -> anyhow::Result<()> {
     }
     for g in file.grids() {
         print_grid(g);
+        if !g.kind.is_scalar() {
+            continue;
+        }
+        match data_place(&file, g, up) {
+            Ok(Some(place)) => {
+                let (lo, hi) = place.world();
+                outln!(
+                    "  data (|value - background| > {DATA_FRACTION:e} of the largest): index box {:?}..={:?}, world box of voxel centres{} ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})",
+                    place.data.min,
+                    place.data.max,
+                    if up == UpArg::Z {
+                        " (Z-up turned to +y)"
+                    } else {
+                        ""
+                    },
+                    lo.x,
+                    lo.y,
+                    lo.z,
+                    hi.x,
+                    hi.y,
+                    hi.z
+                );
+                outln!("  a [medium] that holds it (paste into a scene beside the file):");
+                for line in place.medium_block(path, g, up).lines() {
+                    outln!("    {line}");
+                }
+            }
+            Ok(None) => outln!("  data: every voxel equals the background"),
+            Err(why) => outln!("  data: not located ({why})"),
+        }
     }
     Ok(())
 }
@@ -141,13 +263,24 @@ fn finite_or_null(x: f64) -> Value {
     if x.is_finite() { json!(x) } else { Value::Null }
 }
 
-fn to_json(file: &VdbFile) -> Value {
+fn to_json(file: &VdbFile, path: &Path, up: UpArg) -> Value {
     let grids: Vec<Value> = file
         .grids()
         .iter()
         .map(|g| {
             let (lo, hi) = world_box(g);
+            let place = g
+                .kind
+                .is_scalar()
+                .then(|| data_place(file, g, up).ok().flatten())
+                .flatten();
             json!({
+                "data_index_box": place.as_ref().map(|p| json!({"min": p.data.min, "max": p.data.max})),
+                "data_world_box": place.as_ref().map(|p| {
+                    let (lo, hi) = p.world();
+                    json!({"min": lo.to_array(), "max": hi.to_array()})
+                }),
+                "medium_toml": place.as_ref().map(|p| p.medium_block(path, g, up)),
                 "name": g.name,
                 "value_type": g.value_type,
                 "class": g.grid_class,
