@@ -45,7 +45,7 @@ fn render_pixel(px: u32, row: u32) -> bool {
     var rgb = vec3<f32>(0.0);
     var steps = 0.0;
     var evals = 0.0;
-    var first = PrimaryAov(0.0, vec3<f32>(0.0), 0.0, 0u, 0u, STATUS_MISSED);
+    var first = PrimaryAov(0.0, vec3<f32>(0.0), 0.0, 0u, 0u, STATUS_MISSED, vec3<f32>(0.0), 0.0);
     // Samples first_sample .. first_sample + spp of spp_total: frames of consecutive
     // ranges, averaged, are one render of spp_total samples.
     for (var k = 0u; k < spp; k++) {
@@ -89,6 +89,10 @@ fn render_pixel(px: u32, row: u32) -> bool {
     out.steps = steps * inv;
     out.evals = evals * inv;
     out.status = f32(first.status);
+    out.pos_x = first.exit_pos.x;
+    out.pos_y = first.exit_pos.y;
+    out.pos_z = first.exit_pos.z;
+    out.opd_plane = first.opd_plane;
     out.pad = 0.0;
     out_pixels[row * width + px] = out;
     return true;

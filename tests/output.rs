@@ -333,7 +333,7 @@ fn buffers_that_do_not_fit_are_errors_not_aborts() {
     ));
     assert_eq!(code, Some(1), "{err}");
     assert!(
-        err.contains("grin: error: not enough memory for a 8192x8192 frame: 2952790016 bytes"),
+        err.contains("grin: error: not enough memory for a 8192x8192 frame: 4026531840 bytes"),
         "{err}"
     );
     let (code, err) = run(&format!(

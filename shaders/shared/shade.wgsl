@@ -20,6 +20,10 @@ struct PrimaryAov {
     steps: u32,
     evals: u32,
     status: u32,
+    // Where the ray left the medium or stopped in it (the camera if it missed).
+    exit_pos: vec3<f32>,
+    // opd taken on to the plane through the straight exit, normal to the ray (opd_tail).
+    opd_plane: f32,
 }
 
 struct PathSample {
@@ -27,6 +31,16 @@ struct PathSample {
     aov: PrimaryAov,
     // PASS_FIRST only: the path reached the medium and was left to PASS_MEDIUM.
     deferred: bool,
+}
+
+// The path from a ray's exit along `dir` on to the plane through `straight_exit` normal
+// to `entry_dir`; 0 past a 90 degree turn (CPU twin: opd_tail).
+fn opd_tail(straight_exit: vec3<f32>, entry_dir: vec3<f32>, exit: vec3<f32>, dir: vec3<f32>) -> f32 {
+    let c = dot(dir, entry_dir);
+    if c <= 1e-12 {
+        return 0.0;
+    }
+    return dot(straight_exit - exit, entry_dir) / c;
 }
 
 // In PASS_FIRST a path that reaches the medium stops and the pixel is traced again,
@@ -90,7 +104,7 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
     var dir = d;
     var throughput = vec3<f32>(1.0);
     var radiance = vec3<f32>(0.0);
-    var aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED);
+    var aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED, params.cam_origin, 0.0);
     var primary = true;
     var inside = has_medium() && bounds_signed_distance(origin) < 0.0;
     var bounces = 0u;
@@ -115,8 +129,10 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
             var stats = MarchStats(0u, 0u, 0.0, 0.0);
             let b = bounds_intersect(origin, dir);
             var straight = 0.0;
+            var straight_exit = origin;
             if b.found {
                 straight = max(b.s_out - max(b.s_in, 0.0), 0.0);
+                straight_exit = origin + dir * max(b.s_out, 0.0);
             }
             let entry_dir = dir;
             let end = march_medium(origin, dir, select(1.0, jitter, primary), &stats);
@@ -149,9 +165,11 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
             if primary && status != STATUS_MISSED {
                 aov.status = status;
                 aov.exit_dir = dir;
+                aov.exit_pos = end.point;
                 aov.deflection_deg = angle_between_deg(entry_dir, dir);
                 if status == STATUS_EXITED {
                     aov.opd = stats.opl - ambient_index() * straight;
+                    aov.opd_plane = aov.opd + ambient_index() * opd_tail(straight_exit, entry_dir, end.point, dir);
                 } else {
                     aov.opd = 0.0;
                 }

@@ -86,6 +86,8 @@ struct PixelOut {
     steps: f32,
     evals: f32,
     status: f32,
+    pos_x: f32, pos_y: f32, pos_z: f32,
+    opd_plane: f32,
     pad: f32,
 }
 

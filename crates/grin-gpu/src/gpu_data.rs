@@ -204,7 +204,7 @@ pub struct GpuLight {
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 2 * 16);
 
-/// One output pixel: the same 12 floats as `grin_render::image::PixelOut`.
+/// One output pixel: the 15 floats of `grin_render::image::PixelOut` and 1 of padding.
 /// Keep in sync with `PixelOut` in shaders/shared/types.wgsl.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
@@ -216,9 +216,11 @@ pub struct PixelOut {
     pub steps: f32,
     pub evals: f32,
     pub status: f32,
+    pub exit_pos: [f32; 3],
+    pub opd_plane: f32,
     pub _pad: f32,
 }
-const _: () = assert!(std::mem::size_of::<PixelOut>() == 12 * 4);
+const _: () = assert!(std::mem::size_of::<PixelOut>() == 16 * 4);
 
 impl PixelOut {
     /// The CPU renderer's pixel type.
@@ -231,6 +233,8 @@ impl PixelOut {
             steps: self.steps,
             evals: self.evals,
             status: self.status,
+            exit_pos: self.exit_pos,
+            opd_plane: self.opd_plane,
         }
     }
 }

@@ -31,6 +31,12 @@ pub struct PixelOut {
     pub evals: f32,
     /// `RayStatus` as a number: 0 missed, 1 exited, 2 absorbed, 3 max_steps, 4 error.
     pub status: f32,
+    /// Where the camera ray left the medium (world): where it stopped for absorbed,
+    /// max_steps and error; the camera's position if it missed the medium.
+    pub exit_pos: [f32; 3],
+    /// `opd` with both paths taken on to the plane through the straight ray's exit, normal
+    /// to it: stationary in the deflection, the interferogram's OPD (docs/optics.md).
+    pub opd_plane: f32,
 }
 
 /// A rendered image, row 0 at the top.
@@ -42,7 +48,7 @@ pub struct Frame {
 }
 
 /// EXR channel names: beauty as R, G, B; AOVs as `aov.*` channels of the same part.
-pub const AOV_CHANNELS: [&str; 8] = [
+pub const AOV_CHANNELS: [&str; 12] = [
     "aov.deflection_deg",
     "aov.exit_dir.X",
     "aov.exit_dir.Y",
@@ -51,6 +57,10 @@ pub const AOV_CHANNELS: [&str; 8] = [
     "aov.steps",
     "aov.evals",
     "aov.status",
+    "aov.exit_pos.X",
+    "aov.exit_pos.Y",
+    "aov.exit_pos.Z",
+    "aov.opd_plane",
 ];
 
 fn output_err(path: &Path, message: impl ToString) -> RenderError {
@@ -92,21 +102,12 @@ impl Frame {
             (AOV_CHANNELS[5], self.channel(|p| p.steps)?),
             (AOV_CHANNELS[6], self.channel(|p| p.evals)?),
             (AOV_CHANNELS[7], self.channel(|p| p.status)?),
+            (AOV_CHANNELS[8], self.channel(|p| p.exit_pos[0])?),
+            (AOV_CHANNELS[9], self.channel(|p| p.exit_pos[1])?),
+            (AOV_CHANNELS[10], self.channel(|p| p.exit_pos[2])?),
+            (AOV_CHANNELS[11], self.channel(|p| p.opd_plane)?),
         ];
-        let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = named
-            .into_iter()
-            .map(|(name, data)| AnyChannel::new(name, FlatSamples::F32(data)))
-            .collect();
-        let layer = Layer::new(
-            size,
-            LayerAttributes::named("grin"),
-            Encoding::SMALL_LOSSLESS,
-            AnyChannels::sort(channels),
-        );
-        let image = Image::from_layer(layer);
-        Ok(grin_output::stage_path(path, |tmp| {
-            image.write().to_file(tmp).map_err(|e| e.to_string())
-        })?)
+        stage_channels_exr(path, size, named)
     }
 
     /// Read an EXR written by [`Frame::write_exr`] (beauty and AOVs).
@@ -129,9 +130,15 @@ impl Frame {
         let r = get("R")?;
         let g = get("G")?;
         let b = get("B")?;
+        // The exit position came later than the others: older files read as zeros.
         let aov: Vec<Vec<f32>> = AOV_CHANNELS
             .iter()
-            .map(|n| get(n))
+            .map(|n| match get(n) {
+                Err(_) if n.starts_with("aov.exit_pos") || *n == "aov.opd_plane" => {
+                    Ok(vec![0.0; w * h])
+                }
+                other => other,
+            })
             .collect::<Result<_, _>>()?;
         let pixels = (0..w * h)
             .map(|i| PixelOut {
@@ -142,6 +149,8 @@ impl Frame {
                 steps: aov[5][i],
                 evals: aov[6][i],
                 status: aov[7][i],
+                exit_pos: [aov[8][i], aov[9][i], aov[10][i]],
+                opd_plane: aov[11][i],
             })
             .collect();
         Ok(Frame {
@@ -166,18 +175,7 @@ impl Frame {
 
     /// The PNG preview, staged like [`Frame::stage_exr`].
     pub fn stage_png(&self, path: &Path) -> Result<Staged, RenderError> {
-        let buf = self.preview_rgb8();
-        Ok(grin_output::stage_path(path, |tmp| {
-            image::save_buffer_with_format(
-                tmp,
-                &buf,
-                self.width,
-                self.height,
-                image::ColorType::Rgb8,
-                image::ImageFormat::Png,
-            )
-            .map_err(|e| e.to_string())
-        })?)
+        stage_rgb8_png(path, self.width, self.height, &self.preview_rgb8())
     }
 
     /// Mean of primary-ray steps per pixel sample.
@@ -185,6 +183,49 @@ impl Frame {
         self.pixels.iter().map(|p| f64::from(p.steps)).sum::<f64>()
             / self.pixels.len().max(1) as f64
     }
+}
+
+/// Named f32 channels of one `width` x `height` part as a lossless (ZIP) EXR, staged for
+/// [`grin_output::commit`].
+pub fn stage_channels_exr(
+    path: &Path,
+    size: (usize, usize),
+    named: Vec<(&str, Vec<f32>)>,
+) -> Result<Staged, RenderError> {
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = named
+        .into_iter()
+        .map(|(name, data)| AnyChannel::new(name, FlatSamples::F32(data)))
+        .collect();
+    let layer = Layer::new(
+        size,
+        LayerAttributes::named("grin"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    let image = Image::from_layer(layer);
+    Ok(grin_output::stage_path(path, |tmp| {
+        image.write().to_file(tmp).map_err(|e| e.to_string())
+    })?)
+}
+
+/// 8-bit RGB pixels (row 0 at the top) as a PNG, staged for [`grin_output::commit`].
+pub fn stage_rgb8_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[u8],
+) -> Result<Staged, RenderError> {
+    Ok(grin_output::stage_path(path, |tmp| {
+        image::save_buffer_with_format(
+            tmp,
+            rgb,
+            width,
+            height,
+            image::ColorType::Rgb8,
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| e.to_string())
+    })?)
 }
 
 /// Linear [0, 1] to 8-bit sRGB (IEC 61966-2-1 transfer function).
@@ -281,6 +322,8 @@ mod tests {
                 steps: 10.0 + i as f32,
                 evals: 30.0,
                 status: 1.0,
+                exit_pos: [0.5, -0.25, 2.0 + i as f32],
+                opd_plane: -2e-4 * i as f32,
             })
             .collect();
         Frame {

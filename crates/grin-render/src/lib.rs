@@ -7,6 +7,7 @@
 pub mod camera;
 pub mod image;
 pub mod materials;
+pub mod optics;
 pub mod primitives;
 pub mod rng;
 pub mod scene;

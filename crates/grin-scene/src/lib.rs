@@ -7,6 +7,7 @@ mod de;
 mod error;
 pub mod frames;
 mod load;
+pub mod optics;
 mod span;
 #[cfg(test)]
 mod tests;
@@ -16,6 +17,7 @@ mod validate;
 pub use ambient::AmbientIndex;
 pub use error::SceneError;
 pub use load::{load_scene, locate_key, parse_scene};
+pub use optics::{Dots, Fringes, Knife, OpticsMode, OpticsSpec, PlaneSpec, Screen};
 pub use types::*;
 pub use validate::{
     MAX_IMAGE_SIDE, MAX_NOISE_OCTAVES, MAX_OBJECTS, MAX_STEPS, MAX_WORLD_COORDINATE,

@@ -27,6 +27,9 @@ pub struct Scene {
     /// `%04d`, `$F4`), and noise / `expr` time follows the frame (`t + frame / fps`).
     #[serde(default)]
     pub animation: Option<Animation>,
+    /// An image-space output instead of the beauty render (`grin render` writes it).
+    #[serde(default)]
+    pub optics: Option<crate::optics::OpticsSpec>,
 }
 
 /// `[animation]`: `frames = [first, last]` (inclusive) at `fps` frames per second.

@@ -172,7 +172,65 @@ pub(crate) fn validate(scene: &Scene) -> Check {
             );
         }
     }
+    if let Some(o) = &scene.optics {
+        optics(o, scene.medium.is_some())?;
+    }
     render(&scene.render)
+}
+
+fn optics(o: &crate::OpticsSpec, has_medium: bool) -> Check {
+    use crate::OpticsMode;
+    if !has_medium {
+        return fail(
+            "optics",
+            "an optical output needs a [medium] to look through",
+        );
+    }
+    if let Some(p) = &o.plane {
+        finite3("optics.plane.point", p.point)?;
+        nonzero3("optics.plane.normal", p.normal)?;
+    } else if o.mode == OpticsMode::Bos {
+        return fail(
+            "optics.plane",
+            "BOS needs the plane of its dot background: plane = { point = [..], normal = [..] }",
+        );
+    }
+    finite("optics.knife.angle_deg", o.knife.angle_deg)?;
+    if !(o.knife.cutoff > 0.0 && o.knife.cutoff < 1.0) {
+        return fail(
+            "optics.knife.cutoff",
+            format!(
+                "must be in (0, 1) (the fraction of the source blocked), got {}",
+                o.knife.cutoff
+            ),
+        );
+    }
+    positive("optics.knife.source_size_rad", o.knife.source_size_rad)?;
+    positive("optics.wavelength_nm", o.wavelength_nm)?;
+    non_negative("optics.fringes.spacing_px", o.fringes.spacing_px)?;
+    finite("optics.fringes.angle_deg", o.fringes.angle_deg)?;
+    size("optics.dots.diameter", o.dots.diameter)?;
+    if !(o.dots.density > 0.0 && o.dots.density <= 1.0) {
+        return fail(
+            "optics.dots.density",
+            format!(
+                "must be in (0, 1] (the fraction of the plane covered), got {}",
+                o.dots.density
+            ),
+        );
+    }
+    finite("optics.screen.distance", o.screen.distance)?;
+    if let Some([w, h]) = o.screen.size {
+        size("optics.screen.size", w)?;
+        size("optics.screen.size", h)?;
+    }
+    if !(1..=1024).contains(&o.screen.rays_per_pixel) {
+        return fail(
+            "optics.screen.rays_per_pixel",
+            format!("must be in 1..=1024, got {}", o.screen.rays_per_pixel),
+        );
+    }
+    Ok(())
 }
 
 fn camera(c: &Camera) -> Check {

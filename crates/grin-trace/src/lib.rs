@@ -14,3 +14,4 @@ pub use trace::{
 
 pub use grin_render::image;
 pub mod render;
+pub mod shadowgraph;

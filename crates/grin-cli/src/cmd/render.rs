@@ -123,6 +123,9 @@ struct Summary {
     /// `--compare`: per-pixel beauty difference against the reference (largest channel).
     #[serde(skip_serializing_if = "Option::is_none")]
     comparison: Option<Comparison>,
+    /// `[optics]`: the mode's output (channels written, ranges, PNGs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    optics: Option<serde_json::Value>,
 }
 
 /// The field grid on the device.
@@ -177,6 +180,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(spp) = args.spp {
         scene.render.spp = spp;
+    }
+    if let Some(o) = &scene.optics {
+        // Optical outputs follow each pixel's centre ray, once: the AOVs of that ray.
+        if scene.render.spp > 1 {
+            eprintln!(
+                "grin: note: [optics] {} traces one ray through each pixel's centre (spp {} ignored)",
+                crate::cmd::optics::mode_name(o.mode),
+                scene.render.spp
+            );
+        }
+        scene.render.spp = 1;
+        scene.render.jitter = false;
+        if args.compare.is_some() {
+            bail!("--compare compares beauty renders; this scene has an [optics] output");
+        }
     }
     let fps = args.fps.unwrap_or_else(|| scene.fps());
     if !(fps.is_finite() && fps > 0.0) {
@@ -279,6 +297,48 @@ fn render_one(
         );
     }
 
+    if let Some(spec) = scene
+        .optics
+        .as_ref()
+        .filter(|o| o.mode == grin_scene::OpticsMode::Shadowgraph)
+    {
+        let start = Instant::now();
+        let to_stream = png.is_none();
+        let (staged, optics) =
+            crate::cmd::optics::stage_shadowgraph(spec, &rs, output, png.as_deref())?;
+        grin_output::commit(staged)?;
+        let seconds = start.elapsed().as_secs_f64();
+        let rays = optics["rays_launched"].as_f64().unwrap_or(0.0);
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let mut warnings = Vec::new();
+        if args.backend == Backend::Gpu {
+            let w = "the shadowgraph traces its collimated beam on the CPU (f64)".to_owned();
+            eprintln!("grin: note: {w}");
+            warnings.push(w);
+        }
+        let summary = Summary {
+            backend: "cpu",
+            adapter: format!("cpu ({threads} threads)"),
+            width: scene.render.width,
+            height: scene.render.height,
+            spp: 1,
+            seconds,
+            setup_seconds: 0.0,
+            rays_per_second: rays / seconds.max(1e-9),
+            steps_per_ray: 0.0,
+            evals_per_ray: 0.0,
+            status_counts: std::collections::BTreeMap::new(),
+            exr: output.to_owned(),
+            png,
+            warnings,
+            bake_cache: None,
+            gpu_field: None,
+            comparison: None,
+            optics: Some(optics),
+        };
+        return Ok((summary, to_stream));
+    }
+
     let cancel = AtomicBool::new(false);
     let bar = progress_bar(scene.render.height);
     let tick = |rows: u32| bar.inc(u64::from(rows));
@@ -342,9 +402,24 @@ fn render_one(
     // The EXR, its PNG preview and the --compare difference image are staged, then put
     // in place together: a failure or a signal leaves the previous set as it was.
     let exr_to_stream = png.is_none();
-    let mut staged = vec![frame.stage_exr(output)?];
+    let mut optics = None;
+    let mut staged = match &scene.optics {
+        Some(spec) => {
+            let (staged, summary) =
+                crate::cmd::optics::stage_from_frame(spec, &rs, &frame, output, png.as_deref())?;
+            optics = Some(summary);
+            staged
+        }
+        None => {
+            let mut v = vec![frame.stage_exr(output)?];
+            if let Some(png) = &png {
+                v.push(frame.stage_png(png)?);
+            }
+            v
+        }
+    };
     match &png {
-        Some(png) => staged.push(frame.stage_png(png)?),
+        Some(_) => {}
         None => eprintln!(
             "grin: note: {} is not a file: the EXR goes there, no PNG preview is written",
             args.output.display()
@@ -397,6 +472,7 @@ fn render_one(
         warnings,
         bake_cache,
         gpu_field,
+        optics,
     };
     let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
     if stuck > 0 {

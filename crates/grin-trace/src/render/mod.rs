@@ -19,7 +19,7 @@ use rng::Rng;
 pub use grin_render::scene::{
     MAX_PIXELS, MIN_JITTER_FRACTION, RenderError, RenderScene, SceneMedium,
 };
-pub use grin_render::{camera, materials, primitives, rng, sky};
+pub use grin_render::{camera, materials, optics, primitives, rng, sky};
 
 /// All samples of pixel (px, py): mean radiance; AOVs of sample 0, steps and field
 /// evaluations averaged over the samples.
@@ -58,6 +58,8 @@ pub fn render_pixel(scene: &RenderScene, px: u32, py: u32) -> PixelOut {
         steps: (steps as f64 / spp) as f32,
         evals: (evals as f64 / spp) as f32,
         status: f32::from(shade::status_code(aov.status)),
+        exit_pos: aov.exit_pos.as_vec3().to_array(),
+        opd_plane: aov.opd_plane as f32,
     }
 }
 

@@ -42,12 +42,30 @@ pub struct PrimaryAov {
     pub deflection_deg: f64,
     /// Unit direction after leaving the medium (the camera ray's direction if it missed).
     pub exit_dir: DVec3,
+    /// Where the ray left the medium or stopped in it (the camera if it missed).
+    pub exit_pos: DVec3,
     /// Optical path inside the medium minus ambient n times the straight chord of the
     /// undeflected ray through the bounds (0 for rays stopped inside).
     pub opd: f64,
+    /// `opd` with both paths taken on to the plane through the straight ray's exit,
+    /// normal to it ([`opd_tail`]): the interferometric OPD.
+    pub opd_plane: f64,
     pub steps: u32,
     pub evals: u64,
     pub status: RayStatus,
+}
+
+/// The geometric length from where a ray left the medium (`exit`, along `dir`) to the
+/// plane through `straight_exit` normal to `entry_dir` (where the straight ray would
+/// leave). Taken on to that plane, the OPD is stationary in the ray's deflection (Fermat
+/// with a free end on a surface normal to the ray); measured to the medium's face it has a
+/// first-order term wherever the ray leaves a face obliquely. 0 past a 90 degree turn.
+pub fn opd_tail(straight_exit: DVec3, entry_dir: DVec3, exit: DVec3, dir: DVec3) -> f64 {
+    let cos = dir.dot(entry_dir);
+    if cos <= 1e-12 {
+        return 0.0;
+    }
+    (straight_exit - exit).dot(entry_dir) / cos
 }
 
 /// Radiance and AOVs of one pixel sample.
@@ -117,7 +135,9 @@ impl CpuScene<'_> {
         let mut aov = PrimaryAov {
             deflection_deg: 0.0,
             exit_dir: d,
+            exit_pos: self.camera.origin,
             opd: 0.0,
+            opd_plane: 0.0,
             steps: 0,
             evals: 0,
             status: RayStatus::Missed,
@@ -143,10 +163,11 @@ impl CpuScene<'_> {
                 Event::Medium => {
                     let Some(m) = &self.medium else { break };
                     let mut stats = MarchStats::default();
-                    let straight = m
-                        .bounds
-                        .intersect(origin, dir)
-                        .map_or(0.0, |(s_in, s_out)| (s_out - s_in.max(0.0)).max(0.0));
+                    let chord = m.bounds.intersect(origin, dir);
+                    let straight =
+                        chord.map_or(0.0, |(s_in, s_out)| (s_out - s_in.max(0.0)).max(0.0));
+                    let straight_exit =
+                        origin + dir * chord.map_or(0.0, |(_, s_out)| s_out.max(0.0));
                     let entry_dir = dir;
                     let end = CpuMedium(m).march_medium(
                         &self.objects,
@@ -158,6 +179,7 @@ impl CpuScene<'_> {
                     aov.steps += stats.steps;
                     aov.evals += stats.evals;
                     inside = false;
+                    let mut stopped_at = origin;
                     let (status, next) = match end {
                         MarchEnd::Exited {
                             point,
@@ -166,6 +188,7 @@ impl CpuScene<'_> {
                         } => {
                             throughput *= transmittance;
                             origin = point;
+                            stopped_at = point;
                             dir = out;
                             (RayStatus::Exited, None)
                         }
@@ -176,6 +199,7 @@ impl CpuScene<'_> {
                         } => {
                             throughput *= transmittance;
                             dir = chord;
+                            stopped_at = hit.point;
                             (RayStatus::Absorbed, Some(hit))
                         }
                         MarchEnd::Missed => {
@@ -184,18 +208,28 @@ impl CpuScene<'_> {
                             (RayStatus::Missed, None)
                         }
                         MarchEnd::Stopped {
-                            status, dir: last, ..
+                            status,
+                            point,
+                            dir: last,
                         } => {
                             dir = last;
+                            stopped_at = point;
                             (status, None)
                         }
                     };
                     if primary && status != RayStatus::Missed {
                         aov.status = status;
                         aov.exit_dir = dir;
+                        aov.exit_pos = stopped_at;
                         aov.deflection_deg = entry_dir.angle_between(dir).to_degrees();
                         aov.opd = if status == RayStatus::Exited {
                             stats.opl - m.ambient * straight
+                        } else {
+                            0.0
+                        };
+                        aov.opd_plane = if status == RayStatus::Exited {
+                            aov.opd
+                                + m.ambient * opd_tail(straight_exit, entry_dir, stopped_at, dir)
                         } else {
                             0.0
                         };

@@ -1,0 +1,134 @@
+//! `[optics]`: what `grin render` writes instead of a beauty image: pictures of the
+//! deflection as measurements and compositing see it (docs/optics.md has the physics and
+//! the formulas of each mode).
+
+use serde::{Deserialize, Serialize};
+
+/// An image-space output of the scene's medium.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpticsSpec {
+    pub mode: OpticsMode,
+    /// The background plane that displacement, ST maps and BOS dots are measured on;
+    /// left out: at infinity (displacements are then angles). BOS needs a plane.
+    #[serde(default)]
+    pub plane: Option<PlaneSpec>,
+    #[serde(default)]
+    pub knife: Knife,
+    /// Wavelength of the interferogram, nanometres.
+    #[serde(default = "default_wavelength")]
+    pub wavelength_nm: f64,
+    #[serde(default)]
+    pub fringes: Fringes,
+    #[serde(default)]
+    pub dots: Dots,
+    #[serde(default)]
+    pub screen: Screen,
+}
+
+/// Which picture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OpticsMode {
+    /// Where each pixel's ray lands on the plane with the medium minus without, in pixels
+    /// and in plane units, and the ST map a compositor applies to a plate.
+    Displacement,
+    /// Knife-edge schlieren.
+    Schlieren,
+    /// Ray density on a screen behind the medium, collimated light.
+    Shadowgraph,
+    /// Fringes of the optical path difference.
+    Interferogram,
+    /// Background-oriented schlieren: a random-dot background seen without and with the
+    /// medium, and the true displacement.
+    Bos,
+}
+
+/// A plane through `point` with normal `normal`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneSpec {
+    pub point: [f64; 3],
+    pub normal: [f64; 3],
+}
+
+/// The knife edge of a schlieren system, in the focal plane of its second mirror.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Knife {
+    /// Direction in the image (degrees from +x towards +y up) of the deflections the
+    /// knife sees: 0 = a vertical edge, sensitive to horizontal deflection.
+    pub angle_deg: f64,
+    /// Fraction of the light source's image the edge blocks with no medium (0..1).
+    pub cutoff: f64,
+    /// Half-size of the light source's image, as a deflection angle (radians): the
+    /// deflection that moves the image by its own half-size. Sets the sensitivity and
+    /// the range before the signal saturates.
+    pub source_size_rad: f64,
+}
+
+impl Default for Knife {
+    fn default() -> Self {
+        Knife {
+            angle_deg: 0.0,
+            cutoff: 0.5,
+            source_size_rad: 1e-4,
+        }
+    }
+}
+
+/// Fringes of an interferogram: `spacing_px` 0 is infinite-fringe (the phase itself),
+/// else a carrier of that spacing in pixels, its wave vector at `angle_deg`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Fringes {
+    pub spacing_px: f64,
+    pub angle_deg: f64,
+}
+
+/// The random-dot background of BOS on the plane: dots of `diameter` (plane units, the
+/// 1/e^2 width of a Gaussian) covering `density` of the area, placed by `seed`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Dots {
+    pub diameter: f64,
+    pub density: f64,
+    pub seed: u64,
+}
+
+impl Default for Dots {
+    fn default() -> Self {
+        Dots {
+            diameter: 0.01,
+            density: 0.3,
+            seed: 1,
+        }
+    }
+}
+
+/// The shadowgraph screen: perpendicular to the camera's view, `distance` past the
+/// medium's centre, `size` (width, height) in world units (default: the medium's
+/// bounding box across the view), binned at the render's width x height; the beam is
+/// collimated along the view, `rays_per_pixel` (a square number) per bin of the
+/// undisturbed beam.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Screen {
+    pub distance: f64,
+    pub size: Option<[f64; 2]>,
+    pub rays_per_pixel: u32,
+}
+
+impl Default for Screen {
+    fn default() -> Self {
+        Screen {
+            distance: 1.0,
+            size: None,
+            rays_per_pixel: 16,
+        }
+    }
+}
+
+fn default_wavelength() -> f64 {
+    532.0
+}

@@ -1,0 +1,610 @@
+//! `[optics]` outputs of `grin render` against closed forms: a weak Gaussian plume's
+//! displacement and schlieren signal against the straight-line integral of grad n (both
+//! backends), its interferogram against the line integral of n - n_ambient, a Luneburg
+//! lens's displacement against `grin trace` of the same rays, the shadowgraph's energy and
+//! the lens's caustic, and a BOS round trip through a cross-correlation in numpy.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use grin_trace::render::camera::PinholeCamera;
+use grin_trace::render::optics::{Plane, camera_angles, project_dir};
+
+fn grin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_grin"))
+}
+
+fn run(args: &[&str]) -> Output {
+    grin().args(args).output().expect("run grin")
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "stdout {}\nstderr {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Every channel of an EXR by name, and its width.
+fn channels(path: &Path) -> (usize, HashMap<String, Vec<f64>>) {
+    use exr::prelude::*;
+    let image = read_all_flat_layers_from_file(path).expect("read exr");
+    let layer = &image.layer_data[0];
+    let map = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            (
+                c.name.to_string(),
+                c.sample_data.values_as_f32().map(f64::from).collect(),
+            )
+        })
+        .collect();
+    (layer.size.width(), map)
+}
+
+const A_WEAK: f64 = 1e-4;
+const S: f64 = 0.25;
+const WIDTH: u32 = 48;
+const HEIGHT: u32 = 36;
+
+fn camera() -> PinholeCamera {
+    let c = grin_scene::Camera {
+        position: [0.05, 0.03, -6.0],
+        look_at: [0.05, 0.03, 0.0],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 9.0,
+    };
+    PinholeCamera::new(&c, WIDTH, HEIGHT).expect("camera")
+}
+
+/// A scene with one Gaussian plume (n = 1 - a exp(-r^2 / s^2)) at the origin, seen by
+/// [`camera`], with the `[optics]` table `optics`.
+fn plume_scene(dir: &Path, name: &str, a: f64, step: f64, optics: &str) -> PathBuf {
+    let text = format!(
+        r#"
+[camera]
+position = [0.05, 0.03, -6.0]
+look_at = [0.05, 0.03, 0.0]
+fov_y_deg = 9.0
+
+[medium]
+bounds = {{ box = {{ min = [-1.3, -1.3, -1.3], max = [1.3, 1.3, 1.3] }} }}
+ambient_index = 1.0
+field = {{ kind = "plume", plumes = [ {{ a = {a:e}, center = [0.0, 0.0, 0.0], s = {S} }} ] }}
+
+[render]
+width = {WIDTH}
+height = {HEIGHT}
+integrator = "rk4"
+step = {{ fixed = {step} }}
+
+[optics]
+{optics}
+"#
+    );
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("scene");
+    p
+}
+
+/// The straight-line prediction for pixel (i, j): the deflection vector (perpendicular to
+/// the camera ray, radians) and the closest approach point on the ray, where a thin
+/// symmetric lens bends it. For n = 1 - a exp(-|p|^2/s^2) along p = o + t d:
+/// integral of grad n dt = (2a/s^2) b exp(-b^2/s^2) s sqrt(pi), b the closest-approach
+/// vector; integral of (n - 1) dt = -a s sqrt(pi) exp(-b^2/s^2).
+fn line_integrals(cam: &PinholeCamera, i: u32, j: u32, a: f64) -> (DVec3, DVec3, f64) {
+    let d = cam.primary_ray(i, j, 0.5, 0.5);
+    let t0 = -cam.origin.dot(d);
+    let near = cam.origin + d * t0;
+    let b2 = near.length_squared();
+    let g = (-b2 / (S * S)).exp() * S * std::f64::consts::PI.sqrt();
+    (near * (2.0 * a / (S * S)) * g, near, -a * g)
+}
+
+fn gpu_available() -> bool {
+    grin_gpu::GpuContext::new_headless().is_ok()
+}
+
+/// Displacement on a plane at z = 4 and the schlieren deflection of a weak plume match
+/// the straight-line integral of grad n within 1 % (pixels whose prediction is over a
+/// fifth of the largest), on the CPU and the GPU.
+#[test]
+fn weak_plume_displacement_and_schlieren_match_the_line_integral() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let disp_scene = plume_scene(
+        d,
+        "disp.toml",
+        A_WEAK,
+        0.01,
+        "mode = \"displacement\"\nplane = { point = [0.0, 0.0, 4.0], normal = [0.0, 0.0, -1.0] }",
+    );
+    let sch_scene = plume_scene(
+        d,
+        "sch.toml",
+        A_WEAK,
+        0.01,
+        "mode = \"schlieren\"\nknife = { angle_deg = 30.0, cutoff = 0.5, source_size_rad = 1e-3 }",
+    );
+    let cam = camera();
+    let plane = Plane::new(
+        &grin_scene::PlaneSpec {
+            point: [0.0, 0.0, 4.0],
+            normal: [0.0, 0.0, -1.0],
+        },
+        &cam,
+    )
+    .expect("plane");
+    let backends: &[&str] = if gpu_available() {
+        &["cpu", "gpu"]
+    } else {
+        eprintln!("no wgpu adapter: CPU only");
+        &["cpu"]
+    };
+    for backend in backends {
+        let env_cache = d.join("cache");
+        let out = d.join(format!("disp-{backend}.exr"));
+        let o = grin()
+            .env("GRIN_CACHE_DIR", &env_cache)
+            .args(["render", "--backend", backend, "--json", "-o"])
+            .arg(&out)
+            .arg(&disp_scene)
+            .output()
+            .expect("grin");
+        ok(&o);
+        let (w, ch) = channels(&out);
+        let (mut checked, mut worst_px, mut worst_w) = (0, 0.0f64, 0.0f64);
+        let mut preds = Vec::new();
+        for j in 0..HEIGHT {
+            for i in 0..WIDTH {
+                let (eps, near, _) = line_integrals(&cam, i, j, A_WEAK);
+                let d0 = cam.primary_ray(i, j, 0.5, 0.5);
+                let with = plane.hit(near, (d0 + eps).normalize()).expect("hit");
+                let without = plane.hit(cam.origin, d0).expect("hit");
+                let (cw, c0) = (plane.coords(with), plane.coords(without));
+                let seen = project_dir(&cam, with - cam.origin).expect("front");
+                preds.push((
+                    [seen[0] - f64::from(i) - 0.5, seen[1] - f64::from(j) - 0.5],
+                    [cw[0] - c0[0], cw[1] - c0[1]],
+                ));
+            }
+        }
+        let max_px = preds
+            .iter()
+            .fold(0.0f64, |m, p| m.max(p.0[0].hypot(p.0[1])));
+        // Heat haze: a hundredth of a pixel here; 1 % of it is what is checked.
+        assert!(
+            max_px > 0.01,
+            "the plume moves the background by {max_px} px"
+        );
+        for (idx, (px, world)) in preds.iter().enumerate() {
+            let size = px[0].hypot(px[1]);
+            if size < 0.2 * max_px {
+                continue;
+            }
+            let got_px = [ch["displacement_px.X"][idx], ch["displacement_px.Y"][idx]];
+            let got_w = [ch["displacement.U"][idx], ch["displacement.V"][idx]];
+            let e_px = (got_px[0] - px[0]).hypot(got_px[1] - px[1]) / size;
+            let e_w = (got_w[0] - world[0]).hypot(got_w[1] - world[1]) / world[0].hypot(world[1]);
+            worst_px = worst_px.max(e_px);
+            worst_w = worst_w.max(e_w);
+            checked += 1;
+            // The ST map reads the plate where the displacement points.
+            let x = (idx % w) as f64 + 0.5 + got_px[0];
+            assert!((ch["st.S"][idx] - x / f64::from(WIDTH)).abs() < 1e-6);
+        }
+        assert!(checked > 100, "{checked} pixels checked");
+        assert!(
+            worst_px < 0.01 && worst_w < 0.01,
+            "{backend}: displacement off the line integral by {worst_px:.2e} (pixels), {worst_w:.2e} (plane)"
+        );
+        eprintln!(
+            "{backend}: displacement vs line integral: worst {worst_px:.2e} (px), {worst_w:.2e} (plane), {checked} pixels, max {max_px:.2} px"
+        );
+
+        let out = d.join(format!("sch-{backend}.exr"));
+        let o = grin()
+            .env("GRIN_CACHE_DIR", &env_cache)
+            .args(["render", "--backend", backend, "-o"])
+            .arg(&out)
+            .arg(&sch_scene)
+            .output()
+            .expect("grin");
+        ok(&o);
+        let (_, ch) = channels(&out);
+        let (s30, c30) = 30f64.to_radians().sin_cos();
+        let mut preds = Vec::new();
+        for j in 0..HEIGHT {
+            for i in 0..WIDTH {
+                let (eps, _, _) = line_integrals(&cam, i, j, A_WEAK);
+                let d0 = cam.primary_ray(i, j, 0.5, 0.5);
+                let (a1, a0) = (
+                    camera_angles(&cam, (d0 + eps).normalize()),
+                    camera_angles(&cam, d0),
+                );
+                preds.push([a1[0] - a0[0], a1[1] - a0[1]]);
+            }
+        }
+        let max_k = preds
+            .iter()
+            .fold(0.0f64, |m, p| m.max((p[0] * c30 + p[1] * s30).abs()));
+        let mut worst = 0.0f64;
+        for (idx, p) in preds.iter().enumerate() {
+            let ek = p[0] * c30 + p[1] * s30;
+            if ek.abs() < 0.2 * max_k {
+                continue;
+            }
+            // Linear range: I - 1 = e.k / (2 a (1 - c)) = e.k / 1e-3.
+            let want = 1.0 + ek / 1e-3;
+            let got = ch["schlieren"][idx];
+            worst = worst.max(((got - 1.0) - (want - 1.0)).abs() / (want - 1.0).abs());
+        }
+        assert!(
+            worst < 0.01,
+            "{backend}: schlieren signal off by {worst:.2e}"
+        );
+        eprintln!("{backend}: schlieren vs line integral: worst {worst:.2e}");
+    }
+}
+
+/// The interferogram's phase is the line integral of n - n_ambient over the wavelength
+/// within 1e-3 waves (CPU, a plume weak enough that the bending's second-order path
+/// change is 1e-4 waves).
+#[test]
+fn interferogram_phase_is_the_line_integral_of_the_index() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let a = 1e-5;
+    let scene = plume_scene(
+        dir.path(),
+        "fringes.toml",
+        a,
+        0.005,
+        "mode = \"interferogram\"\nwavelength_nm = 532.0",
+    );
+    let out = dir.path().join("fringes.exr");
+    let o = run(&[
+        "render",
+        "--backend",
+        "cpu",
+        "-o",
+        out.to_str().expect("utf8"),
+        scene.to_str().expect("utf8"),
+    ]);
+    ok(&o);
+    let (_, ch) = channels(&out);
+    let cam = camera();
+    let (mut worst, mut deepest) = (0.0f64, 0.0f64);
+    for j in 0..HEIGHT {
+        for i in 0..WIDTH {
+            let (_, _, opd) = line_integrals(&cam, i, j, a);
+            let want = opd / 532e-9;
+            let idx = (j * WIDTH + i) as usize;
+            let got = ch["phase_waves"][idx];
+            worst = worst.max((got - want).abs());
+            deepest = deepest.max(want.abs());
+            let fringe = 0.5 * (1.0 + (std::f64::consts::TAU * got).cos());
+            assert!((ch["intensity"][idx] - fringe).abs() < 1e-5);
+        }
+    }
+    assert!(deepest > 5.0, "only {deepest} waves");
+    assert!(
+        worst < 1e-3,
+        "phase off by {worst:.2e} waves (of {deepest:.1})"
+    );
+    eprintln!("interferogram vs line integral: worst {worst:.2e} waves of {deepest:.2}");
+}
+
+/// A strong field: the displacement AOV of a Luneburg lens on the CPU agrees with `grin
+/// trace` of the same pixel-centre rays to 1e-6 of the image width.
+#[test]
+fn luneburg_displacement_agrees_with_grin_trace() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = d.join("lens.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            r#"
+[camera]
+position = [0.1, 0.05, -5.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 25.0
+[medium]
+bounds = {{ sphere = {{ center = [0.0, 0.0, 0.0], radius = 1.0 }} }}
+field = {{ kind = "luneburg" }}
+[render]
+width = {WIDTH}
+height = {HEIGHT}
+integrator = "rk4"
+step = {{ fixed = 0.01 }}
+[optics]
+mode = "displacement"
+plane = {{ point = [0.0, 0.0, 3.0], normal = [0.0, 0.2, -1.0] }}
+"#
+        ),
+    )
+    .expect("scene");
+    let out = d.join("lens.exr");
+    ok(&run(&[
+        "render",
+        "--backend",
+        "cpu",
+        "-o",
+        out.to_str().expect("utf8"),
+        scene.to_str().expect("utf8"),
+    ]));
+    let (_, ch) = channels(&out);
+    let c = grin_scene::Camera {
+        position: [0.1, 0.05, -5.0],
+        look_at: [0.0, 0.0, 0.0],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 25.0,
+    };
+    let cam = PinholeCamera::new(&c, WIDTH, HEIGHT).expect("camera");
+    let plane = Plane::new(
+        &grin_scene::PlaneSpec {
+            point: [0.0, 0.0, 3.0],
+            normal: [0.0, 0.2, -1.0],
+        },
+        &cam,
+    )
+    .expect("plane");
+    let mut table = String::from("ox,oy,oz,dx,dy,dz\n");
+    for j in 0..HEIGHT {
+        for i in 0..WIDTH {
+            let v = cam.primary_ray(i, j, 0.5, 0.5);
+            let o = cam.origin;
+            table += &format!("{},{},{},{},{},{}\n", o.x, o.y, o.z, v.x, v.y, v.z);
+        }
+    }
+    let rays = d.join("rays.csv");
+    std::fs::write(&rays, table).expect("rays");
+    let traced = d.join("traced.csv");
+    ok(&run(&[
+        "trace",
+        scene.to_str().expect("utf8"),
+        "--rays",
+        rays.to_str().expect("utf8"),
+        "-o",
+        traced.to_str().expect("utf8"),
+    ]));
+    let text = std::fs::read_to_string(&traced).expect("table");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |row: &[&str], name: &str| -> f64 {
+        row[header.iter().position(|h| *h == name).expect("column")]
+            .parse()
+            .expect("number")
+    };
+    let (mut worst, mut bent) = (0.0f64, 0);
+    for (idx, line) in lines.enumerate() {
+        let row: Vec<&str> = line.split(',').collect();
+        let (i, j) = ((idx as u32) % WIDTH, (idx as u32) / WIDTH);
+        let status = row[header.iter().position(|h| *h == "status").expect("status")];
+        let d0 = cam.primary_ray(i, j, 0.5, 0.5);
+        let (p, q) = match status {
+            "exited" => (
+                DVec3::new(col(&row, "px"), col(&row, "py"), col(&row, "pz")),
+                DVec3::new(col(&row, "qx"), col(&row, "qy"), col(&row, "qz")),
+            ),
+            "missed" => (cam.origin, d0),
+            other => panic!("pixel {i},{j}: {other}"),
+        };
+        let Some(landed) = plane.hit(p, q) else {
+            assert_eq!(ch["valid"][idx], 0.0);
+            continue;
+        };
+        let seen = project_dir(&cam, landed - cam.origin).expect("front");
+        let want = [seen[0] - f64::from(i) - 0.5, seen[1] - f64::from(j) - 0.5];
+        let got = [ch["displacement_px.X"][idx], ch["displacement_px.Y"][idx]];
+        if want[0].hypot(want[1]) > 1.0 {
+            bent += 1;
+        }
+        worst = worst.max((got[0] - want[0]).hypot(got[1] - want[1]));
+    }
+    assert!(bent > 50, "only {bent} pixels moved by more than a pixel");
+    let limit = 1e-6 * f64::from(WIDTH);
+    assert!(worst < limit, "worst {worst:.3e} px (limit {limit:.1e})");
+    eprintln!("luneburg displacement vs grin trace: worst {worst:.2e} px");
+}
+
+fn shadowgraph(
+    dir: &Path,
+    name: &str,
+    field: &str,
+    bounds: &str,
+    distance: f64,
+) -> serde_json::Value {
+    let scene = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &scene,
+        format!(
+            r#"
+[camera]
+position = [0.0, 0.0, -5.0]
+look_at = [0.0, 0.0, 0.0]
+[medium]
+bounds = {bounds}
+field = {field}
+[render]
+width = 48
+height = 48
+integrator = "rk4"
+step = {{ fixed = 0.01 }}
+[optics]
+mode = "shadowgraph"
+screen = {{ distance = {distance}, rays_per_pixel = 36 }}
+"#
+        ),
+    )
+    .expect("scene");
+    let out = dir.join(format!("{name}.exr"));
+    let o = run(&[
+        "render",
+        "--json",
+        "-o",
+        out.to_str().expect("utf8"),
+        scene.to_str().expect("utf8"),
+    ]);
+    ok(&o);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let (_, ch) = channels(&out);
+    let total: f64 = ch["intensity"].iter().sum();
+    let mut optics = v["optics"].clone();
+    optics["mean_intensity"] = serde_json::json!(total / (48.0 * 48.0));
+    optics
+}
+
+/// Shadowgraph: a plume's screen keeps the beam's energy within 1 %; a Luneburg
+/// lens's caustic is brightest on the screen at its exact focus, the far side of the
+/// sphere (distance = radius).
+#[test]
+fn shadowgraph_conserves_energy_and_focuses_where_the_lens_does() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plume = format!(
+        "{{ kind = \"plume\", plumes = [ {{ a = 5e-3, center = [0.0, 0.0, 0.0], s = {S} }} ] }}"
+    );
+    let weak = shadowgraph(
+        dir.path(),
+        "weak",
+        &plume,
+        "{ box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }",
+        2.0,
+    );
+    let mean = weak["mean_intensity"].as_f64().expect("mean");
+    assert!((mean - 1.0).abs() < 0.01, "{weak}");
+    let peak = weak["peak_intensity"].as_f64().expect("peak");
+    assert!(peak > 1.05, "the plume shows: {weak}");
+
+    let lens = "{ kind = \"luneburg\" }";
+    let ball = "{ sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }";
+    let peaks: Vec<(f64, f64)> = [0.6, 0.8, 1.0, 1.2, 1.5]
+        .iter()
+        .map(|&z| {
+            let v = shadowgraph(dir.path(), &format!("lens{z}"), lens, ball, z);
+            (z, v["peak_intensity"].as_f64().expect("peak"))
+        })
+        .collect();
+    let brightest = peaks
+        .iter()
+        .fold((0.0, 0.0), |b, &p| if p.1 > b.1 { p } else { b });
+    assert_eq!(brightest.0, 1.0, "{peaks:?}");
+    assert!(brightest.1 > 50.0, "{peaks:?}");
+}
+
+/// BOS round trip: the reference and distorted dot images, cross-correlated window by
+/// window in numpy (normalized cross-correlation, parabolic sub-pixel peak), give back the
+/// true displacement the render wrote, within 0.15 px RMS.
+#[test]
+fn bos_pair_round_trips_through_cross_correlation() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = d.join("bos.toml");
+    std::fs::write(
+        &scene,
+        r#"
+[camera]
+position = [0.0, 0.0, -6.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 12.0
+[medium]
+bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
+field = { kind = "plume", plumes = [ { a = 2e-3, center = [0.0, 0.0, 0.0], s = 0.3 } ] }
+[render]
+width = 160
+height = 160
+integrator = "rk4"
+step = { fixed = 0.01 }
+[optics]
+mode = "bos"
+plane = { point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }
+dots = { diameter = 0.05, density = 0.4, seed = 3 }
+"#,
+    )
+    .expect("scene");
+    let out = d.join("bos.exr");
+    ok(&run(&[
+        "render",
+        "--backend",
+        "cpu",
+        "-o",
+        out.to_str().expect("utf8"),
+        scene.to_str().expect("utf8"),
+    ]));
+    assert!(d.join("bos.png").exists() && d.join("bos-reference.png").exists());
+    let (_, ch) = channels(&out);
+    for name in [
+        "reference",
+        "distorted",
+        "displacement_px.X",
+        "displacement_px.Y",
+    ] {
+        let bytes: Vec<u8> = ch[name]
+            .iter()
+            .flat_map(|v| (*v as f32).to_le_bytes())
+            .collect();
+        std::fs::write(d.join(format!("{name}.f32")), bytes).expect("raw");
+    }
+    let script = d.join("xcorr.py");
+    std::fs::write(
+        &script,
+        r#"
+import sys
+import numpy as np
+d, n = sys.argv[1], 160
+load = lambda name: np.fromfile(f"{d}/{name}.f32", dtype="<f4").reshape(n, n).astype(float)
+ref, dis = load("reference"), load("distorted")
+tx, ty = load("displacement_px.X"), load("displacement_px.Y")
+win, search, errs, moved = 24, 4, [], 0
+for y0 in range(search + 8, n - win - search - 8, 8):
+    for x0 in range(search + 8, n - win - search - 8, 8):
+        a = dis[y0:y0 + win, x0:x0 + win]
+        a = (a - a.mean()) / (a.std() + 1e-12)
+        score = np.full((2 * search + 1, 2 * search + 1), -np.inf)
+        for dy in range(-search, search + 1):
+            for dx in range(-search, search + 1):
+                b = ref[y0 + dy:y0 + dy + win, x0 + dx:x0 + dx + win]
+                b = (b - b.mean()) / (b.std() + 1e-12)
+                score[dy + search, dx + search] = (a * b).mean()
+        iy, ix = np.unravel_index(np.argmax(score), score.shape)
+        if not (0 < iy < 2 * search and 0 < ix < 2 * search):
+            continue
+        def peak(m, c, p):
+            den = m - 2 * c + p
+            return 0.0 if den == 0 else 0.5 * (m - p) / den
+        sx = ix - search + peak(score[iy, ix - 1], score[iy, ix], score[iy, ix + 1])
+        sy = iy - search + peak(score[iy - 1, ix], score[iy, ix], score[iy + 1, ix])
+        gx = tx[y0:y0 + win, x0:x0 + win].mean()
+        gy = ty[y0:y0 + win, x0:x0 + win].mean()
+        if np.hypot(gx, gy) > 0.5:
+            moved += 1
+        errs.append(np.hypot(sx - gx, sy - gy))
+errs = np.array(errs)
+print(f"{len(errs)} {moved} {np.sqrt((errs ** 2).mean()):.4f} {errs.max():.4f}")
+"#,
+    )
+    .expect("script");
+    let o = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(d)
+        .output()
+        .expect("numpy (python3-numpy, installed by scripts/setup.sh)");
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    let v: Vec<f64> = text
+        .split_whitespace()
+        .map(|x| x.parse().expect("number"))
+        .collect();
+    let (windows, moved, rms, max) = (v[0], v[1], v[2], v[3]);
+    eprintln!(
+        "BOS round trip: {windows} windows, {moved} moved > 0.5 px, rms {rms} px, max {max} px"
+    );
+    assert!(windows > 100.0 && moved > 20.0, "{text}");
+    assert!(rms < 0.15, "{text}");
+}
