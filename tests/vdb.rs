@@ -1237,3 +1237,147 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
         "{err}"
     );
 }
+
+/// A cache whose active box is its whole domain (a 200^3 fill of background-valued active
+/// voxels, as fluid caches are written) with a 10^3 hot block: only the block (and 2
+/// voxels of padding) is read into memory, found from OpenVDB's tree without a dense copy
+/// of the domain.
+#[test]
+fn a_cache_active_over_its_whole_domain_is_read_where_the_data_is() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let script = dir.path().join("make.py");
+    std::fs::write(
+        &script,
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+g = vdb.FloatGrid()
+g.name = "temperature"
+g.fill((0, 0, 0), (199, 199, 199), 0.0, active=True)
+g.copyFromArray(np.ones((10, 10, 10), dtype=np.float32), ijk=(90, 100, 80), tolerance=0)
+g.transform = vdb.createLinearTransform(voxelSize=0.01)
+vdb.write(sys.argv[1], grids=[g])
+"#,
+    )
+    .expect("script");
+    let file = dir.path().join("domain.vdb");
+    let made = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(&file)
+        .output()
+        .expect("python3-openvdb");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let vdb = vdb_sys::VdbFile::open(&file).expect("open");
+    let info = vdb.grid("temperature").expect("grid");
+    let active = info.active_bbox.expect("active");
+    assert_eq!((active.min, active.max), ([0, 0, 0], [199, 199, 199]));
+    let data = info.data_bbox.expect("data");
+    assert_eq!((data.min, data.max), ([90, 100, 80], [99, 109, 89]));
+    assert_eq!(info.data_voxel_count, 1000);
+
+    let params = VdbFieldParams {
+        mapping: Mapping::Linear { k: 1e-4 },
+        units: 1.0,
+        non_finite: NonFinitePolicy::Reject,
+        bounds: Bounds::Box {
+            min: DVec3::splat(-0.01),
+            max: DVec3::splat(2.0),
+        },
+        ambient: Some(1.0),
+        // A dense copy of the domain (8e6 voxels, 96 MB) would not fit under this cap.
+        max_bytes: 1 << 20,
+        placement: grin_field::vdb::IDENTITY,
+    };
+    let field = VdbField::load(&file, "temperature", &params).expect("load");
+    let b = field.index_box();
+    assert_eq!((b.min, b.max), ([88, 98, 78], [101, 111, 91]));
+    assert!((field.n(DVec3::new(0.945, 1.045, 0.845)) - 1.0001).abs() < 1e-12);
+}
+
+/// A sequence whose grid is renamed in one frame or changes type in another is refused
+/// before anything is rendered, naming the frame, its file and what differs.
+#[test]
+fn a_sequence_whose_grid_changes_is_refused_naming_the_frame() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let tools = tempfile::tempdir().expect("tempdir");
+    let script = tools.path().join("make.py");
+    std::fs::write(
+        &script,
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+out = sys.argv[1]
+v = -1e-3 * np.ones((6, 6, 6), dtype=np.float32)
+for frame, name, kind in [(1, "delta_n", "f"), (2, "dn", "f"), (3, "delta_n", "v")]:
+    if kind == "f":
+        g = vdb.FloatGrid()
+        g.copyFromArray(v, ijk=(-3, -3, -3), tolerance=0)
+    else:
+        g = vdb.Vec3SGrid()
+        g.copyFromArray(np.stack([v, v, v], axis=-1), ijk=(-3, -3, -3), tolerance=(0, 0, 0))
+    g.name = name
+    g.transform = vdb.createLinearTransform(voxelSize=0.05)
+    vdb.write(f"{out}/s_{frame:04d}.vdb", grids=[g])
+"#,
+    )
+    .expect("script");
+    let made = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .expect("python3-openvdb");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let scene = dir.path().join("seq.toml");
+    std::fs::write(
+        &scene,
+        r#"
+[camera]
+position = [0.0, 0.0, -2.0]
+look_at = [0.0, 0.0, 0.0]
+[medium]
+bounds = { box = { min = [-0.3, -0.3, -0.3], max = [0.3, 0.3, 0.3] } }
+field = { kind = "vdb", path = "s_####.vdb", grid = "delta_n", map = { index = { delta = true } } }
+[render]
+width = 8
+height = 8
+"#,
+    )
+    .expect("scene");
+    let render = |frames: &str| {
+        let out = dir.path().join("out.####.exr");
+        let o = grin()
+            .args(["render", "--backend", "cpu", "--frames", frames, "-o"])
+            .arg(&out)
+            .arg(&scene)
+            .output()
+            .expect("grin");
+        (o, dir.path().join("out.0001.exr"))
+    };
+    let (o, first) = render("1..3");
+    fails_cleanly(&o, "frame 2: ", Some(&first));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("s_0002.vdb: grid `delta_n` not found; available grids: dn"),
+        "{err}"
+    );
+    let (o, _) = render("3..3");
+    fails_cleanly(&o, "frame 3: ", None);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("s_0003.vdb: grid `delta_n` has value type `vec3s`"),
+        "{err}"
+    );
+    let (o, first) = render("1..1");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(first.exists());
+}

@@ -114,8 +114,19 @@ void scalar_stats(const GridT& grid, GrinVdbGridInfo& info) {
     double lo = std::numeric_limits<double>::infinity();
     double hi = -lo;
     uint64_t bad = 0;
+    const double background = static_cast<double>(grid.background());
+    // Where the values differ from the background: a box over the active voxels and
+    // tiles (a tile counts whole), found without a dense copy.
+    openvdb::CoordBBox data;
+    uint64_t data_count = 0;
     for (auto it = grid.cbeginValueOn(); it; ++it) {
         const double v = static_cast<double>(*it);
+        if (!(v == background)) {
+            openvdb::CoordBBox b;
+            it.getBoundingBox(b);
+            data.expand(b);
+            data_count += it.getVoxelCount();
+        }
         if (!std::isfinite(v)) {
             bad += it.getVoxelCount();
             continue;
@@ -126,7 +137,12 @@ void scalar_stats(const GridT& grid, GrinVdbGridInfo& info) {
     info.non_finite_count = bad;
     info.value_min = lo;
     info.value_max = hi;
-    info.background = static_cast<double>(grid.background());
+    info.background = background;
+    info.data_voxel_count = data_count;
+    for (int i = 0; i < 3; ++i) {
+        info.data_min[i] = data_count == 0 ? 0 : data.min()[i];
+        info.data_max[i] = data_count == 0 ? -1 : data.max()[i];
+    }
 }
 
 template <typename GridT>
@@ -176,6 +192,11 @@ void fill_info(GridEntry& e) {
         info.bbox_max[i] = info.is_empty ? -1 : bb.max()[i];
     }
     info.active_voxel_count = g.activeVoxelCount();
+    for (int i = 0; i < 3; ++i) {
+        info.data_min[i] = 0;
+        info.data_max[i] = -1;
+    }
+    info.data_voxel_count = 0;
     info.value_min = std::numeric_limits<double>::quiet_NaN();
     info.value_max = std::numeric_limits<double>::quiet_NaN();
     info.background = 0.0;

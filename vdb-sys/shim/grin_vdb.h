@@ -62,6 +62,11 @@ typedef struct GrinVdbGridInfo {
     double value_max;
     double background;           /* scalar grids; |background| for vectors */
     size_t meta_count;
+    /* Scalar grids: bounding box (inclusive) of the active voxels whose value differs from
+     * the background (NaN/Inf included), and their count; max < min when there are none. */
+    int32_t data_min[3];
+    int32_t data_max[3];
+    uint64_t data_voxel_count;
 } GrinVdbGridInfo;
 
 /* Open a file and read all of its grids. */

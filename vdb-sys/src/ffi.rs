@@ -51,6 +51,9 @@ pub struct GrinVdbGridInfo {
     pub value_max: f64,
     pub background: f64,
     pub meta_count: usize,
+    pub data_min: [i32; 3],
+    pub data_max: [i32; 3],
+    pub data_voxel_count: u64,
 }
 
 unsafe extern "C" {

@@ -379,6 +379,11 @@ pub struct GridInfo {
     /// Bounding box of the active voxels; `None` for an empty grid.
     pub active_bbox: Option<IndexBox>,
     pub active_voxel_count: u64,
+    /// Scalar grids: the box of the active voxels (and tiles) whose value differs from the
+    /// background, NaN/Inf included; `None` where every value is the background (or a
+    /// vector grid). Found from the tree's active values, without a dense copy.
+    pub data_bbox: Option<IndexBox>,
+    pub data_voxel_count: u64,
     /// Active voxels that are NaN or Inf (any component).
     pub non_finite_count: u64,
     /// (min, max) over finite active values (|v| for vectors); `None` if there are none.
@@ -643,6 +648,11 @@ impl VdbFile {
                 max: r.bbox_max,
             }),
             active_voxel_count: r.active_voxel_count,
+            data_bbox: (r.data_voxel_count > 0).then_some(IndexBox {
+                min: r.data_min,
+                max: r.data_max,
+            }),
+            data_voxel_count: r.data_voxel_count,
             non_finite_count: r.non_finite_count,
             value_range,
             background: r.background,

@@ -119,6 +119,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             missing.join(", ")
         );
     }
+    grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
+        .with_context(|| format!("{}", args.scene.display()))?;
     let mut all = Vec::new();
     for f in first..=last {
         let out = PathBuf::from(

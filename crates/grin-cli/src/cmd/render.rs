@@ -236,6 +236,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             missing.join(", ")
         );
     }
+    grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
+        .with_context(|| format!("{}", args.scene.display()))?;
     let ctx = match args.backend {
         Backend::Gpu => Some(grin_gpu::GpuContext::new_headless()?),
         Backend::Cpu => None,
