@@ -61,37 +61,47 @@ pub fn build_field_capped(
             ),
         });
     }
-    let ambient = match (fixed_ambient, &medium.field) {
-        (Some(a), _) => a,
-        // The VDB field finds its own ambient (the background's index).
-        (None, FieldSpec::Vdb(_)) => f64::NAN,
-        (None, _) => {
+    // The VDB field finds its own ambient where the scene leaves it to the data (the
+    // background's index); every other kind needs a number.
+    let field: Arc<dyn IndexField> = match (&medium.field, fixed_ambient) {
+        (FieldSpec::Vdb(spec), _) => Arc::new(crate::vdb::VdbField::from_medium(
+            medium,
+            spec,
+            scene_dir,
+            max_dense_bytes,
+        )?),
+        (_, None) => {
             return Err(ambient_param(
                 "\"auto\" takes the index a VDB grid's background maps to; give a number for \
                  this field"
                     .into(),
             ));
         }
-    };
-    let field: Arc<dyn IndexField> = match &medium.field {
-        FieldSpec::Uniform { n } => Arc::new(Uniform::new(bounds, ambient, *n)?),
-        FieldSpec::LinearN2 { n0, k, axis } => {
+        (FieldSpec::Uniform { n }, Some(ambient)) => Arc::new(Uniform::new(bounds, ambient, *n)?),
+        (FieldSpec::LinearN2 { n0, k, axis }, Some(ambient)) => {
             Arc::new(LinearN2::new(bounds, ambient, *n0, *k, *axis)?)
         }
-        FieldSpec::GrinRod { n0, a, axis } => {
+        (FieldSpec::GrinRod { n0, a, axis }, Some(ambient)) => {
             Arc::new(GrinRod::new(bounds, ambient, *n0, *a, *axis)?)
         }
-        FieldSpec::Luneburg { radius } => Arc::new(Luneburg::new(bounds, ambient, *radius)?),
-        FieldSpec::MaxwellFishEye { n0, a } => {
+        (FieldSpec::Luneburg { radius }, Some(ambient)) => {
+            Arc::new(Luneburg::new(bounds, ambient, *radius)?)
+        }
+        (FieldSpec::MaxwellFishEye { n0, a }, Some(ambient)) => {
             Arc::new(MaxwellFishEye::new(bounds, ambient, *n0, *a)?)
         }
-        FieldSpec::Eaton { radius, core } => Arc::new(Eaton::new(bounds, ambient, *radius, *core)?),
-        FieldSpec::ExponentialAtmosphere {
-            e,
-            scale_height,
-            base,
-            axis,
-        } => Arc::new(ExponentialAtmosphere::new(
+        (FieldSpec::Eaton { radius, core }, Some(ambient)) => {
+            Arc::new(Eaton::new(bounds, ambient, *radius, *core)?)
+        }
+        (
+            FieldSpec::ExponentialAtmosphere {
+                e,
+                scale_height,
+                base,
+                axis,
+            },
+            Some(ambient),
+        ) => Arc::new(ExponentialAtmosphere::new(
             bounds,
             ambient,
             *e,
@@ -99,22 +109,25 @@ pub fn build_field_capped(
             *base,
             *axis,
         )?),
-        FieldSpec::Plume { plumes } => Arc::new(Plume::new(bounds, ambient, plumes)?),
+        (FieldSpec::Plume { plumes }, Some(ambient)) => {
+            Arc::new(Plume::new(bounds, ambient, plumes)?)
+        }
         // ExprField runs the n > 0 check itself (it needs the sampled range anyway).
-        FieldSpec::Expr { n, t } => return Ok(Arc::new(ExprField::new(n, bounds, ambient, *t)?)),
+        (FieldSpec::Expr { n, t }, Some(ambient)) => {
+            return Ok(Arc::new(ExprField::new(n, bounds, ambient, *t)?));
+        }
 
         // Kinds built by other modules: each arm is one call into its module.
-        FieldSpec::Noise(spec) => Arc::new(crate::noise::NoiseField::new(spec, bounds, ambient)?),
-        FieldSpec::Vdb(spec) => Arc::new(crate::vdb::VdbField::from_medium(
-            medium,
-            spec,
-            scene_dir,
-            max_dense_bytes,
-        )?),
-        FieldSpec::Baked {
-            path,
-            interpolation,
-        } => {
+        (FieldSpec::Noise(spec), Some(ambient)) => {
+            Arc::new(crate::noise::NoiseField::new(spec, bounds, ambient)?)
+        }
+        (
+            FieldSpec::Baked {
+                path,
+                interpolation,
+            },
+            Some(ambient),
+        ) => {
             let baked = crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)?;
             Arc::new(match interpolation {
                 Some(grin_scene::Interpolation::Trilinear) => baked.with_interp(Interp::Trilinear),

@@ -40,12 +40,8 @@ impl Plane {
 
     /// Where the ray `o + t d` (t > 0) meets the plane.
     pub fn hit(&self, o: DVec3, d: DVec3) -> Option<DVec3> {
-        let den = d.dot(self.normal);
-        if den.abs() < 1e-300 {
-            return None;
-        }
-        let t = (self.point - o).dot(self.normal) / den;
-        (t > 0.0 && t.is_finite()).then(|| o + d * t)
+        crate::primitives::intersect_plane(self.point, self.normal, o, d, 0.0, f64::INFINITY)
+            .map(|(t, _)| o + d * t)
     }
 
     /// Plane coordinates (u, v) of a point on it.
