@@ -574,3 +574,47 @@ fn unknown_keys_are_found_by_path_not_by_message_text() {
         "{e:?}"
     );
 }
+
+/// `[optics]`: bad values are refused at their key, BOS needs a plane, and an optical
+/// output needs a medium.
+#[test]
+fn optics_errors_name_the_key() {
+    let with = |optics: &str| BASE.to_owned() + "\n[optics]\n" + optics + "\n";
+    let err = |optics: &str| {
+        parse_scene(&with(optics), Path::new("scene.toml"))
+            .expect_err(optics)
+            .to_string()
+    };
+    assert!(parse_scene(&with("mode = \"schlieren\""), Path::new("s.toml")).is_ok());
+    let e = err("mode = \"interferogram\"\nwavelength_nm = -3.0");
+    assert!(
+        e.contains("optics.wavelength_nm: must be > 0, got -3"),
+        "{e}"
+    );
+    let e = err("mode = \"bos\"");
+    assert!(e.contains("optics.plane: BOS needs the plane"), "{e}");
+    let e = err("mode = \"schlieren\"\nknife = { cutoff = 1.0 }");
+    assert!(e.contains("optics.knife.cutoff: must be in (0, 1)"), "{e}");
+    let e = err("mode = \"bos\"\nplane = { point = [0.0, 0.0, 1.0], normal = [0.0, 0.0, 0.0] }");
+    assert!(
+        e.contains("optics.plane.normal: must be a non-zero vector"),
+        "{e}"
+    );
+    let e = err("mode = \"shadowgraph\"\nscreen = { rays_per_pixel = 0 }");
+    assert!(
+        e.contains("optics.screen.rays_per_pixel: must be in 1..=1024"),
+        "{e}"
+    );
+    let e = err("mode = \"x\"");
+    assert!(e.contains("unknown variant `x`"), "{e}");
+    let no_medium: String = BASE
+        .split("[medium]")
+        .next()
+        .expect("before the medium")
+        .to_owned()
+        + "[optics]\nmode = \"schlieren\"\n";
+    let e = parse_scene(&no_medium, Path::new("s.toml"))
+        .expect_err("no medium")
+        .to_string();
+    assert!(e.contains("an optical output needs a [medium]"), "{e}");
+}
