@@ -207,6 +207,19 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
                 }
                 radiance += throughput * shade_diffuse(hit, albedo);
             }
+            case MATERIAL_TEXTURE, MATERIAL_DOTS: {
+                var rgb: vec3<f32>;
+                if obj.material == MATERIAL_TEXTURE {
+                    rgb = texture_colour(obj, hit.point, hit.normal);
+                } else {
+                    rgb = dots_colour(obj, hit.point, hit.normal);
+                }
+                if (obj.surface_flags & SURFACE_EMISSIVE) != 0u {
+                    radiance += throughput * rgb;
+                } else {
+                    radiance += throughput * shade_diffuse(hit, rgb);
+                }
+            }
             case MATERIAL_MIRROR: {
                 next = reflect_dir(hit_dir, hit.normal);
                 weight = obj.color_a;
@@ -240,8 +253,9 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
                 }
             }
         }
-        if obj.material == MATERIAL_DIFFUSE || obj.material == MATERIAL_CHECKER {
-            // Diffuse surfaces end the path (direct light only).
+        if obj.material == MATERIAL_DIFFUSE || obj.material == MATERIAL_CHECKER
+            || obj.material == MATERIAL_TEXTURE || obj.material == MATERIAL_DOTS {
+            // Diffuse and emissive surfaces end the path (direct light only).
             break;
         }
         throughput *= weight;
@@ -254,7 +268,7 @@ fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample 
 }
 
 fn shade_diffuse(hit: Hit, albedo: vec3<f32>) -> vec3<f32> {
-    var irradiance = sky_radiance(hit.normal) * (AMBIENT_SKY_WEIGHT * PI);
+    var irradiance = ambient_radiance(hit.normal) * (AMBIENT_SKY_WEIGHT * PI);
     let p = hit.point + hit.normal * SURFACE_EPS;
     let count = params.light_count;
     for (var i = 0u; i < count; i++) {

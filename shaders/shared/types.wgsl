@@ -45,30 +45,41 @@ struct FrameParams {
     grid_inv_spacing: vec3<f32>, // 1 / node spacing per axis
     _pad2: f32,
     grid_dims: vec3<u32>,        // node counts
-    _pad3: u32,
+    env_width: u32,              // the sky's image (map or plate) at the atlas' top left
     macro_dims: vec3<u32>,       // macro-cell counts
-    _pad4: u32,
+    env_height: u32,
     sky_horizon: vec3<f32>,
     _pad5: f32,
     sky_zenith: vec3<f32>,
     _pad6: f32,
     sky_ground: vec3<f32>,
     _pad7: f32,
+    plate_forward: vec3<f32>,    // the background plate's camera (the scene's)
+    plate_tan_half_fov_y: f32,
+    plate_right: vec3<f32>,
+    plate_aspect: f32,
+    plate_up: vec3<f32>,
+    _pad8: f32,
 }
 
 struct GpuObject {
     a: vec3<f32>,                // sphere: centre; plane: point; box: min
     radius: f32,                 // sphere
     b: vec3<f32>,                // plane: unit normal; box: max
-    _pad0: f32,
-    color_a: vec3<f32>,
-    param: f32,                  // checker scale | glass ior
-    color_b: vec3<f32>,
-    _pad1: f32,
+    density: f32,                // dots: fraction of the surface covered
+    color_a: vec3<f32>,          // colour | checker a | texture tint | dot colour
+    param: f32,                  // checker scale | glass ior | dot diameter
+    color_b: vec3<f32>,          // checker b | texture border | dots' background
+    seed: u32,                   // dots
     shape: u32,                  // SHAPE_*
     material: u32,               // MATERIAL_*
     scene_index: u32,            // the object's index in the scene (copies keep it)
-    _pad2: u32,
+    surface_flags: u32,          // SURFACE_*
+    center: vec3<f32>,           // texture, dots: centre of the surface frame
+    image_row: u32,              // texture: first row in the image atlas
+    size: vec2<f32>,             // texture on a plane: world size
+    image_width: u32,            // texture: size in texels
+    image_height: u32,
 }
 
 struct GpuLight {
@@ -118,12 +129,18 @@ const MATERIAL_CHECKER: u32 = 1u;
 const MATERIAL_MIRROR: u32 = 2u;
 const MATERIAL_METAL: u32 = 3u;
 const MATERIAL_GLASS: u32 = 4u;
+const MATERIAL_TEXTURE: u32 = 5u;
+const MATERIAL_DOTS: u32 = 6u;
+const SURFACE_EMISSIVE: u32 = 1u;
+const SURFACE_REPEAT: u32 = 2u;
+const SURFACE_HAS_CENTER: u32 = 4u;
 const LIGHT_KIND_POINT: u32 = 0u;
 const LIGHT_KIND_DIRECTIONAL: u32 = 1u;
 const BOUNDS_KIND_SPHERE: u32 = 0u;
 const BOUNDS_KIND_BOX: u32 = 1u;
 const SKY_KIND_GRADIENT: u32 = 0u;
 const SKY_KIND_MAP: u32 = 1u;
+const SKY_KIND_PLATE: u32 = 2u;
 
 const PI: f32 = 3.14159265358979;
 const TAU: f32 = 6.28318530717959;
@@ -138,6 +155,7 @@ override STEP_POLICY: u32 = 0u;
 override FLAGS: u32 = 0u;
 override BOUNDS_BOX: bool = false;
 override SKY_MAP: bool = false;
+override SKY_PLATE: bool = false;
 // Which pass of the frame this pipeline runs (render.rs): PASS_ALL, every pixel whole;
 // PASS_FIRST, every pixel whose paths never touch the medium, the others listed for
 // PASS_MEDIUM (render_deferred), which traces them whole. Splitting keeps the march out

@@ -52,6 +52,13 @@ pub const MATERIAL_CHECKER: u32 = 1;
 pub const MATERIAL_MIRROR: u32 = 2;
 pub const MATERIAL_METAL: u32 = 3;
 pub const MATERIAL_GLASS: u32 = 4;
+pub const MATERIAL_TEXTURE: u32 = 5;
+pub const MATERIAL_DOTS: u32 = 6;
+
+/// `GpuObject::surface_flags` bits.
+pub const SURFACE_EMISSIVE: u32 = 1;
+pub const SURFACE_REPEAT: u32 = 2;
+pub const SURFACE_HAS_CENTER: u32 = 4;
 
 /// Light codes (`GpuLight::kind`).
 pub const LIGHT_KIND_POINT: u32 = 0;
@@ -64,6 +71,7 @@ pub const BOUNDS_KIND_BOX: u32 = 1;
 /// Sky codes (`FrameParams::sky_kind`; the kernel reads the `SKY_MAP` override).
 pub const SKY_KIND_GRADIENT: u32 = 0;
 pub const SKY_KIND_MAP: u32 = 1;
+pub const SKY_KIND_PLATE: u32 = 2;
 
 /// Everything uniform over one dispatch, every field named. Keep in sync with
 /// `FrameParams` in shaders/shared/types.wgsl: a `[f32; 3]` and the 4-byte field after
@@ -148,10 +156,11 @@ pub struct FrameParams {
     pub _pad2: f32,
     /// Node counts.
     pub grid_dims: [u32; 3],
-    pub _pad3: u32,
+    /// The sky's image (map or plate) at the top left of the image atlas: its size.
+    pub env_width: u32,
     /// Macro-cell counts.
     pub macro_dims: [u32; 3],
-    pub _pad4: u32,
+    pub env_height: u32,
     /// Gradient sky colours.
     pub sky_horizon: [f32; 3],
     pub _pad5: f32,
@@ -159,8 +168,16 @@ pub struct FrameParams {
     pub _pad6: f32,
     pub sky_ground: [f32; 3],
     pub _pad7: f32,
+    /// The background plate's camera (the scene's, fixed when a viewer moves its own):
+    /// unit forward, right and up, tan(fov_y / 2) and width / height.
+    pub plate_forward: [f32; 3],
+    pub plate_tan_half_fov_y: f32,
+    pub plate_right: [f32; 3],
+    pub plate_aspect: f32,
+    pub plate_up: [f32; 3],
+    pub _pad8: f32,
 }
-const _: () = assert!(std::mem::size_of::<FrameParams>() == 20 * 16);
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 23 * 16);
 
 /// One scene object. Keep in sync with `GpuObject` in shaders/shared/types.wgsl.
 #[repr(C)]
@@ -172,23 +189,35 @@ pub struct GpuObject {
     pub radius: f32,
     /// Plane: unit normal; box: max.
     pub b: [f32; 3],
-    pub _pad0: f32,
-    /// Diffuse/mirror/metal/glass colour, checker colour a.
+    /// Dots: the fraction of the surface covered.
+    pub density: f32,
+    /// Diffuse/mirror/metal/glass colour, checker colour a, texture tint, dot colour.
     pub color_a: [f32; 3],
-    /// Checker scale or glass ior.
+    /// Checker scale, glass ior or dot diameter.
     pub param: f32,
-    /// Checker colour b.
+    /// Checker colour b, texture border, dots' background.
     pub color_b: [f32; 3],
-    pub _pad1: f32,
+    /// Dots: the seed.
+    pub seed: u32,
     /// `SHAPE_*`.
     pub shape: u32,
     /// `MATERIAL_*`.
     pub material: u32,
     /// The object's index in the scene (its copies keep it).
     pub scene_index: u32,
-    pub _pad2: u32,
+    /// `SURFACE_*` bits.
+    pub surface_flags: u32,
+    /// Texture and dots: the centre of the surface frame (with `SURFACE_HAS_CENTER`).
+    pub center: [f32; 3],
+    /// Texture: its first row in the image atlas.
+    pub image_row: u32,
+    /// Texture on a plane: its world size.
+    pub size: [f32; 2],
+    /// Texture: its size in texels.
+    pub image_width: u32,
+    pub image_height: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuObject>() == 5 * 16);
+const _: () = assert!(std::mem::size_of::<GpuObject>() == 7 * 16);
 
 /// One light. Keep in sync with `GpuLight` in shaders/shared/types.wgsl.
 #[repr(C)]
@@ -327,30 +356,41 @@ mod tests {
             grid_inv_spacing,
             _pad2,
             grid_dims,
-            _pad3,
+            env_width,
             macro_dims,
-            _pad4,
+            env_height,
             sky_horizon,
             _pad5,
             sky_zenith,
             _pad6,
             sky_ground,
             _pad7,
+            plate_forward,
+            plate_tan_half_fov_y,
+            plate_right,
+            plate_aspect,
+            plate_up,
+            _pad8,
         );
         same_layout!(
             GpuObject,
             a,
             radius,
             b,
-            _pad0,
+            density,
             color_a,
             param,
             color_b,
-            _pad1,
+            seed,
             shape,
             material,
             scene_index,
-            _pad2,
+            surface_flags,
+            center,
+            image_row,
+            size,
+            image_width,
+            image_height,
         );
         same_layout!(GpuLight, position, kind, intensity, _pad0);
     }

@@ -101,6 +101,25 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
         SkyModel::Map(map) => {
             params.sky_kind = SKY_KIND_MAP;
             params.env_intensity = map.intensity as f32;
+            params.env_width = map.width as u32;
+            params.env_height = map.height as u32;
+        }
+        SkyModel::Plate {
+            image,
+            camera,
+            intensity,
+            mean,
+        } => {
+            params.sky_kind = SKY_KIND_PLATE;
+            params.env_intensity = *intensity as f32;
+            params.env_width = image.width as u32;
+            params.env_height = image.height as u32;
+            params.sky_horizon = f3(*mean);
+            params.plate_forward = f3(camera.forward);
+            params.plate_right = f3(camera.right);
+            params.plate_up = f3(camera.up);
+            params.plate_tan_half_fov_y = camera.tan_half_fov_y as f32;
+            params.plate_aspect = (f64::from(camera.width) / f64::from(camera.height)) as f32;
         }
     }
     if let Some(m) = &scene.medium {
@@ -130,12 +149,22 @@ pub(crate) fn scene_arrays(
     params: &mut FrameParams,
 ) -> (Vec<GpuObject>, Vec<GpuLight>) {
     let n_objects = params.object_count;
+    let image_rows = atlas_rows(scene);
     let mut objects: Vec<GpuObject> = scene
         .objects
         .iter()
         .zip(&scene.materials)
+        .zip(&scene.object_images)
         .zip(0u32..)
-        .map(|((p, m), i)| object(p, m, i))
+        .map(|(((p, m), image), i)| {
+            let mut o = object(p, m, i);
+            if let Some(k) = *image {
+                o.image_row = image_rows[k];
+                o.image_width = scene.images[k].width as u32;
+                o.image_height = scene.images[k].height as u32;
+            }
+            o
+        })
         .collect();
     // After them, copies of the objects a chord inside the medium can meet (those
     // reaching into the bounds' bounding ball, with a margin for f32 roundoff): the
@@ -173,32 +202,80 @@ pub(crate) fn scene_arrays(
     (objects, lights)
 }
 
-/// The environment map as rgba32float texels (a 1x1 placeholder for a gradient sky),
+/// The sky's image (environment map or plate), if any, and the textures' images, in
+/// atlas order, as (width, height, texels).
+fn atlas_images(scene: &RenderScene) -> Vec<(usize, usize, &[[f32; 3]])> {
+    let sky = match &scene.sky {
+        SkyModel::Map(map) => Some((map.width, map.height, &map.texels[..])),
+        SkyModel::Plate { image, .. } => Some((image.width, image.height, &image.texels[..])),
+        SkyModel::Gradient { .. } => None,
+    };
+    sky.into_iter()
+        .chain(
+            scene
+                .images
+                .iter()
+                .map(|i| (i.width, i.height, &i.texels[..])),
+        )
+        .collect()
+}
+
+/// The first atlas row of each of `scene.images` (the sky's image, if any, on top).
+fn atlas_rows(scene: &RenderScene) -> Vec<u32> {
+    let sky_rows = match &scene.sky {
+        SkyModel::Map(map) => map.height,
+        SkyModel::Plate { image, .. } => image.height,
+        SkyModel::Gradient { .. } => 0,
+    };
+    let mut row = sky_rows as u32;
+    scene
+        .images
+        .iter()
+        .map(|i| {
+            let r = row;
+            row += i.height as u32;
+            r
+        })
+        .collect()
+}
+
+/// The image atlas as rgba32float texels: the sky's image at the top left, the
+/// textures stacked below it, left-aligned (a 1x1 placeholder when there are none),
 /// checked against the device's 2D texture limit.
 pub(crate) fn env_texels(
     ctx: &GpuContext,
     scene: &RenderScene,
 ) -> Result<(u32, u32, Vec<[f32; 4]>), GpuError> {
-    let limits = ctx.limits();
-    let env = match &scene.sky {
-        SkyModel::Map(map) => {
-            let limit = limits.max_texture_dimension_2d;
-            if map.width > limit as usize || map.height > limit as usize {
-                return Err(GpuError::TooLarge {
-                    what: format!("environment map {}x{}", map.width, map.height),
-                    needed: format!("{} texels per axis", map.width.max(map.height)),
-                    limit: format!("{limit} (max_texture_dimension_2d)"),
-                    adapter: ctx.adapter_name(),
-                });
+    let limit = ctx.limits().max_texture_dimension_2d as usize;
+    let images = atlas_images(scene);
+    if images.is_empty() {
+        return Ok((1, 1, vec![[0.0; 4]]));
+    }
+    let width = images.iter().map(|i| i.0).max().unwrap_or(1);
+    let height: usize = images.iter().map(|i| i.1).sum();
+    if width > limit || height > limit {
+        return Err(GpuError::TooLarge {
+            what: format!(
+                "the scene's images ({} stacked in one {width}x{height} atlas)",
+                images.len()
+            ),
+            needed: format!("{} texels per axis", width.max(height)),
+            limit: format!("{limit} (max_texture_dimension_2d)"),
+            adapter: ctx.adapter_name(),
+        });
+    }
+    let mut texels = vec![[0.0f32; 4]; width * height];
+    let mut row = 0;
+    for (w, h, image) in images {
+        for (y, line) in image.chunks_exact(w).enumerate() {
+            let start = (row + y) * width;
+            for (dst, t) in texels[start..start + w].iter_mut().zip(line) {
+                *dst = [t[0], t[1], t[2], 1.0];
             }
-            let texels: Vec<[f32; 4]> =
-                map.texels.iter().map(|t| [t[0], t[1], t[2], 1.0]).collect();
-            (map.width as u32, map.height as u32, texels)
         }
-        SkyModel::Gradient { .. } => (1, 1, vec![[0.0; 4]]),
-    };
-
-    Ok(env)
+        row += h;
+    }
+    Ok((width as u32, height as u32, texels))
 }
 
 /// The environment map's texture from [`env_texels`] (call inside an error scope).
@@ -304,8 +381,50 @@ fn object(prim: &Primitive, material: &Material, index: u32) -> GpuObject {
             o.color_a = a3(color);
             o.param = ior as f32;
         }
+        // The image's place in the atlas is filled in by `scene_arrays`.
+        Material::Texture {
+            size,
+            center,
+            repeat,
+            border,
+            color,
+            emissive,
+            ..
+        } => {
+            o.material = MATERIAL_TEXTURE;
+            o.color_a = a3(color);
+            o.color_b = a3(border);
+            o.size = size.map_or([1.0, 1.0], |s| s.map(|x| x as f32));
+            o.surface_flags = surface_flags(emissive, repeat, center);
+            o.center = center.map_or([0.0; 3], a3);
+        }
+        Material::Dots {
+            diameter,
+            density,
+            seed,
+            color,
+            background,
+            center,
+            emissive,
+        } => {
+            o.material = MATERIAL_DOTS;
+            o.param = diameter as f32;
+            o.density = density as f32;
+            o.seed = seed;
+            o.color_a = a3(color);
+            o.color_b = a3(background);
+            o.surface_flags = surface_flags(emissive, false, center);
+            o.center = center.map_or([0.0; 3], a3);
+        }
     }
     o
+}
+
+fn surface_flags(emissive: bool, repeat: bool, center: Option<[f64; 3]>) -> u32 {
+    let bit = |on: bool, b: u32| if on { b } else { 0 };
+    bit(emissive, SURFACE_EMISSIVE)
+        | bit(repeat, SURFACE_REPEAT)
+        | bit(center.is_some(), SURFACE_HAS_CENTER)
 }
 
 fn light(l: &Light) -> GpuLight {

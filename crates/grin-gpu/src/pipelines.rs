@@ -51,5 +51,6 @@ pub(crate) fn pipeline_constants(params: &FrameParams, pass: u32) -> Vec<(&'stat
         ("FLAGS", f64::from(params.flags)),
         ("BOUNDS_BOX", flag(params.bounds_kind == BOUNDS_KIND_BOX)),
         ("SKY_MAP", flag(params.sky_kind == SKY_KIND_MAP)),
+        ("SKY_PLATE", flag(params.sky_kind == SKY_KIND_PLATE)),
     ]
 }

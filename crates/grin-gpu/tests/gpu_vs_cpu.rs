@@ -171,6 +171,7 @@ example_scene_tests! {
     scene_eaton => "eaton.toml",
     scene_grin_rod => "grin-rod.toml",
     scene_heat_haze => "heat-haze.toml",
+    scene_heat_haze_plate => "heat-haze-plate.toml",
     scene_luneburg => "luneburg.toml",
     scene_maxwell_fish_eye => "maxwell-fish-eye.toml",
     scene_mirage => "mirage.toml",
@@ -594,4 +595,71 @@ fn renderers_with_the_same_constants_share_compiled_pipelines() {
     let c = render(&rs);
     assert_eq!(ctx.pipelines_compiled(), 2);
     assert_eq!((c.width, c.height), (32, 18));
+}
+
+/// Images on surfaces and behind the scene, both backends: a floor tiled with an EXR
+/// (lit, repeated), a wall box showing a PNG on its faces (emissive), a box of BOS dots
+/// (lit) and a background plate, around the Luneburg lens. The lookups are the same
+/// arithmetic in f32 and f64 (bilinear, the PCG dot hash), so the images agree within
+/// the suite's tolerances.
+#[test]
+fn textures_dots_and_background_plate_match_cpu() {
+    let Some(ctx) = harness::context("textures_dots_and_background_plate_match_cpu") else {
+        return;
+    };
+    let dir = tempfile_dir("textures");
+    exr::prelude::write_rgb_file(dir.join("tile.exr"), 16, 16, |x, y| {
+        let c = if (x / 4 + y / 4) % 2 == 0 { 0.9 } else { 0.2 };
+        (c, 0.5 * c + 0.05 * x as f32 / 16.0, 0.3)
+    })
+    .expect("write exr");
+    let wall = image::RgbImage::from_fn(64, 48, |x, y| {
+        image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x * y) % 256) as u8])
+    });
+    wall.save(dir.join("wall.png")).expect("write png");
+    let plate = image::RgbImage::from_fn(96, 54, |x, y| {
+        image::Rgb([
+            (x * 2 + 40) as u8,
+            (y * 4 + 20) as u8,
+            ((x + y) * 3 % 256) as u8,
+        ])
+    });
+    plate.save(dir.join("plate.png")).expect("write png");
+    let text = r#"
+[camera]
+position = [0.0, 1.0, -4.0]
+look_at = [0.0, 0.6, 0.0]
+fov_y_deg = 40.0
+
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
+material = { texture = { path = "tile.exr", size = [0.7, 0.7], repeat = true } }
+
+[[object]]
+shape = { box = { min = [-1.2, 0.0, 2.0], max = [1.2, 1.8, 2.2] } }
+material = { texture = { path = "wall.png", emissive = true } }
+
+[[object]]
+shape = { box = { min = [0.6, 0.0, -0.2], max = [1.3, 0.6, 0.5] } }
+material = { dots = { diameter = 0.06, density = 0.4, seed = 5, color = [0.9, 0.8, 0.2], background = [0.1, 0.1, 0.3] } }
+
+[sky]
+plate = { path = "plate.png", intensity = 1.5 }
+
+[medium]
+bounds = { sphere = { center = [0.0, 0.7, -0.6], radius = 0.6 } }
+field = { kind = "luneburg" }
+
+[[light]]
+point = { position = [2.0, 4.0, -2.0], intensity = [30.0, 30.0, 30.0] }
+
+[render]
+width = 96
+height = 54
+"#;
+    let scene = parse_scene(text, &dir.join("scene.toml")).expect("scene");
+    let baked = harness::baked(&scene, &dir, 48);
+    let (cpu, gpu) = harness::render_both(&ctx, &scene, &dir, baked);
+    harness::assert_images_agree("textures", &cpu, &gpu, MEAN_TOL, P99_TOL);
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -13,3 +13,4 @@ pub mod rng;
 pub mod scene;
 pub mod settings;
 pub mod sky;
+pub mod surface;

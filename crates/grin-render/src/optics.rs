@@ -234,37 +234,10 @@ pub fn interferogram(frame: &Frame, wavelength_nm: f64, fringes: &Fringes) -> (V
     (phase, intensity)
 }
 
-/// The random-dot background: one Gaussian dot (1/e^2 diameter `dots.diameter`) per
-/// square cell of side diameter * sqrt(pi / (4 density)), at a position in the cell drawn
-/// from the seed; intensity at plane coordinates (u, v), clamped to 1.
+/// The random-dot background at plane coordinates `uv` (the `dots` material's pattern:
+/// [`crate::surface::dot_intensity`]).
 pub fn dot_intensity(dots: &Dots, uv: [f64; 2]) -> f64 {
-    let cell = dots.diameter * (std::f64::consts::PI / (4.0 * dots.density)).sqrt();
-    let (ci, cj) = ((uv[0] / cell).floor(), (uv[1] / cell).floor());
-    let mut sum = 0.0;
-    for di in -1..=1 {
-        for dj in -1..=1 {
-            let (i, j) = (ci as i64 + di, cj as i64 + dj);
-            let (ru, rv) = cell_random(dots.seed, i, j);
-            let centre = [(i as f64 + ru) * cell, (j as f64 + rv) * cell];
-            let r2 = (uv[0] - centre[0]).powi(2) + (uv[1] - centre[1]).powi(2);
-            sum += (-8.0 * r2 / (dots.diameter * dots.diameter)).exp();
-        }
-    }
-    sum.min(1.0)
-}
-
-/// Two numbers in [0, 1) for cell (i, j) of `seed` (SplitMix64 of the three).
-fn cell_random(seed: u64, i: i64, j: i64) -> (f64, f64) {
-    let mix = |mut z: u64| {
-        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    };
-    let h = mix(seed ^ mix(i as u64 ^ mix(j as u64)));
-    let a = (h >> 11) as f64 / (1u64 << 53) as f64;
-    let b = (mix(h) >> 11) as f64 / (1u64 << 53) as f64;
-    (a, b)
+    crate::surface::dot_intensity(dots.diameter, dots.density, dots.seed, uv)
 }
 
 /// A BOS image pair on `plane`: the reference (each pixel's camera ray straight onto the
@@ -338,32 +311,5 @@ mod tests {
         assert!((i[1] - 1.2).abs() < 1e-12, "{i:?}");
         assert!((i[2] - 0.8).abs() < 1e-12, "{i:?}");
         assert_eq!((i[3], i[4]), (2.0, 0.0));
-    }
-
-    #[test]
-    fn dots_cover_about_their_density_and_repeat_by_seed() {
-        let dots = Dots {
-            diameter: 0.02,
-            density: 0.3,
-            seed: 7,
-        };
-        let n = 400;
-        let mut above = 0;
-        for a in 0..n {
-            for b in 0..n {
-                let uv = [f64::from(a) * 0.001, f64::from(b) * 0.001];
-                if dot_intensity(&dots, uv) > (-2.0f64).exp() {
-                    above += 1;
-                }
-                assert_eq!(dot_intensity(&dots, uv), dot_intensity(&dots, uv));
-            }
-        }
-        let covered = f64::from(above) / f64::from(n * n);
-        assert!((0.2..0.4).contains(&covered), "{covered}");
-        let other = Dots { seed: 8, ..dots };
-        assert_ne!(
-            dot_intensity(&dots, [0.05, 0.05]),
-            dot_intensity(&other, [0.05, 0.05])
-        );
     }
 }

@@ -14,6 +14,7 @@ use crate::primitives::Primitive;
 use crate::rng::Rng;
 use crate::settings::TraceSettings;
 use crate::sky::SkyModel;
+use crate::surface::{Image, load_image};
 
 /// Shortest jittered first step, as a fraction of the nominal step: keeps a jittered
 /// step from being vanishingly small (GPU twin: MIN_JITTER_FRACTION in step.wgsl).
@@ -36,6 +37,12 @@ pub enum RenderError {
     Settings(String),
     #[error("environment map {}: {message}", path.display())]
     EnvMap { path: PathBuf, message: String },
+    #[error("{what} {}: {message}", path.display())]
+    Image {
+        what: &'static str,
+        path: PathBuf,
+        message: String,
+    },
     #[error("{}: {message}", path.display())]
     Output { path: PathBuf, message: String },
     #[error(transparent)]
@@ -80,6 +87,10 @@ pub struct RenderScene {
     pub sky: SkyModel,
     pub medium: Option<SceneMedium>,
     pub settings: RenderSettings,
+    /// The images of `texture` materials, each file read once.
+    pub images: Vec<Image>,
+    /// Per object: its image in `images` (texture materials).
+    pub object_images: Vec<Option<usize>>,
 }
 
 fn finite3(v: [f64; 3]) -> bool {
@@ -170,6 +181,48 @@ impl RenderScene {
                 return Err(bad("checker scale must be positive"));
             }
         }
+        let mut images = Vec::new();
+        let mut object_images = Vec::with_capacity(scene.objects.len());
+        let mut read: Vec<PathBuf> = Vec::new();
+        for (index, o) in scene.objects.iter().enumerate() {
+            let bad = |message: &str| RenderError::Object {
+                index,
+                message: message.into(),
+            };
+            let image = match &o.material {
+                Material::Texture { path, size, .. } => {
+                    match o.shape {
+                        Shape::Sphere { .. } => {
+                            return Err(bad("texture maps onto planes and boxes, not spheres"));
+                        }
+                        Shape::Plane { .. } if size.is_none() => {
+                            return Err(bad("texture on a plane needs size = [width, height]"));
+                        }
+                        _ => {}
+                    }
+                    let path = scene_dir.join(path);
+                    Some(match read.iter().position(|p| *p == path) {
+                        Some(i) => i,
+                        None => {
+                            let image =
+                                load_image(&path).map_err(|message| RenderError::Image {
+                                    what: "texture",
+                                    path: path.clone(),
+                                    message,
+                                })?;
+                            images.push(image);
+                            read.push(path);
+                            images.len() - 1
+                        }
+                    })
+                }
+                Material::Dots { .. } if matches!(o.shape, Shape::Sphere { .. }) => {
+                    return Err(bad("dots map onto planes and boxes, not spheres"));
+                }
+                _ => None,
+            };
+            object_images.push(image);
+        }
         for (index, light) in scene.lights.iter().enumerate() {
             let ok = match *light {
                 Light::Point {
@@ -202,7 +255,9 @@ impl RenderScene {
                 .collect(),
             materials: scene.objects.iter().map(|o| o.material.clone()).collect(),
             lights: scene.lights.clone(),
-            sky: SkyModel::from_scene(&scene.sky, scene_dir)?,
+            sky: SkyModel::from_scene(&scene.sky, scene_dir, &camera)?,
+            images,
+            object_images,
             medium: field.map(|f| SceneMedium::new(f, s)).transpose()?,
             settings: s.clone(),
         })

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
+use crate::camera::PinholeCamera;
+use crate::optics::project_dir;
 use crate::scene::RenderError;
+use crate::surface::{Image, load_image};
 
 /// An equirectangular map, linear RGB, row 0 at the zenith.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,11 +30,23 @@ pub enum SkyModel {
         ground: DVec3,
     },
     Map(EnvMap),
+    /// A plate at infinity filling `camera`'s view (the scene's camera: it stays put
+    /// when a viewer moves its own); `mean` lights diffuse surfaces.
+    Plate {
+        image: Image,
+        camera: PinholeCamera,
+        intensity: f64,
+        mean: DVec3,
+    },
 }
 
 impl SkyModel {
     /// Build from the scene's `[sky]`, reading a map relative to `scene_dir`.
-    pub fn from_scene(sky: &grin_scene::Sky, scene_dir: &Path) -> Result<Self, RenderError> {
+    pub fn from_scene(
+        sky: &grin_scene::Sky,
+        scene_dir: &Path,
+        camera: &PinholeCamera,
+    ) -> Result<Self, RenderError> {
         Ok(match sky {
             grin_scene::Sky::Gradient {
                 horizon,
@@ -46,6 +61,20 @@ impl SkyModel {
                 let mut map = load_env_map(&scene_dir.join(path))?;
                 map.intensity = *intensity;
                 SkyModel::Map(map)
+            }
+            grin_scene::Sky::Plate { path, intensity } => {
+                let path = scene_dir.join(path);
+                let image = load_image(&path).map_err(|message| RenderError::Image {
+                    what: "background plate",
+                    path,
+                    message,
+                })?;
+                SkyModel::Plate {
+                    mean: image.mean() * *intensity,
+                    image,
+                    camera: *camera,
+                    intensity: *intensity,
+                }
             }
         })
     }
@@ -65,6 +94,28 @@ impl SkyModel {
                 }
             }
             SkyModel::Map(map) => map.lookup(d),
+            SkyModel::Plate {
+                image,
+                camera,
+                intensity,
+                ..
+            } => match project_dir(camera, d) {
+                Some([x, y]) => {
+                    let sx = image.width as f64 / f64::from(camera.width);
+                    let sy = image.height as f64 / f64::from(camera.height);
+                    image.bilinear(x * sx, y * sy, false) * *intensity
+                }
+                None => DVec3::ZERO,
+            },
+        }
+    }
+
+    /// The sky light on a diffuse surface of normal `n`: the sky in that direction, or
+    /// a plate's mean colour.
+    pub fn ambient_radiance(&self, n: DVec3) -> DVec3 {
+        match self {
+            SkyModel::Plate { mean, .. } => *mean,
+            _ => self.sky_radiance(n),
         }
     }
 }
@@ -98,53 +149,18 @@ pub fn load_env_map(path: &Path) -> Result<EnvMap, RenderError> {
         path: PathBuf::from(path),
         message,
     };
-    let ext = path
+    if path
         .extension()
         .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let (width, height, texels) = match ext.as_deref() {
-        Some("exr") => {
-            let image = exr::prelude::read_first_rgba_layer_from_file(
-                path,
-                |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
-                |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                    px[pos.y() * *w + pos.x()] = [r, g, b];
-                },
-            )
-            .map_err(|e| err(e.to_string()))?;
-            let size = image.layer_data.size;
-            (
-                size.width(),
-                size.height(),
-                image.layer_data.channel_data.pixels.1,
-            )
-        }
-        Some("hdr") => {
-            let img = image::open(path)
-                .map_err(|e| err(e.to_string()))?
-                .into_rgb32f();
-            let (w, h) = (img.width() as usize, img.height() as usize);
-            let texels = img.pixels().map(|p| p.0).collect();
-            (w, h, texels)
-        }
-        _ => return Err(err("environment map must be an .exr or .hdr file".into())),
-    };
-    if width == 0 || height == 0 {
-        return Err(err("environment map is empty".into()));
-    }
-    if let Some(bad) = texels
-        .iter()
-        .flatten()
-        .find(|v| !v.is_finite() || **v < 0.0)
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
     {
-        return Err(err(format!(
-            "environment map has a non-finite or negative texel ({bad})"
-        )));
+        return Err(err("environment map must be an .exr or .hdr file".into()));
     }
+    let image = load_image(path).map_err(err)?;
     Ok(EnvMap {
-        width,
-        height,
-        texels,
+        width: image.width,
+        height: image.height,
+        texels: image.texels,
         intensity: 1.0,
     })
 }
@@ -155,7 +171,15 @@ mod tests {
 
     #[test]
     fn gradient_has_a_horizon() {
-        let sky = SkyModel::from_scene(&grin_scene::Sky::default(), Path::new(".")).expect("sky");
+        let c = grin_scene::Camera {
+            position: [0.0; 3],
+            look_at: [0.0, 0.0, -1.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 40.0,
+        };
+        let cam = PinholeCamera::new(&c, 4, 4).expect("camera");
+        let sky =
+            SkyModel::from_scene(&grin_scene::Sky::default(), Path::new("."), &cam).expect("sky");
         let SkyModel::Gradient {
             horizon,
             zenith,

@@ -93,7 +93,7 @@ pub struct Fringes {
 pub struct Dots {
     pub diameter: f64,
     pub density: f64,
-    pub seed: u64,
+    pub seed: u32,
 }
 
 impl Default for Dots {

@@ -122,6 +122,39 @@ pub enum Material {
         ior: f64,
         color: [f64; 3],
     },
+    /// An image on a plane or a box (PNG: sRGB, decoded to linear; EXR or HDR: linear;
+    /// `path` relative to the scene file), times `color`. On a plane it is `size`
+    /// (width, height) world units centred on `center` (default: the plane's point),
+    /// along the plane's axes (grin_render::surface::face_axes); on a box it spans each
+    /// face. Outside the image: `border`, or the image again with `repeat`. `emissive`:
+    /// the surface shows the image as it is, unlit (a backlit plate); else the image is
+    /// the diffuse albedo.
+    Texture {
+        path: String,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        size: Option<[f64; 2]>,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        center: Option<[f64; 3]>,
+        repeat: bool,
+        border: [f64; 3],
+        color: [f64; 3],
+        emissive: bool,
+    },
+    /// The random-dot background of BOS experiments on a plane or a box: Gaussian dots
+    /// of 1/e^2 `diameter` (world units) covering `density` of the area, placed by
+    /// `seed`, in `color` over `background`; plane coordinates from `center` (default:
+    /// the plane's point or the box face's centre) along the face's axes. The same
+    /// pattern as `[optics] mode = "bos"` with the same dots on the same plane.
+    Dots {
+        diameter: f64,
+        density: f64,
+        seed: u32,
+        color: [f64; 3],
+        background: [f64; 3],
+        #[serde(skip_serializing_if = "Option::is_none")]
+        center: Option<[f64; 3]>,
+        emissive: bool,
+    },
 }
 
 impl Default for Material {
@@ -432,6 +465,16 @@ pub enum Sky {
         #[serde(default = "default_one")]
         intensity: f64,
     },
+    /// A background plate (PNG, EXR or HDR, path relative to the scene file) at
+    /// infinity, filling the scene camera's view: without a medium, pixel (i, j) of the
+    /// render shows the plate at the same place (scaled when the sizes differ); through
+    /// the medium it is distorted. Directions behind the camera see black, beyond the
+    /// frame the plate's edge. Diffuse surfaces are lit by its mean colour.
+    Plate {
+        path: String,
+        #[serde(default = "default_one")]
+        intensity: f64,
+    },
 }
 
 fn default_one() -> f64 {
@@ -625,6 +668,47 @@ mod material_serde {
             #[serde(default = "white")]
             color: [f64; 3],
         },
+        Texture {
+            path: String,
+            #[serde(default)]
+            size: Option<[f64; 2]>,
+            #[serde(default)]
+            center: Option<[f64; 3]>,
+            #[serde(default)]
+            repeat: bool,
+            #[serde(default)]
+            border: [f64; 3],
+            #[serde(default = "white")]
+            color: [f64; 3],
+            #[serde(default)]
+            emissive: bool,
+        },
+        Dots {
+            #[serde(default = "dot_diameter")]
+            diameter: f64,
+            #[serde(default = "dot_density")]
+            density: f64,
+            #[serde(default = "dot_seed")]
+            seed: u32,
+            #[serde(default = "white")]
+            color: [f64; 3],
+            #[serde(default)]
+            background: [f64; 3],
+            #[serde(default)]
+            center: Option<[f64; 3]>,
+            #[serde(default)]
+            emissive: bool,
+        },
+    }
+
+    fn dot_diameter() -> f64 {
+        crate::optics::Dots::default().diameter
+    }
+    fn dot_density() -> f64 {
+        crate::optics::Dots::default().density
+    }
+    fn dot_seed() -> u32 {
+        crate::optics::Dots::default().seed
     }
 
     fn grey() -> [f64; 3] {
@@ -664,6 +748,40 @@ mod material_serde {
                 Table::Mirror { color } => Material::Mirror { color },
                 Table::Metal { color } => Material::Metal { color },
                 Table::Glass { ior, color } => Material::Glass { ior, color },
+                Table::Texture {
+                    path,
+                    size,
+                    center,
+                    repeat,
+                    border,
+                    color,
+                    emissive,
+                } => Material::Texture {
+                    path,
+                    size,
+                    center,
+                    repeat,
+                    border,
+                    color,
+                    emissive,
+                },
+                Table::Dots {
+                    diameter,
+                    density,
+                    seed,
+                    color,
+                    background,
+                    center,
+                    emissive,
+                } => Material::Dots {
+                    diameter,
+                    density,
+                    seed,
+                    color,
+                    background,
+                    center,
+                    emissive,
+                },
             }
         }
     }
@@ -693,9 +811,24 @@ mod material_serde {
                     ior: glass_ior(),
                     color: white(),
                 },
+                "dots" => Table::Dots {
+                    diameter: dot_diameter(),
+                    density: dot_density(),
+                    seed: dot_seed(),
+                    color: white(),
+                    background: [0.0; 3],
+                    center: None,
+                    emissive: false,
+                },
+                "texture" => {
+                    return Err(E::custom(
+                        "material `texture` needs a table with its image: \
+                         { texture = { path = \"plate.png\", size = [w, h] } }",
+                    ));
+                }
                 other => {
                     return Err(E::custom(format!(
-                        "unknown material `{other}`, expected one of diffuse, checker, mirror, metal, glass"
+                        "unknown material `{other}`, expected one of diffuse, checker, mirror, metal, glass, texture, dots"
                     )));
                 }
             };

@@ -210,15 +210,7 @@ fn optics(o: &crate::OpticsSpec, has_medium: bool) -> Check {
     non_negative("optics.fringes.spacing_px", o.fringes.spacing_px)?;
     finite("optics.fringes.angle_deg", o.fringes.angle_deg)?;
     size("optics.dots.diameter", o.dots.diameter)?;
-    if !(o.dots.density > 0.0 && o.dots.density <= 1.0) {
-        return fail(
-            "optics.dots.density",
-            format!(
-                "must be in (0, 1] (the fraction of the plane covered), got {}",
-                o.dots.density
-            ),
-        );
-    }
+    dot_density("optics.dots.density", o.dots.density)?;
     finite("optics.screen.distance", o.screen.distance)?;
     if let Some([w, h]) = o.screen.size {
         size("optics.screen.size", w)?;
@@ -280,7 +272,35 @@ fn object(key: &str, o: &Object) -> Check {
         }
         Shape::Box { min, max } => min_max(&format!("{key}.shape.box"), *min, *max)?,
     }
-    material(&format!("{key}.material"), &o.material)
+    material(&format!("{key}.material"), &o.material)?;
+    surface_placement(key, o)
+}
+
+/// Where an image or dot pattern lies: on planes and boxes only; an image on a plane
+/// needs its size, on a box it spans each face.
+fn surface_placement(key: &str, o: &Object) -> Check {
+    let (name, size, center) = match &o.material {
+        Material::Texture { size, center, .. } => ("texture", *size, *center),
+        Material::Dots { center, .. } => ("dots", None, *center),
+        _ => return Ok(()),
+    };
+    let m = format!("{key}.material.{name}");
+    match o.shape {
+        Shape::Sphere { .. } => fail(
+            m,
+            format!("`{name}` maps onto planes and boxes; this object is a sphere"),
+        ),
+        Shape::Plane { .. } if name == "texture" && size.is_none() => fail(
+            format!("{m}.size"),
+            "an image on a plane needs its size in world units: size = [width, height]",
+        ),
+        Shape::Box { .. } if size.is_some() || center.is_some() => fail(
+            m,
+            "on a box the image or pattern is placed on each face; `size` and `center` are \
+             for planes",
+        ),
+        _ => Ok(()),
+    }
 }
 
 fn material(key: &str, m: &Material) -> Check {
@@ -301,6 +321,54 @@ fn material(key: &str, m: &Material) -> Check {
             positive(&format!("{key}.glass.ior"), *ior)?;
             colour(&format!("{key}.glass.color"), *color)
         }
+        Material::Texture {
+            path,
+            size: image_size,
+            center,
+            border,
+            color,
+            ..
+        } => {
+            let k = |p: &str| format!("{key}.texture.{p}");
+            non_empty(&k("path"), path)?;
+            if let Some([w, h]) = image_size {
+                size(&k("size"), *w)?;
+                size(&k("size"), *h)?;
+            }
+            if let Some(c) = center {
+                finite3(&k("center"), *c)?;
+            }
+            colour(&k("border"), *border)?;
+            colour(&k("color"), *color)
+        }
+        Material::Dots {
+            diameter,
+            density,
+            color,
+            background,
+            center,
+            ..
+        } => {
+            let k = |p: &str| format!("{key}.dots.{p}");
+            size(&k("diameter"), *diameter)?;
+            dot_density(&k("density"), *density)?;
+            if let Some(c) = center {
+                finite3(&k("center"), *c)?;
+            }
+            colour(&k("color"), *color)?;
+            colour(&k("background"), *background)
+        }
+    }
+}
+
+fn dot_density(key: &str, density: f64) -> Check {
+    if density > 0.0 && density <= 1.0 {
+        Ok(())
+    } else {
+        fail(
+            key,
+            format!("must be in (0, 1] (the fraction of the surface covered), got {density}"),
+        )
     }
 }
 
@@ -472,6 +540,10 @@ fn sky(s: &Sky) -> Check {
         Sky::Map { path, intensity } => {
             non_empty("sky.map.path", path)?;
             non_negative("sky.map.intensity", *intensity)
+        }
+        Sky::Plate { path, intensity } => {
+            non_empty("sky.plate.path", path)?;
+            non_negative("sky.plate.intensity", *intensity)
         }
     }
 }

@@ -19,7 +19,7 @@ use rng::Rng;
 pub use grin_render::scene::{
     MAX_PIXELS, MIN_JITTER_FRACTION, RenderError, RenderScene, SceneMedium,
 };
-pub use grin_render::{camera, materials, optics, primitives, rng, sky};
+pub use grin_render::{camera, materials, optics, primitives, rng, sky, surface};
 
 /// All samples of pixel (px, py): mean radiance; AOVs of sample 0, steps and field
 /// evaluations averaged over the samples.

@@ -11,6 +11,7 @@ use super::materials::{
 use super::medium::{CpuMedium, MarchEnd, MarchStats, SURFACE_EPS};
 use super::primitives::{Hit, intersect_scene};
 use super::rng::Rng;
+use super::surface::{dot_intensity, surface_coords, texture_uv};
 use super::{RenderScene, SceneMedium};
 use crate::trace::RayStatus;
 
@@ -291,6 +292,46 @@ impl CpuScene<'_> {
                 };
                 Scatter::Emit(self.shade_diffuse(hit, DVec3::from_array(albedo)))
             }
+            Material::Texture {
+                repeat,
+                border,
+                color,
+                emissive,
+                size,
+                center,
+                ..
+            } => {
+                let (coords, face) = surface_coords(
+                    &self.objects[hit.object],
+                    hit.point,
+                    hit.normal,
+                    center.map(DVec3::from_array),
+                );
+                let image = &self.images[self.object_images[hit.object].unwrap_or_default()];
+                let texel = image
+                    .at_uv(texture_uv(coords, size, face), repeat)
+                    .unwrap_or(DVec3::from_array(border));
+                self.surface_colour(hit, texel * DVec3::from_array(color), emissive)
+            }
+            Material::Dots {
+                diameter,
+                density,
+                seed,
+                color,
+                background,
+                center,
+                emissive,
+            } => {
+                let (coords, _) = surface_coords(
+                    &self.objects[hit.object],
+                    hit.point,
+                    hit.normal,
+                    center.map(DVec3::from_array),
+                );
+                let a = dot_intensity(diameter, density, seed, coords);
+                let albedo = DVec3::from_array(background).lerp(DVec3::from_array(color), a);
+                self.surface_colour(hit, albedo, emissive)
+            }
             Material::Mirror { color } => Scatter::Continue {
                 dir: reflect_dir(d, hit.normal),
                 weight: DVec3::from_array(color),
@@ -324,11 +365,21 @@ impl CpuScene<'_> {
         }
     }
 
+    /// An image or pattern's colour: shown as it is when `emissive`, else lit as a
+    /// diffuse albedo.
+    fn surface_colour(&self, hit: &Hit, rgb: DVec3, emissive: bool) -> Scatter {
+        Scatter::Emit(if emissive {
+            rgb
+        } else {
+            self.shade_diffuse(hit, rgb)
+        })
+    }
+
     /// Lambertian surface: direct light from every light (with shadow rays) plus the
     /// ambient sky term.
     fn shade_diffuse(&self, hit: &Hit, albedo: DVec3) -> DVec3 {
         let mut irradiance =
-            self.sky.sky_radiance(hit.normal) * AMBIENT_SKY_WEIGHT * std::f64::consts::PI;
+            self.sky.ambient_radiance(hit.normal) * AMBIENT_SKY_WEIGHT * std::f64::consts::PI;
         let p = hit.point + hit.normal * SURFACE_EPS;
         for light in &self.lights {
             let (to_light, dist, intensity) = match *light {
