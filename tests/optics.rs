@@ -59,6 +59,11 @@ fn camera() -> PinholeCamera {
         look_at: [0.05, 0.03, 0.0],
         up: [0.0, 1.0, 0.0],
         fov_y_deg: 9.0,
+        focal_length_mm: None,
+        sensor_height_mm: None,
+        pixel_pitch_um: None,
+        f_number: None,
+        focus_distance: None,
     };
     PinholeCamera::new(&c, WIDTH, HEIGHT).expect("camera")
 }
@@ -345,6 +350,11 @@ plane = {{ point = [0.0, 0.0, 3.0], normal = [0.0, 0.2, -1.0] }}
         look_at: [0.0, 0.0, 0.0],
         up: [0.0, 1.0, 0.0],
         fov_y_deg: 25.0,
+        focal_length_mm: None,
+        sensor_height_mm: None,
+        pixel_pitch_um: None,
+        f_number: None,
+        focus_distance: None,
     };
     let cam = PinholeCamera::new(&c, WIDTH, HEIGHT).expect("camera");
     let plane = Plane::new(

@@ -97,14 +97,14 @@ fn angle_between_deg(a: vec3<f32>, b: vec3<f32>) -> f32 {
     return atan2(length(cross(a, b)), dot(a, b)) * (180.0 / PI);
 }
 
-// One pixel sample: the camera ray `d` through the medium and the objects, up to
+// One pixel sample: the camera ray from `start` along `d` through the medium and the objects, up to
 // max_depth bounces. `jitter` scales the first step of the camera ray's passage.
-fn trace_path(d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample {
-    var origin = params.cam_origin;
+fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample {
+    var origin = start;
     var dir = d;
     var throughput = vec3<f32>(1.0);
     var radiance = vec3<f32>(0.0);
-    var aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED, params.cam_origin, 0.0);
+    var aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED, start, 0.0);
     var primary = true;
     var inside = has_medium() && bounds_signed_distance(origin) < 0.0;
     var bounces = 0u;

@@ -48,13 +48,6 @@ fn texture_colour(obj: GpuObject, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return texel * obj.color_a;
 }
 
-// The PCG output permutation (Jarzynski and Olano 2020).
-fn hash_u32(x: u32) -> u32 {
-    let state = x * 747796405u + 2891336453u;
-    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
-
 // One Gaussian dot (1/e^2 diameter) per square cell of side
 // diameter * sqrt(pi / (4 density)), placed by the seed; clamped to 1.
 fn dot_intensity(diameter: f32, density: f32, seed: u32, uv: vec2<f32>) -> f32 {
@@ -66,9 +59,9 @@ fn dot_intensity(diameter: f32, density: f32, seed: u32, uv: vec2<f32>) -> f32 {
         for (var dj = -1; dj <= 1; dj++) {
             let i = ci + di;
             let j = cj + dj;
-            let h = hash_u32(seed ^ hash_u32(bitcast<u32>(i) ^ hash_u32(bitcast<u32>(j))));
+            let h = pcg_hash(seed ^ pcg_hash(bitcast<u32>(i) ^ pcg_hash(bitcast<u32>(j))));
             let ru = f32(h >> 8u) / 16777216.0;
-            let rv = f32(hash_u32(h) >> 8u) / 16777216.0;
+            let rv = f32(pcg_hash(h) >> 8u) / 16777216.0;
             let centre = vec2<f32>((f32(i) + ru) * cell, (f32(j) + rv) * cell);
             let r = uv - centre;
             sum += exp(-8.0 * dot(r, r) / (diameter * diameter));

@@ -49,9 +49,9 @@ struct FrameParams {
     macro_dims: vec3<u32>,       // macro-cell counts
     env_height: u32,
     sky_horizon: vec3<f32>,
-    _pad5: f32,
+    lens_radius: f32,            // thin lens: aperture radius (0: a pinhole)
     sky_zenith: vec3<f32>,
-    _pad6: f32,
+    focus_distance: f32,         // thin lens: distance in focus along cam_forward
     sky_ground: vec3<f32>,
     _pad7: f32,
     plate_forward: vec3<f32>,    // the background plate's camera (the scene's)

@@ -163,9 +163,10 @@ pub struct FrameParams {
     pub env_height: u32,
     /// Gradient sky colours.
     pub sky_horizon: [f32; 3],
-    pub _pad5: f32,
+    /// Thin lens: aperture radius (0: a pinhole) and the distance in focus.
+    pub lens_radius: f32,
     pub sky_zenith: [f32; 3],
-    pub _pad6: f32,
+    pub focus_distance: f32,
     pub sky_ground: [f32; 3],
     pub _pad7: f32,
     /// The background plate's camera (the scene's, fixed when a viewer moves its own):
@@ -360,9 +361,9 @@ mod tests {
             macro_dims,
             env_height,
             sky_horizon,
-            _pad5,
+            lens_radius,
             sky_zenith,
-            _pad6,
+            focus_distance,
             sky_ground,
             _pad7,
             plate_forward,

@@ -26,6 +26,8 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     params.aspect = (f64::from(cam.width) / f64::from(cam.height)) as f32;
     params.cam_right = f3(cam.right);
     params.cam_up = f3(cam.up);
+    params.lens_radius = cam.lens_radius as f32;
+    params.focus_distance = cam.focus_distance as f32;
     params.width = s.width;
     params.height = s.height;
     params.spp = s.spp;

@@ -1,4 +1,4 @@
-//! The pinhole camera: pixel -> primary ray in world space.
+//! The camera: pixel -> primary ray in world space, through a pinhole or a thin lens.
 
 use glam::DVec3;
 
@@ -12,6 +12,10 @@ pub struct PinholeCamera {
     pub tan_half_fov_y: f64,
     pub width: u32,
     pub height: u32,
+    /// Thin lens: aperture radius (0: a pinhole) and the distance in focus along
+    /// `forward`.
+    pub lens_radius: f64,
+    pub focus_distance: f64,
 }
 
 impl PinholeCamera {
@@ -22,7 +26,10 @@ impl PinholeCamera {
         let forward = (DVec3::from_array(cam.look_at) - origin).try_normalize()?;
         let right = forward.cross(DVec3::from_array(cam.up)).try_normalize()?;
         let up = right.cross(forward);
+        let (aperture, focus) = cam.aperture().unwrap_or((0.0, 1.0));
         Some(PinholeCamera {
+            lens_radius: 0.5 * aperture,
+            focus_distance: focus,
             origin,
             forward,
             right,
@@ -43,6 +50,18 @@ impl PinholeCamera {
         let v = (1.0 - 2.0 * (f64::from(py) + sy) / f64::from(self.height)) * self.tan_half_fov_y;
         (self.forward + self.right * u + self.up * v).normalize()
     }
+
+    /// The thin-lens ray (origin, unit direction) of the pinhole ray `d` for the lens
+    /// sample (`u1`, `u2`) in [0, 1)^2: from a point uniform on the aperture disc
+    /// (radius R sqrt(u1), angle 2 pi u2) through where `d` meets the plane in focus.
+    /// GPU twin: `lens_ray` in camera.wgsl.
+    pub fn lens_ray(&self, d: DVec3, u1: f64, u2: f64) -> (DVec3, DVec3) {
+        let r = self.lens_radius * u1.sqrt();
+        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+        let o = self.origin + self.right * (r * c) + self.up * (r * s);
+        let focus = self.origin + d * (self.focus_distance / d.dot(self.forward));
+        (o, (focus - o).normalize())
+    }
 }
 
 #[cfg(test)]
@@ -55,6 +74,11 @@ mod tests {
             look_at: [0.0, 1.0, 0.0],
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 90.0,
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
         };
         PinholeCamera::new(&c, 200, 100).expect("valid camera")
     }
@@ -79,6 +103,11 @@ mod tests {
             look_at: [0.0, 2.0, 0.0],
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 40.0,
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
         };
         assert!(PinholeCamera::new(&c, 10, 10).is_none());
     }

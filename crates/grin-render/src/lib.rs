@@ -11,6 +11,7 @@ pub mod optics;
 pub mod primitives;
 pub mod rng;
 pub mod scene;
+pub mod sensor;
 pub mod settings;
 pub mod sky;
 pub mod surface;

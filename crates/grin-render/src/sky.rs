@@ -176,6 +176,11 @@ mod tests {
             look_at: [0.0, 0.0, -1.0],
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 40.0,
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
         };
         let cam = PinholeCamera::new(&c, 4, 4).expect("camera");
         let sky =

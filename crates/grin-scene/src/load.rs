@@ -35,6 +35,10 @@ pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
             message: one_line(e.message()),
         }
     })?;
+    let fov_given = table
+        .get("camera")
+        .and_then(|c| c.get("fov_y_deg"))
+        .is_some();
     let mut scene: Scene = crate::de::from_table(table).map_err(|e| {
         let key = e.key();
         let doc = Document::parse(text);
@@ -57,23 +61,40 @@ pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
             message: one_line(&e.to_string()),
         }
     })?;
-    validate(&scene).map_err(|p| {
-        let offset = Document::parse(text).span_of(&p.key).map_or(0, |s| s.start);
-        let (line, column) = line_column(text, offset);
-        SceneError::Invalid {
-            path: path.to_owned(),
-            line,
-            column,
-            key: p.key,
-            message: p.message,
-        }
-    })?;
+    let lens_conflict =
+        (fov_given && scene.camera.focal_length_mm.is_some()).then(|| crate::validate::Problem {
+            key: "camera.focal_length_mm".into(),
+            message: "give fov_y_deg or focal_length_mm with the sensor, not both".into(),
+        });
+    lens_conflict
+        .map_or_else(|| validate(&scene), Err)
+        .map_err(|p| {
+            let offset = Document::parse(text).span_of(&p.key).map_or(0, |s| s.start);
+            let (line, column) = line_column(text, offset);
+            SceneError::Invalid {
+                path: path.to_owned(),
+                line,
+                column,
+                key: p.key,
+                message: p.message,
+            }
+        })?;
     normalize(&mut scene);
     Ok(scene)
 }
 
-/// Unit plane normals (validated non-zero above).
+/// Unit plane normals (validated non-zero above); a lens's field of view.
 fn normalize(scene: &mut Scene) {
+    let c = &mut scene.camera;
+    if let Some(f) = c.focal_length_mm {
+        let sensor = c
+            .sensor_height_mm
+            .or(c
+                .pixel_pitch_um
+                .map(|p| p * 1e-3 * f64::from(scene.render.height)))
+            .unwrap_or(24.0);
+        c.fov_y_deg = 2.0 * (0.5 * sensor / f).atan().to_degrees();
+    }
     for o in &mut scene.objects {
         if let Shape::Plane { normal, .. } = &mut o.shape {
             let len = normal.iter().map(|c| c * c).sum::<f64>().sqrt();

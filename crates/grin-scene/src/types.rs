@@ -30,6 +30,9 @@ pub struct Scene {
     /// An image-space output instead of the beauty render (`grin render` writes it).
     #[serde(default)]
     pub optics: Option<crate::optics::OpticsSpec>,
+    /// Sensor noise and bit depth applied to the written images.
+    #[serde(default)]
+    pub sensor: Option<Sensor>,
 }
 
 /// `[animation]`: `frames = [first, last]` (inclusive) at `fps` frames per second.
@@ -45,7 +48,10 @@ fn default_fps() -> f64 {
     24.0
 }
 
-/// Pinhole camera.
+/// The camera: a pinhole with a vertical field of view, or a lens described as a
+/// measurement would (focal length and sensor height in mm, or the pixel pitch; loading
+/// turns them into `fov_y_deg`), with a thin-lens aperture (`f_number`: defocus blur
+/// away from `focus_distance`, world units taken as metres for the aperture's size).
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
@@ -55,6 +61,73 @@ pub struct Camera {
     pub up: [f64; 3],
     #[serde(default = "default_fov")]
     pub fov_y_deg: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focal_length_mm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_height_mm: Option<f64>,
+    /// With `focal_length_mm`: the sensor height is the pitch times `[render] height`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_pitch_um: Option<f64>,
+    /// Aperture diameter = focal length / f_number (needs `focal_length_mm`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub f_number: Option<f64>,
+    /// Distance in focus along the view (default: from `position` to `look_at`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_distance: Option<f64>,
+}
+
+impl Camera {
+    /// A pinhole camera.
+    pub fn pinhole(position: [f64; 3], look_at: [f64; 3], up: [f64; 3], fov_y_deg: f64) -> Self {
+        Camera {
+            position,
+            look_at,
+            up,
+            fov_y_deg,
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
+        }
+    }
+
+    /// The thin lens's aperture diameter in world units (metres) and the distance in
+    /// focus; `None` for a pinhole.
+    pub fn aperture(&self) -> Option<(f64, f64)> {
+        let (f, n) = (self.focal_length_mm?, self.f_number?);
+        let focus = self.focus_distance.unwrap_or_else(|| {
+            (0..3)
+                .map(|i| (self.look_at[i] - self.position[i]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        });
+        Some((f / 1000.0 / n, focus))
+    }
+}
+
+/// `[sensor]`: what a camera's sensor does to the linear image (values in [0, 1] of its
+/// full well): photon shot noise (Poisson, `full_well` electrons at 1), Gaussian read
+/// noise (`read_noise` electrons rms), saturation at 1, and quantisation to `bits`.
+/// 0 turns each off. Applied to the beauty image and the `[optics]` intensity images.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sensor {
+    pub full_well: f64,
+    pub read_noise: f64,
+    pub bits: u32,
+    pub seed: u64,
+}
+
+impl Default for Sensor {
+    fn default() -> Self {
+        Sensor {
+            full_well: 0.0,
+            read_noise: 0.0,
+            bits: 0,
+            seed: 1,
+        }
+    }
 }
 
 fn default_up() -> [f64; 3] {

@@ -153,6 +153,9 @@ pub(crate) fn validate(scene: &Scene) -> Check {
         light(&format!("light[{i}]"), l)?;
     }
     sky(&scene.sky)?;
+    if let Some(s) = &scene.sensor {
+        sensor(s)?;
+    }
     if let Some(a) = &scene.animation {
         positive("animation.fps", a.fps)?;
         let [first, last] = a.frames;
@@ -255,6 +258,65 @@ fn camera(c: &Camera) -> Check {
         return fail(
             "camera.fov_y_deg",
             format!("must be in (0, 180) degrees, got {}", c.fov_y_deg),
+        );
+    }
+    lens(c)
+}
+
+fn lens(c: &Camera) -> Check {
+    let given = |v: Option<f64>, key: &str| v.map_or(Ok(()), |v| size(key, v));
+    given(c.focal_length_mm, "camera.focal_length_mm")?;
+    given(c.sensor_height_mm, "camera.sensor_height_mm")?;
+    given(c.pixel_pitch_um, "camera.pixel_pitch_um")?;
+    given(c.f_number, "camera.f_number")?;
+    given(c.focus_distance, "camera.focus_distance")?;
+    match (c.focal_length_mm, c.sensor_height_mm, c.pixel_pitch_um) {
+        (Some(_), None, None) => fail(
+            "camera.focal_length_mm",
+            "needs the sensor: sensor_height_mm, or pixel_pitch_um (times [render] height)",
+        ),
+        (Some(_), Some(_), Some(_)) => fail(
+            "camera.pixel_pitch_um",
+            "give sensor_height_mm or pixel_pitch_um, not both",
+        ),
+        (None, Some(_), _) | (None, _, Some(_)) => fail(
+            if c.sensor_height_mm.is_some() {
+                "camera.sensor_height_mm"
+            } else {
+                "camera.pixel_pitch_um"
+            },
+            "describes the sensor for focal_length_mm, which is missing",
+        ),
+        _ => Ok(()),
+    }?;
+    if c.f_number.is_some() && c.focal_length_mm.is_none() {
+        return fail(
+            "camera.f_number",
+            "needs focal_length_mm (the aperture is focal length / f-number)",
+        );
+    }
+    if c.focus_distance.is_some() && c.f_number.is_none() {
+        return fail(
+            "camera.focus_distance",
+            "only matters with an aperture: set f_number",
+        );
+    }
+    Ok(())
+}
+
+fn sensor(s: &crate::Sensor) -> Check {
+    non_negative("sensor.full_well", s.full_well)?;
+    non_negative("sensor.read_noise", s.read_noise)?;
+    if s.read_noise > 0.0 && s.full_well == 0.0 {
+        return fail(
+            "sensor.read_noise",
+            "is in electrons: set full_well (electrons at a value of 1) too",
+        );
+    }
+    if s.bits > 24 {
+        return fail(
+            "sensor.bits",
+            format!("must be at most 24 (0: no quantisation), got {}", s.bits),
         );
     }
     Ok(())

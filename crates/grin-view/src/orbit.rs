@@ -72,6 +72,11 @@ impl OrbitCamera {
             look_at: self.target.to_array(),
             up: self.up.to_array(),
             fov_y_deg: self.fov_y_deg,
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
         }
     }
 
@@ -119,6 +124,11 @@ mod tests {
             look_at: [0.1, 0.4, 0.5],
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 35.0,
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
         }
     }
 

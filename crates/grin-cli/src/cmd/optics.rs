@@ -13,6 +13,7 @@ use grin_trace::render::RenderScene;
 use grin_trace::render::optics::{
     Displacement, Plane, bos_pair, deflection_angles, interferogram, schlieren,
 };
+use grin_trace::render::sensor::record_all;
 use serde_json::json;
 
 /// The mode's name as the scene writes it.
@@ -58,6 +59,7 @@ fn sibling(png: &Path, suffix: &str) -> std::path::PathBuf {
 /// summary of what was written.
 pub fn stage_from_frame(
     spec: &OpticsSpec,
+    sensor: Option<&grin_scene::Sensor>,
     rs: &RenderScene,
     frame: &Frame,
     exr: &Path,
@@ -100,7 +102,12 @@ pub fn stage_from_frame(
                 let pl = plane
                     .as_ref()
                     .context("[optics] BOS needs a plane for its dots")?;
-                let (reference, distorted) = bos_pair(frame, cam, pl, &spec.dots);
+                let (mut reference, mut distorted) = bos_pair(frame, cam, pl, &spec.dots);
+                if let Some(sensor) = sensor {
+                    // Two exposures: independent noise.
+                    record_all(sensor, &mut reference, 1);
+                    record_all(sensor, &mut distorted, 2);
+                }
                 if let Some(png) = png {
                     let r = sibling(png, "reference");
                     staged.push(stage_rgb8_png(
@@ -180,7 +187,10 @@ pub fn stage_from_frame(
             staged.insert(0, stage_channels_exr(exr, size, named)?);
         }
         OpticsMode::Interferogram => {
-            let (phase, intensity) = interferogram(frame, spec.wavelength_nm, &spec.fringes);
+            let (phase, mut intensity) = interferogram(frame, spec.wavelength_nm, &spec.fringes);
+            if let Some(sensor) = sensor {
+                record_all(sensor, &mut intensity, 1);
+            }
             if let Some(png) = png {
                 staged.push(stage_rgb8_png(
                     png,

@@ -400,6 +400,29 @@ fn render_one(
     };
     let setup_seconds = setup_start.elapsed().as_secs_f64() - seconds;
     bar.finish_and_clear();
+    let mut frame = frame;
+    if let Some(sensor) = &scene.sensor {
+        match scene.optics.as_ref().map(|o| o.mode) {
+            None => grin_trace::render::sensor::record_frame(sensor, &mut frame),
+            Some(grin_scene::OpticsMode::Bos | grin_scene::OpticsMode::Interferogram) => {}
+            Some(mode) => {
+                let w = format!(
+                    "[sensor] records the beauty, BOS and interferogram images; the {} \
+                     output is written without sensor noise",
+                    crate::cmd::optics::mode_name(mode)
+                );
+                eprintln!("grin: warning: {w}");
+                warnings.push(w);
+            }
+        }
+    }
+    if scene.optics.is_some() && scene.camera.f_number.is_some() {
+        let w = "[optics] outputs trace one pinhole ray per pixel centre: camera.f_number \
+                 (defocus) is not applied to them"
+            .to_owned();
+        eprintln!("grin: warning: {w}");
+        warnings.push(w);
+    }
 
     // The EXR, its PNG preview and the --compare difference image are staged, then put
     // in place together: a failure or a signal leaves the previous set as it was.
@@ -407,8 +430,14 @@ fn render_one(
     let mut optics = None;
     let mut staged = match &scene.optics {
         Some(spec) => {
-            let (staged, summary) =
-                crate::cmd::optics::stage_from_frame(spec, &rs, &frame, output, png.as_deref())?;
+            let (staged, summary) = crate::cmd::optics::stage_from_frame(
+                spec,
+                scene.sensor.as_ref(),
+                &rs,
+                &frame,
+                output,
+                png.as_deref(),
+            )?;
             optics = Some(summary);
             staged
         }

@@ -19,7 +19,7 @@ use rng::Rng;
 pub use grin_render::scene::{
     MAX_PIXELS, MIN_JITTER_FRACTION, RenderError, RenderScene, SceneMedium,
 };
-pub use grin_render::{camera, materials, optics, primitives, rng, sky, surface};
+pub use grin_render::{camera, materials, optics, primitives, rng, sensor, sky, surface};
 
 /// All samples of pixel (px, py): mean radiance; AOVs of sample 0, steps and field
 /// evaluations averaged over the samples.
@@ -40,7 +40,15 @@ pub fn render_pixel(scene: &RenderScene, px: u32, py: u32) -> PixelOut {
             1.0
         };
         let d = scene.camera.primary_ray(px, py, sx, sy);
-        let path = shade::CpuScene(scene).trace_path(d, f64::from(jitter), &mut rng);
+        // A thin lens's aperture point, drawn last (the stream is unchanged without
+        // one), with the sub-pixel position's rule: none for a single-sample image.
+        let (o, d) = if scene.camera.lens_radius > 0.0 && scene.settings.spp != 1 {
+            let (u1, u2) = (rng.next_f32(), rng.next_f32());
+            scene.camera.lens_ray(d, f64::from(u1), f64::from(u2))
+        } else {
+            (scene.camera.origin, d)
+        };
+        let path = shade::CpuScene(scene).trace_path(o, d, f64::from(jitter), &mut rng);
         rgb += path.rgb;
         steps += u64::from(path.aov.steps);
         evals += path.aov.evals;

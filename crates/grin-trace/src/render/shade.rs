@@ -125,18 +125,19 @@ impl CpuScene<'_> {
         }
     }
 
-    /// One pixel sample: follow the camera ray `d` from the camera through the medium
-    /// and the objects, up to max_depth bounces. `jitter` in (0, 1] scales the first step
-    /// of the camera ray's passage through the medium (1: none).
-    pub fn trace_path(&self, d: DVec3, jitter: f64, rng: &mut Rng) -> PathSample {
-        let mut origin = self.camera.origin;
+    /// One pixel sample: follow the camera ray from `start` along `d` (the camera's
+    /// origin, or a point on its lens) through the medium and the objects, up to
+    /// max_depth bounces. `jitter` in (0, 1] scales the first step of the camera ray's
+    /// passage through the medium (1: none).
+    pub fn trace_path(&self, start: DVec3, d: DVec3, jitter: f64, rng: &mut Rng) -> PathSample {
+        let mut origin = start;
         let mut dir = d;
         let mut throughput = DVec3::ONE;
         let mut radiance = DVec3::ZERO;
         let mut aov = PrimaryAov {
             deflection_deg: 0.0,
             exit_dir: d,
-            exit_pos: self.camera.origin,
+            exit_pos: start,
             opd: 0.0,
             opd_plane: 0.0,
             steps: 0,

@@ -225,6 +225,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             look_at: centre.to_array(),
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 2.0 * tan_half_y.atan().to_degrees(),
+            focal_length_mm: None,
+            sensor_height_mm: None,
+            pixel_pitch_um: None,
+            f_number: None,
+            focus_distance: None,
         };
         rs.camera = grin_trace::render::camera::PinholeCamera::new(&cam, size.0, size.1)
             .context("close-up camera")?;
