@@ -2,12 +2,10 @@
 //! with `grin trace`: Luneburg focus through a baked grid, macro-cell flights, round trips,
 //! and clear errors with no output file.
 
+mod common;
+use common::grin;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
+use std::process::Output;
 
 struct Dir {
     dir: tempfile::TempDir,

@@ -4,14 +4,12 @@
 //! both backends; `[sensor]` noise has the variance of its shot and read noise and its
 //! bit depth; contradictory settings are errors naming the key.
 
+mod common;
+use common::{assert_ok as ok, gpu_available, grin};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use grin_trace::image::Frame;
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
 
 fn render(scene: &Path, out: &Path, backend: &str) -> Output {
     grin()
@@ -22,19 +20,6 @@ fn render(scene: &Path, out: &Path, backend: &str) -> Output {
         .args(["--backend", backend])
         .output()
         .expect("grin runs")
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "stdout {}\nstderr {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn gpu_available() -> bool {
-    grin_gpu::GpuContext::new_headless().is_ok()
 }
 
 /// A checker wall at z = `wall_z` (squares of 10 m: one vertical edge at x = 0 in view),

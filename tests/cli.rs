@@ -1,10 +1,7 @@
 //! End-to-end tests of the `grin` binary.
 
-use std::process::Command;
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
+mod common;
+use common::grin;
 
 #[test]
 fn help_lists_subcommands() {

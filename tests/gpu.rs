@@ -3,12 +3,10 @@
 //! `grin bench speed`. A missing adapter fails these tests unless GRIN_ALLOW_NO_GPU=1,
 //! which turns them into a loud SKIPPED line.
 
+mod common;
+use common::grin;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
+use std::process::Output;
 
 fn scenes() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes")

@@ -4,7 +4,8 @@
 //! lens's displacement against `grin trace` of the same rays, the shadowgraph's energy and
 //! the lens's caustic, and a BOS round trip through a cross-correlation in numpy.
 
-use std::collections::HashMap;
+mod common;
+use common::{assert_ok as ok, exr_channels as channels, gpu_available, grin};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -12,40 +13,8 @@ use glam::DVec3;
 use grin_trace::render::camera::PinholeCamera;
 use grin_trace::render::optics::{Plane, camera_angles, project_dir};
 
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
-
 fn run(args: &[&str]) -> Output {
     grin().args(args).output().expect("run grin")
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "stdout {}\nstderr {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-/// Every channel of an EXR by name, and its width.
-fn channels(path: &Path) -> (usize, HashMap<String, Vec<f64>>) {
-    use exr::prelude::*;
-    let image = read_all_flat_layers_from_file(path).expect("read exr");
-    let layer = &image.layer_data[0];
-    let map = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            (
-                c.name.to_string(),
-                c.sample_data.values_as_f32().map(f64::from).collect(),
-            )
-        })
-        .collect();
-    (layer.size.width(), map)
 }
 
 const A_WEAK: f64 = 1e-4;
@@ -110,10 +79,6 @@ fn line_integrals(cam: &PinholeCamera, i: u32, j: u32, a: f64) -> (DVec3, DVec3,
     let b2 = near.length_squared();
     let g = (-b2 / (S * S)).exp() * S * std::f64::consts::PI.sqrt();
     (near * (2.0 * a / (S * S)) * g, near, -a * g)
-}
-
-fn gpu_available() -> bool {
-    grin_gpu::GpuContext::new_headless().is_ok()
 }
 
 /// Displacement on a plane at z = 4 and the schlieren deflection of a weak plume match
@@ -617,4 +582,98 @@ print(f"{len(errs)} {moved} {np.sqrt((errs ** 2).mean()):.4f} {errs.max():.4f}")
     );
     assert!(windows > 100.0 && moved > 20.0, "{text}");
     assert!(rms < 0.15, "{text}");
+}
+
+/// BOS images through a lens: with `f_number` (and spp > 1) the pair is rendered as
+/// beauty images of the dots plane through the camera's aperture. Focused on the dots,
+/// the reference is the point-sampled one, anti-aliased (correlation > 0.9); focused at
+/// a quarter of the distance, the dots blur (the image's contrast drops by over a third), and the
+/// plume still moves them (distorted differs from reference).
+#[test]
+fn bos_images_go_through_the_lens() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = |name: &str, lens: &str, spp: u32| {
+        let p = d.join(name);
+        std::fs::write(
+            &p,
+            format!(
+                r#"
+[camera]
+position = [0.0, 0.0, -6.0]
+look_at = [0.0, 0.0, 0.0]
+{lens}
+[medium]
+bounds = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}
+field = {{ kind = "plume", plumes = [ {{ a = 2e-3, center = [0.0, 0.0, 0.0], s = 0.3 }} ] }}
+[render]
+width = 64
+height = 64
+spp = {spp}
+integrator = "rk4"
+step = {{ fixed = 0.02 }}
+[optics]
+mode = "bos"
+plane = {{ point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }}
+dots = {{ diameter = 0.08, density = 0.4, seed = 3 }}
+"#
+            ),
+        )
+        .expect("scene");
+        let out = d.join(format!("{name}.exr"));
+        let o = run(&[
+            "render",
+            "--backend",
+            "cpu",
+            "--json",
+            "-o",
+            out.to_str().expect("utf8"),
+            p.to_str().expect("utf8"),
+        ]);
+        ok(&o);
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+        (channels(&out).1, summary)
+    };
+    // 12 degrees (2 atan(10.5 / 100)): a 21 mm sensor behind 100 mm; at f/1.4 a 71 mm aperture, which
+    // focused at 3 m blurs the dots 12 m away by a 214 mm disc (2.7 dot diameters).
+    let pinhole = format!("fov_y_deg = {}", 2.0 * 0.105f64.atan().to_degrees());
+    let focused =
+        "focal_length_mm = 100.0\nsensor_height_mm = 21.0\nf_number = 1.4\nfocus_distance = 12.0";
+    let near =
+        "focal_length_mm = 100.0\nsensor_height_mm = 21.0\nf_number = 1.4\nfocus_distance = 3.0";
+    let (p, ps) = scene("pinhole.toml", &pinhole, 1);
+    let (f, fs) = scene("focused.toml", focused, 32);
+    let (n, _) = scene("near.toml", near, 32);
+    assert_eq!(ps["optics"]["images"], "pixel centres", "{ps}");
+    assert_eq!(fs["optics"]["images"], "rendered", "{fs}");
+    let stats = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+        (m, sd)
+    };
+    let corr = |a: &[f64], b: &[f64]| {
+        let ((ma, sa), (mb, sb)) = (stats(a), stats(b));
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - ma) * (y - mb))
+            .sum::<f64>()
+            / (a.len() as f64 * sa * sb)
+    };
+    let c = corr(&p["reference"], &f["reference"]);
+    let (sd_focused, sd_near) = (stats(&f["reference"]).1, stats(&n["reference"]).1);
+    let moved = corr(&f["reference"], &f["distorted"]);
+    eprintln!(
+        "BOS through a lens: in-focus reference vs pinhole correlation {c:.3}; contrast (sd) in focus {sd_focused:.3}, defocused {sd_near:.3}; reference vs distorted correlation {moved:.3}"
+    );
+    assert!(c > 0.9, "{c}");
+    assert!(sd_near < 0.67 * sd_focused, "{sd_near} vs {sd_focused}");
+    assert!(moved < 0.98, "{moved}");
+    // The true displacement stays the pixel-centre rays': the same with and without the lens.
+    let dx = |m: &std::collections::HashMap<String, Vec<f64>>| m["displacement_px.X"].clone();
+    let worst = dx(&p)
+        .iter()
+        .zip(dx(&f))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f64, f64::max);
+    assert!(worst < 1e-9, "{worst}");
 }

@@ -2,6 +2,8 @@
 //! the exact solution says (through the render's AOVs and through `grin trace`), scene
 //! errors before any work, and no broken output when a render is interrupted.
 
+mod common;
+use common::grin;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -9,10 +11,6 @@ use std::time::Duration;
 use glam::DVec3;
 use grin_trace::image::Frame;
 use grin_trace::render::camera::PinholeCamera;
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
 
 fn scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -5,15 +5,13 @@
 //! naming them. Both backends agreeing on textures, dots and plates is tested in
 //! crates/grin-gpu/tests/gpu_vs_cpu.rs.
 
+mod common;
+use common::{assert_ok as ok, exr_channels, gpu_available, grin};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use grin_trace::image::Frame;
 use grin_trace::render::surface::srgb_to_linear;
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
 
 fn render(scene: &Path, out: &Path, backend: &str) -> Output {
     grin()
@@ -24,19 +22,6 @@ fn render(scene: &Path, out: &Path, backend: &str) -> Output {
         .args(["--backend", backend])
         .output()
         .expect("grin runs")
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "stdout {}\nstderr {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn gpu_available() -> bool {
-    grin_gpu::GpuContext::new_headless().is_ok()
 }
 
 /// A plate at infinity, rendered at its own size without a medium, is the plate: each
@@ -173,30 +158,14 @@ step = { fixed = 0.01 }
     .expect("scene");
     ok(&render(&bos, &d.join("bos.exr"), "cpu"));
     ok(&render(&beauty, &d.join("beauty.exr"), "cpu"));
-    let channels = |path: &Path| {
-        use exr::prelude::*;
-        let image = read_all_flat_layers_from_file(path).expect("read exr");
-        let layer = &image.layer_data[0];
-        layer
-            .channel_data
-            .list
-            .iter()
-            .map(|c| {
-                (
-                    c.name.to_string(),
-                    c.sample_data.values_as_f32().collect::<Vec<f32>>(),
-                )
-            })
-            .collect::<std::collections::HashMap<_, _>>()
-    };
-    let b = channels(&d.join("bos.exr"));
-    let r = channels(&d.join("beauty.exr"));
+    let (_, b) = exr_channels(&d.join("bos.exr"));
+    let (_, r) = exr_channels(&d.join("beauty.exr"));
     let (distorted, reference, red) = (&b["distorted"], &b["reference"], &r["R"]);
     let worst = distorted
         .iter()
         .zip(red)
         .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+        .fold(0.0f64, f64::max);
     let changed = distorted
         .iter()
         .zip(reference)

@@ -1,12 +1,10 @@
 //! End-to-end tests of `grin trace`: ray table in, ray table out, through the real
 //! scene loader and field profiles.
 
+mod common;
+use common::grin;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
+use std::process::Output;
 
 const HEADER: &str = "ox,oy,oz,dx,dy,dz,status,px,py,pz,qx,qy,qz,opl,length,steps,evals";
 

@@ -2,6 +2,8 @@
 //! `kind = "vdb"` scene (and its clear refusals of bad input), and a ray traced through a
 //! VDB-sourced field against the analytic field the VDB sampled.
 
+mod common;
+use common::grin;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -10,10 +12,6 @@ use grin_field::vdb::{DEFAULT_MAX_DENSE_BYTES, Mapping, VdbField, VdbFieldParams
 use grin_field::{Bounds, FieldSample, IndexField};
 use grin_scene::{ExitMethod, IntegratorKind, NonFinitePolicy, StepSpec};
 use grin_trace::{RayStatus, TraceSettings, trace_ray};
-
-fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
-}
 
 fn data(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -60,6 +60,7 @@ fn sibling(png: &Path, suffix: &str) -> std::path::PathBuf {
 pub fn stage_from_frame(
     spec: &OpticsSpec,
     sensor: Option<&grin_scene::Sensor>,
+    bos_images: Option<(Vec<f64>, Vec<f64>)>,
     rs: &RenderScene,
     frame: &Frame,
     exr: &Path,
@@ -78,6 +79,7 @@ pub fn stage_from_frame(
     let summary;
     match spec.mode {
         OpticsMode::Displacement | OpticsMode::Bos => {
+            let mut images = None;
             let disp = Displacement::new(frame, cam, plane.as_ref());
             let st = disp.st();
             let mut named: Vec<(&str, Vec<f32>)> = vec![
@@ -102,7 +104,16 @@ pub fn stage_from_frame(
                 let pl = plane
                     .as_ref()
                     .context("[optics] BOS needs a plane for its dots")?;
-                let (mut reference, mut distorted) = bos_pair(frame, cam, pl, &spec.dots);
+                // Rendered through the lens at the scene's spp, or point-sampled from
+                // each pixel centre's ray.
+                let rendered = bos_images.is_some();
+                let (mut reference, mut distorted) =
+                    bos_images.unwrap_or_else(|| bos_pair(frame, cam, pl, &spec.dots));
+                images = Some(if rendered {
+                    "rendered"
+                } else {
+                    "pixel centres"
+                });
                 if let Some(sensor) = sensor {
                     // Two exposures: independent noise.
                     record_all(sensor, &mut reference, 1);
@@ -150,6 +161,7 @@ pub fn stage_from_frame(
             }
             summary = json!({
                 "mode": mode_name(spec.mode),
+                "images": images,
                 "plane": spec.plane.is_some(),
                 "max_displacement_px": max_px,
                 "invalid_pixels": invalid,

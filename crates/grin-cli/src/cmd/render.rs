@@ -182,16 +182,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene.render.spp = spp;
     }
     if let Some(o) = &scene.optics {
-        // Optical outputs follow each pixel's centre ray, once: the AOVs of that ray.
-        if scene.render.spp > 1 {
+        // Optical outputs follow each pixel's centre ray, once: the AOVs of that ray
+        // (render_one sets that up). BOS images are rendered at the scene's spp.
+        if scene.render.spp > 1 && o.mode != grin_scene::OpticsMode::Bos {
             eprintln!(
                 "grin: note: [optics] {} traces one ray through each pixel's centre (spp {} ignored)",
                 crate::cmd::optics::mode_name(o.mode),
                 scene.render.spp
             );
         }
-        scene.render.spp = 1;
-        scene.render.jitter = false;
         if args.compare.is_some() {
             bail!("--compare compares beauty renders; this scene has an [optics] output");
         }
@@ -265,7 +264,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// to a stream.
 fn render_one(
     args: &Args,
-    scene: grin_scene::Scene,
+    mut scene: grin_scene::Scene,
     output: &Path,
     gpu: Option<&grin_gpu::GpuContext>,
 ) -> anyhow::Result<(Summary, bool)> {
@@ -278,8 +277,27 @@ fn render_one(
         .map(|m| grin_field::build_field(m, scene_dir))
         .transpose()
         .with_context(|| format!("{}: [medium]", args.scene.display()))?;
-    let rs = RenderScene::new(&scene, scene_dir, field)
+    // BOS images through the camera's lens or anti-aliased: rendered as beauty images
+    // of the dots on the plane, with and without the medium, at the scene's spp.
+    let bos_scene = bos_image_scene(&scene)?;
+    if scene.optics.is_some() {
+        scene.render.spp = 1;
+        scene.render.jitter = false;
+    }
+    let rs = RenderScene::new(&scene, scene_dir, field.clone())
         .with_context(|| format!("{}", args.scene.display()))?;
+    let bos_scenes = match &bos_scene {
+        Some(s) => {
+            let with = RenderScene::new(s, scene_dir, field.clone())
+                .with_context(|| format!("{}", args.scene.display()))?;
+            let mut bare = s.clone();
+            bare.medium = None;
+            let without = RenderScene::new(&bare, scene_dir, None)
+                .with_context(|| format!("{}", args.scene.display()))?;
+            Some((with, without))
+        }
+        None => None,
+    };
 
     let reference = args
         .compare
@@ -341,62 +359,37 @@ fn render_one(
         return Ok((summary, to_stream));
     }
 
-    let cancel = AtomicBool::new(false);
-    let bar = progress_bar(scene.render.height);
-    let tick = |rows: u32| bar.inc(u64::from(rows));
+    let passes = if bos_scenes.is_some() { 3 } else { 1 };
+    let bar = progress_bar(scene.render.height * passes);
     let setup_start = Instant::now();
     let mut warnings = Vec::new();
-    let mut gpu_field = None;
-    let mut bake_cache = None;
-    let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
-        Backend::Cpu => {
-            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-            let start = Instant::now();
-            let frame = render_cpu(&rs, &tick, &cancel)?;
-            let adapter = format!("cpu ({threads} threads)");
-            (frame, adapter, start.elapsed().as_secs_f64())
-        }
-        Backend::Gpu => {
-            let owned;
-            let ctx = match gpu {
-                Some(c) => c,
-                None => {
-                    owned = grin_gpu::GpuContext::new_headless()?;
-                    &owned
-                }
-            };
-            let cache = (!args.no_cache)
-                .then(grin_gpu::cache::BakeCache::user_default)
-                .flatten();
-            let field = grin_gpu::cache::scene_gpu_field(
-                &rs,
+    let (frame, adapter, seconds, gpu_field, bake_cache) = render_frame(
+        args,
+        &rs,
+        scene.medium.as_ref(),
+        scene_dir,
+        gpu,
+        &bar,
+        &mut warnings,
+    )?;
+    let bos_images = match &bos_scenes {
+        Some((with, without)) => {
+            let mut quiet = Vec::new();
+            let (distorted, ..) = render_frame(
+                args,
+                with,
                 scene.medium.as_ref(),
                 scene_dir,
-                cache.as_ref(),
+                gpu,
+                &bar,
+                &mut quiet,
             )?;
-            let renderer = grin_gpu::GpuRenderer::new(ctx, &rs, field.as_ref().map(|f| &f.0))?;
-            if let Some((_, field_warnings, used)) = &field {
-                bake_cache = Some(*used);
-                for w in field_warnings {
-                    bar.suspend(|| eprintln!("grin: warning: {w}"));
-                    warnings.push(w.clone());
-                }
-            }
-            for w in renderer.warnings() {
-                bar.suspend(|| eprintln!("grin: warning: {w}"));
-                warnings.push(w.clone());
-            }
-            if scene.medium.is_some() {
-                gpu_field = Some(GpuField {
-                    dims: renderer.field_dims(),
-                    bytes: renderer.field_bytes(),
-                });
-            }
-            let adapter = renderer.adapter_info();
-            let start = Instant::now();
-            let frame = renderer.render(&tick, &cancel)?;
-            (frame, adapter, start.elapsed().as_secs_f64())
+            let (reference, ..) =
+                render_frame(args, without, None, scene_dir, gpu, &bar, &mut quiet)?;
+            let red = |f: &Frame| f.pixels.iter().map(|p| f64::from(p.rgb[0])).collect();
+            Some((red(&reference), red(&distorted)))
         }
+        None => None,
     };
     let setup_seconds = setup_start.elapsed().as_secs_f64() - seconds;
     bar.finish_and_clear();
@@ -416,7 +409,7 @@ fn render_one(
             }
         }
     }
-    if scene.optics.is_some() && scene.camera.f_number.is_some() {
+    if scene.optics.is_some() && scene.camera.f_number.is_some() && bos_images.is_none() {
         let w = "[optics] outputs trace one pinhole ray per pixel centre: camera.f_number \
                  (defocus) is not applied to them"
             .to_owned();
@@ -433,6 +426,7 @@ fn render_one(
             let (staged, summary) = crate::cmd::optics::stage_from_frame(
                 spec,
                 scene.sensor.as_ref(),
+                bos_images,
                 &rs,
                 &frame,
                 output,
@@ -515,6 +509,115 @@ fn render_one(
         summary.warnings.push(w);
     }
     Ok((summary, exr_to_stream))
+}
+
+/// One frame of `rs` on the backend `args` asks for (`gpu`: a device to reuse): the
+/// frame, the adapter, the render time, and on the GPU the field's size and how the bake
+/// cache served it; warnings are printed above `bar` and collected.
+#[allow(clippy::type_complexity)]
+fn render_frame(
+    args: &Args,
+    rs: &RenderScene,
+    medium: Option<&grin_scene::MediumSpec>,
+    scene_dir: &Path,
+    gpu: Option<&grin_gpu::GpuContext>,
+    bar: &ProgressBar,
+    warnings: &mut Vec<String>,
+) -> anyhow::Result<(
+    Frame,
+    String,
+    f64,
+    Option<GpuField>,
+    Option<grin_gpu::cache::CacheUse>,
+)> {
+    let cancel = AtomicBool::new(false);
+    let tick = |rows: u32| bar.inc(u64::from(rows));
+    let mut gpu_field = None;
+    let mut bake_cache = None;
+    let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
+        Backend::Cpu => {
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let start = Instant::now();
+            let frame = render_cpu(rs, &tick, &cancel)?;
+            let adapter = format!("cpu ({threads} threads)");
+            (frame, adapter, start.elapsed().as_secs_f64())
+        }
+        Backend::Gpu => {
+            let owned;
+            let ctx = match gpu {
+                Some(c) => c,
+                None => {
+                    owned = grin_gpu::GpuContext::new_headless()?;
+                    &owned
+                }
+            };
+            let cache = (!args.no_cache)
+                .then(grin_gpu::cache::BakeCache::user_default)
+                .flatten();
+            let field = grin_gpu::cache::scene_gpu_field(rs, medium, scene_dir, cache.as_ref())?;
+            let renderer = grin_gpu::GpuRenderer::new(ctx, rs, field.as_ref().map(|f| &f.0))?;
+            if let Some((_, field_warnings, used)) = &field {
+                bake_cache = Some(*used);
+                for w in field_warnings {
+                    bar.suspend(|| eprintln!("grin: warning: {w}"));
+                    warnings.push(w.clone());
+                }
+            }
+            for w in renderer.warnings() {
+                bar.suspend(|| eprintln!("grin: warning: {w}"));
+                warnings.push(w.clone());
+            }
+            if medium.is_some() {
+                gpu_field = Some(GpuField {
+                    dims: renderer.field_dims(),
+                    bytes: renderer.field_bytes(),
+                });
+            }
+            let adapter = renderer.adapter_info();
+            let start = Instant::now();
+            let frame = renderer.render(&tick, &cancel)?;
+            (frame, adapter, start.elapsed().as_secs_f64())
+        }
+    };
+    Ok((frame, adapter, seconds, gpu_field, bake_cache))
+}
+
+/// The scene whose beauty renders are the BOS images when they need more than the pixel
+/// centre's pinhole ray (a lens, or spp > 1): the dots as an emissive plane object (white
+/// on black, the `[optics]` dots and plane), at the scene's spp; `None` otherwise.
+fn bos_image_scene(scene: &grin_scene::Scene) -> anyhow::Result<Option<grin_scene::Scene>> {
+    let Some(spec) = scene
+        .optics
+        .as_ref()
+        .filter(|o| o.mode == grin_scene::OpticsMode::Bos)
+    else {
+        return Ok(None);
+    };
+    if scene.render.spp <= 1 && scene.camera.f_number.is_none() {
+        return Ok(None);
+    }
+    let plane = spec
+        .plane
+        .context("[optics] BOS needs a plane for its dots")?;
+    let len = plane.normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+    let mut s = scene.clone();
+    s.optics = None;
+    s.objects.push(grin_scene::Object {
+        shape: grin_scene::Shape::Plane {
+            point: plane.point,
+            normal: plane.normal.map(|c| c / len),
+        },
+        material: grin_scene::Material::Dots {
+            diameter: spec.dots.diameter,
+            density: spec.dots.density,
+            seed: spec.dots.seed,
+            color: [1.0; 3],
+            background: [0.0; 3],
+            center: Some(plane.point),
+            emissive: true,
+        },
+    });
+    Ok(Some(s))
 }
 
 /// Print a frame's summary (JSON or a few lines).
