@@ -359,6 +359,15 @@ fn render_one(
         return Ok((summary, to_stream));
     }
 
+    // Three renders share one device (and its compiled pipelines).
+    let owned_ctx;
+    let gpu = match (gpu, &bos_scenes, args.backend) {
+        (None, Some(_), Backend::Gpu) => {
+            owned_ctx = grin_gpu::GpuContext::new_headless()?;
+            Some(&owned_ctx)
+        }
+        _ => gpu,
+    };
     let passes = if bos_scenes.is_some() { 3 } else { 1 };
     let bar = progress_bar(scene.render.height * passes);
     let setup_start = Instant::now();
