@@ -298,6 +298,52 @@ pub fn noise(count: usize) -> anyhow::Result<Case> {
     Ok(numeric_case("noise", field, rays))
 }
 
+/// The plume case's index sampled onto an OpenVDB grid (voxels of 0.04, delta_n / 1e-3
+/// stored, written by grin's own writer to a temporary file) and read back through the
+/// VDB pipeline (`kind = "vdb"`, linear map): what a simulation cache gives. The
+/// reference is traced on the VDB field itself (its interpolant between voxels), so the
+/// methods are measured, not the sampling; not smooth for orders (C1 between voxels).
+pub fn vdb_plume(count: usize) -> anyhow::Result<Case> {
+    let analytic = plume(count)?;
+    let (h, half, k) = (0.04, 25, 1e-3);
+    let ambient = analytic.source.ambient_index();
+    let side = (2 * half + 1) as usize;
+    let mut values = Vec::with_capacity(side * side * side);
+    for kk in -half..=half {
+        for j in -half..=half {
+            for i in -half..=half {
+                let p = DVec3::new(f64::from(i), f64::from(j), f64::from(kk)) * h;
+                values.push(((analytic.source.sample(p).n - ambient) / k) as f32);
+            }
+        }
+    }
+    let grid = vdb_sys::DenseGrid {
+        bbox: vdb_sys::IndexBox {
+            min: [-half; 3],
+            max: [half; 3],
+        },
+        world_from_index: vdb_sys::Transform::uniform(h, [0.0; 3]),
+        values,
+    };
+    let dir = std::env::temp_dir().join(format!("grin-bench-vdb-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let path = dir.join("plume.vdb");
+    let mut writer = vdb_sys::VdbWriter::new()?;
+    writer.add_float("dn", &grid, &vdb_sys::WriteOptions::default())?;
+    writer.write(&path)?;
+    let field = medium(&format!(
+        "bounds = {{ box = {{ min = [-0.98, -0.98, -0.98], max = [0.98, 0.98, 0.98] }} }}\n\
+         ambient_index = {ambient}\n\
+         field = {{ kind = \"vdb\", path = \"{}\", grid = \"dn\", map = {{ linear = {{ k = {k} }} }} }}",
+        path.display()
+    ));
+    // The field holds the grid in memory: the file is no longer needed.
+    std::fs::remove_dir_all(&dir).ok();
+    let mut case = numeric_case("vdb-plume", field?, analytic.rays);
+    case.smooth = false;
+    Ok(case)
+}
+
 /// `base` baked at `resolution` nodes with `interp` and `storage`; the reference stays
 /// the unbaked source's (exact where known).
 pub fn baked(
@@ -357,6 +403,7 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
                 p.clone(),
                 expr(36)?,
                 noise(32)?,
+                vdb_plume(36)?,
             ];
             for base in [&l, &p] {
                 for (interp, storage) in [
