@@ -5,22 +5,10 @@
 //! bit depth; contradictory settings are errors naming the key.
 
 mod common;
-use common::{assert_ok as ok, gpu_available, grin};
+use common::{assert_ok as ok, gpu_available, render};
 use std::path::Path;
-use std::process::Output;
 
 use grin_trace::image::Frame;
-
-fn render(scene: &Path, out: &Path, backend: &str) -> Output {
-    grin()
-        .arg("render")
-        .arg(scene)
-        .arg("-o")
-        .arg(out)
-        .args(["--backend", backend])
-        .output()
-        .expect("grin runs")
-}
 
 /// A checker wall at z = `wall_z` (squares of 10 m: one vertical edge at x = 0 in view),
 /// lit evenly from behind the camera, seen from z = -4 with the camera table `lens`.

@@ -5,7 +5,9 @@
 //! the lens's caustic, and a BOS round trip through a cross-correlation in numpy.
 
 mod common;
-use common::{assert_ok as ok, exr_channels as channels, gpu_available, grin};
+use common::{
+    assert_ok as ok, bos_plume_scene, exr_channels as channels, gpu_available, grin, render_json,
+};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -483,24 +485,17 @@ fn bos_pair_round_trips_through_cross_correlation() {
     let scene = d.join("bos.toml");
     std::fs::write(
         &scene,
-        r#"
-[camera]
-position = [0.0, 0.0, -6.0]
-look_at = [0.0, 0.0, 0.0]
-fov_y_deg = 12.0
-[medium]
-bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-field = { kind = "plume", plumes = [ { a = 2e-3, center = [0.0, 0.0, 0.0], s = 0.3 } ] }
-[render]
-width = 160
-height = 160
-integrator = "rk4"
-step = { fixed = 0.01 }
-[optics]
+        bos_plume_scene(
+            "fov_y_deg = 12.0",
+            160,
+            160,
+            0.01,
+            r#"[optics]
 mode = "bos"
 plane = { point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }
 dots = { diameter = 0.05, density = 0.4, seed = 3 }
 "#,
+        ),
     )
     .expect("scene");
     let out = d.join("bos.exr");
@@ -595,43 +590,14 @@ fn bos_images_go_through_the_lens() {
     let d = dir.path();
     let scene = |name: &str, lens: &str, spp: u32| {
         let p = d.join(name);
-        std::fs::write(
-            &p,
-            format!(
-                r#"
-[camera]
-position = [0.0, 0.0, -6.0]
-look_at = [0.0, 0.0, 0.0]
-{lens}
-[medium]
-bounds = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}
-field = {{ kind = "plume", plumes = [ {{ a = 2e-3, center = [0.0, 0.0, 0.0], s = 0.3 }} ] }}
-[render]
-width = 64
-height = 64
-spp = {spp}
-integrator = "rk4"
-step = {{ fixed = 0.02 }}
-[optics]
-mode = "bos"
-plane = {{ point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }}
-dots = {{ diameter = 0.08, density = 0.4, seed = 3 }}
-"#
-            ),
-        )
-        .expect("scene");
+        let extra = format!(
+            "spp = {spp}\n[optics]\nmode = \"bos\"\n\
+             plane = {{ point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }}\n\
+             dots = {{ diameter = 0.08, density = 0.4, seed = 3 }}\n"
+        );
+        std::fs::write(&p, bos_plume_scene(lens, 64, 64, 0.02, &extra)).expect("scene");
         let out = d.join(format!("{name}.exr"));
-        let o = run(&[
-            "render",
-            "--backend",
-            "cpu",
-            "--json",
-            "-o",
-            out.to_str().expect("utf8"),
-            p.to_str().expect("utf8"),
-        ]);
-        ok(&o);
-        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+        let summary = render_json(&p, &out, "cpu");
         (channels(&out).1, summary)
     };
     // 12 degrees (2 atan(10.5 / 100)): a 21 mm sensor behind 100 mm; at f/1.4 a 71 mm aperture, which

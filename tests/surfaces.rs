@@ -6,23 +6,10 @@
 //! crates/grin-gpu/tests/gpu_vs_cpu.rs.
 
 mod common;
-use common::{assert_ok as ok, exr_channels, gpu_available, grin};
-use std::path::Path;
-use std::process::Output;
+use common::{assert_ok as ok, bos_plume_scene, exr_channels, gpu_available, render};
 
 use grin_trace::image::Frame;
 use grin_trace::render::surface::srgb_to_linear;
-
-fn render(scene: &Path, out: &Path, backend: &str) -> Output {
-    grin()
-        .arg("render")
-        .arg(scene)
-        .arg("-o")
-        .arg(out)
-        .args(["--backend", backend])
-        .output()
-        .expect("grin runs")
-}
 
 /// A plate at infinity, rendered at its own size without a medium, is the plate: each
 /// pixel-centre ray projects back to its texel's centre (CPU exactly, to f32 rounding;
@@ -124,20 +111,7 @@ fn texture_reads_upright_and_is_decoded_from_srgb() {
 fn dots_material_is_the_bos_background() {
     let dir = tempfile::tempdir().expect("tmp");
     let d = dir.path();
-    let head = r#"
-[camera]
-position = [0.0, 0.0, -6.0]
-look_at = [0.0, 0.0, 0.0]
-fov_y_deg = 12.0
-[medium]
-bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-field = { kind = "plume", plumes = [ { a = 2e-3, center = [0.0, 0.0, 0.0], s = 0.3 } ] }
-[render]
-width = 64
-height = 48
-integrator = "rk4"
-step = { fixed = 0.01 }
-"#;
+    let head = bos_plume_scene("fov_y_deg = 12.0", 64, 48, 0.01, "");
     let bos = d.join("bos.toml");
     std::fs::write(
         &bos,

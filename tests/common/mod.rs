@@ -45,3 +45,53 @@ pub fn exr_channels(path: &Path) -> (usize, HashMap<String, Vec<f64>>) {
         .collect();
     (layer.size.width(), map)
 }
+
+/// `grin render SCENE -o OUT --backend BACKEND`.
+pub fn render(scene: &Path, out: &Path, backend: &str) -> Output {
+    grin()
+        .arg("render")
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .args(["--backend", backend])
+        .output()
+        .expect("grin runs")
+}
+
+/// [`render`] with `--json`, which must succeed: the summary.
+pub fn render_json(scene: &Path, out: &Path, backend: &str) -> serde_json::Value {
+    let o = grin()
+        .arg("render")
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .args(["--backend", backend, "--json"])
+        .output()
+        .expect("grin runs");
+    assert_ok(&o);
+    serde_json::from_slice(&o.stdout).expect("json summary")
+}
+
+/// The BOS tests' set-up as scene text: a Gaussian plume of hot air (a = 2e-3, s = 0.3)
+/// in a 2 m box, seen from 6 m (`camera`: its lens lines, e.g. `fov_y_deg = 12.0`),
+/// `width` x `height`, rk4 at fixed `step`; `extra` is appended right after `[render]`'s
+/// lines (so it may set more of them, e.g. `spp = 32`, before its own tables).
+pub fn bos_plume_scene(camera: &str, width: u32, height: u32, step: f64, extra: &str) -> String {
+    format!(
+        r#"
+[camera]
+position = [0.0, 0.0, -6.0]
+look_at = [0.0, 0.0, 0.0]
+{camera}
+[medium]
+bounds = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}
+field = {{ kind = "plume", plumes = [ {{ a = 2e-3, center = [0.0, 0.0, 0.0], s = 0.3 }} ] }}
+[render]
+width = {width}
+height = {height}
+integrator = "rk4"
+step = {{ fixed = {step} }}
+{extra}
+"#
+    )
+}
