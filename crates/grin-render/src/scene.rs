@@ -263,6 +263,18 @@ impl RenderScene {
         })
     }
 
+    /// Fix a background plate to `camera` (the scene file's), seen at this render's
+    /// size: a viewer that renders through its own moving camera keeps the plate where
+    /// the scene put it. Nothing changes for another sky or a degenerate camera.
+    pub fn pin_plate_to(&mut self, camera: &grin_scene::Camera) {
+        if let SkyModel::Plate { camera: c, .. } = &mut self.sky
+            && let Some(pinned) =
+                PinholeCamera::new(camera, self.settings.width, self.settings.height)
+        {
+            *c = pinned;
+        }
+    }
+
     /// The sub-pixel position of sample `sample`: the pixel centre for one sample per
     /// pixel, uniformly random otherwise.
     pub fn subpixel(&self, rng: &mut Rng) -> (f64, f64) {
@@ -271,5 +283,35 @@ impl RenderScene {
         } else {
             (f64::from(rng.next_f32()), f64::from(rng.next_f32()))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A plate pinned to the file's camera stays put when the render's camera turns: the
+    /// file camera's centre ray still sees the plate's centre, the turned camera's
+    /// centre ray sees another part of it.
+    #[test]
+    fn a_pinned_plate_stays_where_the_file_camera_sees_it() {
+        let dir = std::env::temp_dir().join(format!("grin-plate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("tmp");
+        exr::prelude::write_rgb_file(dir.join("p.exr"), 8, 8, |x, y| (x as f32, y as f32, 0.0))
+            .expect("exr");
+        let text = "[camera]\nposition = [0.0, 0.0, 0.0]\nlook_at = [0.0, 0.0, 1.0]\n\
+                    [sky]\nplate = { path = \"p.exr\" }\n[render]\nwidth = 8\nheight = 8\n";
+        let file = grin_scene::parse_scene(text, &dir.join("s.toml")).expect("scene");
+        let mut turned = file.clone();
+        turned.camera.look_at = [0.3, 0.0, 1.0];
+        let mut rs = RenderScene::new(&turned, &dir, None).expect("render scene");
+        let centre = |rs: &RenderScene, d: DVec3| rs.sky.sky_radiance(d.normalize());
+        // Unpinned, the plate follows the turned camera: its centre is the plate's centre.
+        let mid = DVec3::new(3.5, 3.5, 0.0); // bilinear between texels 3 and 4
+        assert!((centre(&rs, rs.camera.forward) - mid).length() < 1e-9);
+        rs.pin_plate_to(&file.camera);
+        assert!((centre(&rs, DVec3::Z) - mid).length() < 1e-9);
+        assert!((centre(&rs, rs.camera.forward) - mid).length() > 0.5);
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

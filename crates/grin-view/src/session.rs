@@ -271,8 +271,10 @@ impl<'a> Session<'a> {
                 Some(e) => (Some(e.field.clone()), e.grid.clone()),
                 None => (None, None),
             };
-            let scene = RenderScene::new(&applied, &self.dir, field)
+            let mut scene = RenderScene::new(&applied, &self.dir, field)
                 .with_context(|| self.path.display().to_string())?;
+            // A background plate stays where the scene file's camera sees it.
+            scene.pin_plate_to(&self.scene.camera);
             let mut renderer = GpuRenderer::new(self.ctx, &scene, grid.as_deref())?;
             renderer.retarget(&scene, first_sample, spp_total)?;
             self.warnings.extend(renderer.warnings().iter().cloned());
