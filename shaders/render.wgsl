@@ -63,7 +63,7 @@ fn render_pixel(px: u32, row: u32) -> bool {
         if field_flag(FLAG_JITTER) {
             jitter = max(rng_next_f32(&rng), MIN_JITTER_FRACTION);
         }
-        var ray = LensRay(params.cam_origin, primary_ray(px, py, sx, sy));
+        var ray = camera_ray(px, py, sx, sy);
         // A thin lens's aperture point, drawn last, none for a single-sample image.
         if params.lens_radius > 0.0 && params.spp_total != 1u {
             let u1 = rng_next_f32(&rng);

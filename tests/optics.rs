@@ -397,7 +397,8 @@ fn shadowgraph(
     field: &str,
     bounds: &str,
     distance: f64,
-) -> serde_json::Value {
+    backend: &str,
+) -> (serde_json::Value, Vec<f64>) {
     let scene = dir.join(format!("{name}.toml"));
     std::fs::write(
         &scene,
@@ -422,20 +423,13 @@ screen = {{ distance = {distance}, rays_per_pixel = 36 }}
     )
     .expect("scene");
     let out = dir.join(format!("{name}.exr"));
-    let o = run(&[
-        "render",
-        "--json",
-        "-o",
-        out.to_str().expect("utf8"),
-        scene.to_str().expect("utf8"),
-    ]);
-    ok(&o);
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let v = render_json(&scene, &out, backend);
+    assert_eq!(v["backend"], backend, "{v}");
     let (_, ch) = channels(&out);
     let total: f64 = ch["intensity"].iter().sum();
     let mut optics = v["optics"].clone();
     optics["mean_intensity"] = serde_json::json!(total / (48.0 * 48.0));
-    optics
+    (optics, ch["intensity"].clone())
 }
 
 /// Shadowgraph: a plume's screen keeps the beam's energy within 1 %; a Luneburg
@@ -447,12 +441,13 @@ fn shadowgraph_conserves_energy_and_focuses_where_the_lens_does() {
     let plume = format!(
         "{{ kind = \"plume\", plumes = [ {{ a = 5e-3, center = [0.0, 0.0, 0.0], s = {S} }} ] }}"
     );
-    let weak = shadowgraph(
+    let (weak, _) = shadowgraph(
         dir.path(),
         "weak",
         &plume,
         "{ box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }",
         2.0,
+        "cpu",
     );
     let mean = weak["mean_intensity"].as_f64().expect("mean");
     assert!((mean - 1.0).abs() < 0.01, "{weak}");
@@ -464,7 +459,7 @@ fn shadowgraph_conserves_energy_and_focuses_where_the_lens_does() {
     let peaks: Vec<(f64, f64)> = [0.6, 0.8, 1.0, 1.2, 1.5]
         .iter()
         .map(|&z| {
-            let v = shadowgraph(dir.path(), &format!("lens{z}"), lens, ball, z);
+            let (v, _) = shadowgraph(dir.path(), &format!("lens{z}"), lens, ball, z, "cpu");
             (z, v["peak_intensity"].as_f64().expect("peak"))
         })
         .collect();
@@ -473,6 +468,42 @@ fn shadowgraph_conserves_energy_and_focuses_where_the_lens_does() {
         .fold((0.0, 0.0), |b, &p| if p.1 > b.1 { p } else { b });
     assert_eq!(brightest.0, 1.0, "{peaks:?}");
     assert!(brightest.1 > 50.0, "{peaks:?}");
+}
+
+/// The shadowgraph on the GPU: the beam as an orthographic camera's pixel centres, one
+/// frame of the marcher (its baked field, f32), binned like the CPU's f64 beam. The
+/// plume's screen keeps the energy and matches the CPU's image (mean |difference| under
+/// 2 % of the mean intensity); the Luneburg lens focuses on the screen at its radius.
+#[test]
+fn shadowgraph_on_the_gpu_matches_the_cpu() {
+    if !gpu_available() {
+        eprintln!("SKIPPED shadowgraph_on_the_gpu_matches_the_cpu: no GPU adapter");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plume = format!(
+        "{{ kind = \"plume\", plumes = [ {{ a = 5e-3, center = [0.0, 0.0, 0.0], s = {S} }} ] }}"
+    );
+    let cube = "{ box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }";
+    let (cpu, ci) = shadowgraph(dir.path(), "c", &plume, cube, 2.0, "cpu");
+    let (gpu, gi) = shadowgraph(dir.path(), "g", &plume, cube, 2.0, "gpu");
+    let mean = gpu["mean_intensity"].as_f64().expect("mean");
+    assert!((mean - 1.0).abs() < 0.01, "{gpu}");
+    let diff = ci.iter().zip(&gi).map(|(a, b)| (a - b).abs()).sum::<f64>() / ci.len() as f64;
+    eprintln!(
+        "shadowgraph GPU vs CPU: mean |difference| {diff:.4}; peaks {} / {}",
+        cpu["peak_intensity"], gpu["peak_intensity"]
+    );
+    assert!(diff < 0.02, "{diff}");
+    let lens = "{ kind = \"luneburg\" }";
+    let ball = "{ sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }";
+    let peak = |z: f64| {
+        let (v, _) = shadowgraph(dir.path(), &format!("gl{z}"), lens, ball, z, "gpu");
+        v["peak_intensity"].as_f64().expect("peak")
+    };
+    let (near, focus) = (peak(0.6), peak(1.0));
+    eprintln!("GPU Luneburg caustic: peak {near} at 0.6 R, {focus} at R");
+    assert!(focus > 50.0 && focus > 2.0 * near, "{near} {focus}");
 }
 
 /// BOS round trip: the reference and distorted dot images, cross-correlated window by

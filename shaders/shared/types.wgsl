@@ -43,7 +43,7 @@ struct FrameParams {
     grid_origin: vec3<f32>,      // world position of grid node (0, 0, 0)
     spp_total: u32,              // samples of the accumulated image: sub-pixel positions unless 1
     grid_inv_spacing: vec3<f32>, // 1 / node spacing per axis
-    _pad2: f32,
+    ortho_half_width: f32,       // orthographic camera: half the view (0: perspective)
     grid_dims: vec3<u32>,        // node counts
     env_width: u32,              // the sky's image (map or plate) at the atlas' top left
     macro_dims: vec3<u32>,       // macro-cell counts
@@ -59,7 +59,7 @@ struct FrameParams {
     plate_right: vec3<f32>,
     plate_aspect: f32,
     plate_up: vec3<f32>,
-    _pad8: f32,
+    ortho_half_height: f32,
 }
 
 struct GpuObject {

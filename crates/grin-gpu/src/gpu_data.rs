@@ -153,7 +153,8 @@ pub struct FrameParams {
     pub spp_total: u32,
     /// 1 / node spacing per axis.
     pub grid_inv_spacing: [f32; 3],
-    pub _pad2: f32,
+    /// Orthographic camera: half the view's width and height (0: perspective).
+    pub ortho_half_width: f32,
     /// Node counts.
     pub grid_dims: [u32; 3],
     /// The sky's image (map or plate) at the top left of the image atlas: its size.
@@ -176,7 +177,7 @@ pub struct FrameParams {
     pub plate_right: [f32; 3],
     pub plate_aspect: f32,
     pub plate_up: [f32; 3],
-    pub _pad8: f32,
+    pub ortho_half_height: f32,
 }
 const _: () = assert!(std::mem::size_of::<FrameParams>() == 23 * 16);
 
@@ -355,7 +356,7 @@ mod tests {
             grid_origin,
             spp_total,
             grid_inv_spacing,
-            _pad2,
+            ortho_half_width,
             grid_dims,
             env_width,
             macro_dims,
@@ -371,7 +372,7 @@ mod tests {
             plate_right,
             plate_aspect,
             plate_up,
-            _pad8,
+            ortho_half_height,
         );
         same_layout!(
             GpuObject,

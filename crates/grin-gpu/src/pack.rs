@@ -27,6 +27,10 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     params.cam_right = f3(cam.right);
     params.cam_up = f3(cam.up);
     params.lens_radius = cam.lens_radius as f32;
+    if let Some([hw, hh]) = cam.ortho {
+        params.ortho_half_width = hw as f32;
+        params.ortho_half_height = hh as f32;
+    }
     params.focus_distance = cam.focus_distance as f32;
     params.width = s.width;
     params.height = s.height;

@@ -16,6 +16,9 @@ pub struct PinholeCamera {
     /// `forward`.
     pub lens_radius: f64,
     pub focus_distance: f64,
+    /// Orthographic: half the width and height of the view in world units (rays
+    /// parallel to `forward` from the plane through `origin`); `None`: perspective.
+    pub ortho: Option<[f64; 2]>,
 }
 
 impl PinholeCamera {
@@ -30,6 +33,7 @@ impl PinholeCamera {
         Some(PinholeCamera {
             lens_radius: 0.5 * aperture,
             focus_distance: focus,
+            ortho: None,
             origin,
             forward,
             right,
@@ -49,6 +53,20 @@ impl PinholeCamera {
             * self.tan_half_fov_y;
         let v = (1.0 - 2.0 * (f64::from(py) + sy) / f64::from(self.height)) * self.tan_half_fov_y;
         (self.forward + self.right * u + self.up * v).normalize()
+    }
+
+    /// The camera ray (origin, unit direction) through image position (`px + sx`,
+    /// `py + sy`): from `origin` through the image plane, or, orthographic, along
+    /// `forward` from its point on the view plane. GPU twin: `camera_ray` in camera.wgsl.
+    pub fn camera_ray(&self, px: u32, py: u32, sx: f64, sy: f64) -> (DVec3, DVec3) {
+        match self.ortho {
+            Some([hw, hh]) => {
+                let u = (2.0 * (f64::from(px) + sx) / f64::from(self.width) - 1.0) * hw;
+                let v = (1.0 - 2.0 * (f64::from(py) + sy) / f64::from(self.height)) * hh;
+                (self.origin + self.right * u + self.up * v, self.forward)
+            }
+            None => (self.origin, self.primary_ray(px, py, sx, sy)),
+        }
     }
 
     /// The thin-lens ray (origin, unit direction) of the pinhole ray `d` for the lens

@@ -1,13 +1,16 @@
 //! Shadowgraph: a collimated beam along the camera's view through the medium onto a
 //! screen; the image is the ray density on the screen, 1 where nothing deflects. Each
 //! screen bin of the undisturbed beam gets `rays_per_pixel` rays on a k x k grid, traced
-//! with the scene's integrator (f64) and carried straight from where they leave the
-//! medium to the screen. What leaves the screen is counted (energy bookkeeping).
+//! with the scene's integrator and carried straight from where they leave the medium to
+//! the screen. What leaves the screen is counted (energy bookkeeping). The beam's rays
+//! are the pixel centres of an orthographic camera ([`Beam::camera`]), so either
+//! backend can trace them: [`shadowgraph`] here in f64, or the GPU marcher's frame of
+//! that camera binned by [`Beam::collect`].
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use grin_field::IndexField;
+use grin_field::{Bounds, IndexField};
 use grin_render::camera::PinholeCamera;
 use grin_render::settings::TraceSettings;
 use grin_scene::Screen;
@@ -31,85 +34,143 @@ pub struct Shadowgraph {
     pub centre: DVec3,
 }
 
-/// Trace the beam through `field` (view axes from `cam`, bins `width` x `height`).
+/// The collimated beam: `k` x `k` rays per screen bin, starting on a plane before the
+/// medium, and the screen they land on (`width` x `height` bins).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Beam {
+    pub width: u32,
+    pub height: u32,
+    pub k: u32,
+    /// Where the central ray starts (before the medium's bounding ball).
+    pub start: DVec3,
+    pub forward: DVec3,
+    pub right: DVec3,
+    pub up: DVec3,
+    /// Screen (and beam) size in world units, and the screen's centre.
+    pub size: [f64; 2],
+    pub centre: DVec3,
+}
+
+impl Beam {
+    /// The beam of `screen` through a medium in `bounds`, along `cam`'s view, binned at
+    /// its image size.
+    pub fn new(bounds: &Bounds, cam: &PinholeCamera, screen: &Screen) -> Beam {
+        let (w, h) = (cam.width, cam.height);
+        let (lo, hi) = bounds.aabb();
+        let middle = (lo + hi) * 0.5;
+        let radius = (hi - lo).length() * 0.5;
+        let across = |axis: DVec3| {
+            // The bounding box's extent along a view axis.
+            let e = (hi - lo) * 0.5;
+            2.0 * (e.x * axis.x.abs() + e.y * axis.y.abs() + e.z * axis.z.abs())
+        };
+        let size = screen.size.unwrap_or([
+            across(cam.right),
+            across(cam.right) * f64::from(h) / f64::from(w),
+        ]);
+        Beam {
+            width: w,
+            height: h,
+            k: (f64::from(screen.rays_per_pixel).sqrt().round() as u32).max(1),
+            start: middle - cam.forward * (radius * 1.01 + 1e-9),
+            forward: cam.forward,
+            right: cam.right,
+            up: cam.up,
+            size,
+            centre: middle + cam.forward * screen.distance,
+        }
+    }
+
+    /// The orthographic camera whose pixel centres, (`width` k) x (`height` k) of them,
+    /// are the beam's rays: pixel (i k + a, j k + b) is ray (a, b) of bin (i, j).
+    pub fn camera(&self) -> PinholeCamera {
+        PinholeCamera {
+            origin: self.start,
+            forward: self.forward,
+            right: self.right,
+            up: self.up,
+            tan_half_fov_y: 1.0,
+            width: self.width * self.k,
+            height: self.height * self.k,
+            lens_radius: 0.0,
+            focus_distance: 1.0,
+            ortho: Some([0.5 * self.size[0], 0.5 * self.size[1]]),
+        }
+    }
+
+    /// The bin (index, row 0 at the top) where a ray leaving the medium at `p` along
+    /// `d` meets the screen; `None` off the screen or going away from it.
+    pub fn bin(&self, p: DVec3, d: DVec3) -> Option<usize> {
+        let den = d.dot(self.forward);
+        if den <= 0.0 {
+            return None;
+        }
+        let q = p + d * ((self.centre - p).dot(self.forward) / den);
+        let (bw, bh) = (
+            self.size[0] / f64::from(self.width),
+            self.size[1] / f64::from(self.height),
+        );
+        let sx = (q - self.centre).dot(self.right) + 0.5 * self.size[0];
+        let sy = 0.5 * self.size[1] - (q - self.centre).dot(self.up);
+        let (bi, bj) = ((sx / bw).floor(), (sy / bh).floor());
+        (bi >= 0.0 && bj >= 0.0 && bi < f64::from(self.width) && bj < f64::from(self.height))
+            .then(|| (bj as u32 * self.width + bi as u32) as usize)
+    }
+
+    /// The shadowgraph of the beam's rays as they left the medium: `Some((p, d))` for a
+    /// ray that exited at p along d (or missed it: its start and `forward`), `None` for
+    /// one stopped inside.
+    pub fn collect(&self, ends: impl Iterator<Item = Option<(DVec3, DVec3)>>) -> Shadowgraph {
+        let mut counts = vec![0u64; (self.width * self.height) as usize];
+        let (mut landed, mut stopped) = (0, 0);
+        for end in ends {
+            match end {
+                Some((p, d)) => {
+                    if let Some(b) = self.bin(p, d) {
+                        counts[b] += 1;
+                        landed += 1;
+                    }
+                }
+                None => stopped += 1,
+            }
+        }
+        let per = f64::from(self.k * self.k);
+        Shadowgraph {
+            width: self.width,
+            height: self.height,
+            intensity: counts.iter().map(|&c| c as f64 / per).collect(),
+            launched: u64::from(self.width) * u64::from(self.height) * u64::from(self.k * self.k),
+            landed,
+            stopped,
+            size: self.size,
+            centre: self.centre,
+        }
+    }
+}
+
+/// Trace the beam through `field` on the CPU (f64; view axes from `cam`, bins `width` x
+/// `height`).
 pub fn shadowgraph(
     field: &dyn IndexField,
     settings: &TraceSettings,
     cam: &PinholeCamera,
     screen: &Screen,
 ) -> Shadowgraph {
-    let (w, h) = (cam.width, cam.height);
-    let bounds = field.bounds();
-    let (lo, hi) = bounds.aabb();
-    let middle = (lo + hi) * 0.5;
-    let radius = (hi - lo).length() * 0.5;
-    let across = |axis: DVec3| {
-        // The bounding box's extent along a view axis.
-        let e = (hi - lo) * 0.5;
-        2.0 * (e.x * axis.x.abs() + e.y * axis.y.abs() + e.z * axis.z.abs())
-    };
-    let size = screen.size.unwrap_or([
-        across(cam.right),
-        across(cam.right) * f64::from(h) / f64::from(w),
-    ]);
-    let centre = middle + cam.forward * screen.distance;
-    let start = middle - cam.forward * (radius * 1.01 + 1e-9);
-    let k = (f64::from(screen.rays_per_pixel).sqrt().round() as u32).max(1);
-    let (bw, bh) = (size[0] / f64::from(w), size[1] / f64::from(h));
-    let empty = || (vec![0u64; (w * h) as usize], 0u64, 0u64);
-    // One histogram per rayon job, summed at the end.
-    let (counts, landed, stopped) = (0..h)
+    let beam = Beam::new(&field.bounds(), cam, screen);
+    let view = beam.camera();
+    let ends: Vec<Option<(DVec3, DVec3)>> = (0..view.height)
         .into_par_iter()
-        .fold(empty, |(mut counts, mut landed, mut stopped), j| {
-            for i in 0..w {
-                for a in 0..k {
-                    for b in 0..k {
-                        let x = (f64::from(i) + (f64::from(a) + 0.5) / f64::from(k)) * bw
-                            - 0.5 * size[0];
-                        let y = 0.5 * size[1]
-                            - (f64::from(j) + (f64::from(b) + 0.5) / f64::from(k)) * bh;
-                        let o = start + cam.right * x + cam.up * y;
-                        let r = trace_ray::<f64>(field, settings, o, cam.forward);
-                        let (p, d) = match r.status {
-                            RayStatus::Exited => (r.position, r.direction),
-                            RayStatus::Missed => (o, cam.forward),
-                            _ => {
-                                stopped += 1;
-                                continue;
-                            }
-                        };
-                        let den = d.dot(cam.forward);
-                        if den <= 0.0 {
-                            continue;
-                        }
-                        let q = p + d * ((centre - p).dot(cam.forward) / den);
-                        let sx = (q - centre).dot(cam.right) + 0.5 * size[0];
-                        let sy = 0.5 * size[1] - (q - centre).dot(cam.up);
-                        let (bi, bj) = ((sx / bw).floor(), (sy / bh).floor());
-                        if bi >= 0.0 && bj >= 0.0 && bi < f64::from(w) && bj < f64::from(h) {
-                            counts[(bj as u32 * w + bi as u32) as usize] += 1;
-                            landed += 1;
-                        }
-                    }
+        .flat_map_iter(|py| {
+            (0..view.width).map(move |px| {
+                let (o, d) = view.camera_ray(px, py, 0.5, 0.5);
+                let r = trace_ray::<f64>(field, settings, o, d);
+                match r.status {
+                    RayStatus::Exited => Some((r.position, r.direction)),
+                    RayStatus::Missed => Some((o, d)),
+                    _ => None,
                 }
-            }
-            (counts, landed, stopped)
+            })
         })
-        .reduce(empty, |(mut a, la, sa), (b, lb, sb)| {
-            for (x, y) in a.iter_mut().zip(b) {
-                *x += y;
-            }
-            (a, la + lb, sa + sb)
-        });
-    let per = f64::from(k * k);
-    Shadowgraph {
-        width: w,
-        height: h,
-        intensity: counts.iter().map(|&c| c as f64 / per).collect(),
-        launched: u64::from(w) * u64::from(h) * u64::from(k * k),
-        landed,
-        stopped,
-        size,
-        centre,
-    }
+        .collect();
+    beam.collect(ends.into_iter())
 }

@@ -235,23 +235,12 @@ pub fn stage_from_frame(
     Ok((staged, summary))
 }
 
-/// Trace the shadowgraph of `rs`'s medium (CPU) and stage it to `exr` and `png`.
+/// Stage a shadowgraph (traced by either backend) to `exr` and `png`.
 pub fn stage_shadowgraph(
-    spec: &OpticsSpec,
-    rs: &RenderScene,
+    sg: &grin_trace::shadowgraph::Shadowgraph,
     exr: &Path,
     png: Option<&Path>,
 ) -> anyhow::Result<(Vec<Staged>, serde_json::Value)> {
-    let medium = rs
-        .medium
-        .as_ref()
-        .context("[optics] a shadowgraph needs a [medium]")?;
-    let sg = grin_trace::shadowgraph::shadowgraph(
-        medium.field.as_ref(),
-        &medium.trace,
-        &rs.camera,
-        &spec.screen,
-    );
     let mut staged = vec![stage_channels_exr(
         exr,
         (sg.width as usize, sg.height as usize),

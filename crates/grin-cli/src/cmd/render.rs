@@ -324,21 +324,69 @@ fn render_one(
     {
         let start = Instant::now();
         let to_stream = png.is_none();
-        let (staged, optics) =
-            crate::cmd::optics::stage_shadowgraph(spec, &rs, output, png.as_deref())?;
+        let medium = rs
+            .medium
+            .as_ref()
+            .context("[optics] a shadowgraph needs a [medium]")?;
+        let mut warnings = Vec::new();
+        let (sg, adapter, gpu_field, bake_cache) = match args.backend {
+            Backend::Cpu => {
+                let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+                let sg = grin_trace::shadowgraph::shadowgraph(
+                    medium.field.as_ref(),
+                    &medium.trace,
+                    &rs.camera,
+                    &spec.screen,
+                );
+                (sg, format!("cpu ({threads} threads)"), None, None)
+            }
+            Backend::Gpu => {
+                // The beam's rays are an orthographic camera's pixel centres: one GPU
+                // frame, its exit AOVs binned on the screen.
+                let beam =
+                    grin_trace::shadowgraph::Beam::new(&medium.bounds, &rs.camera, &spec.screen);
+                let mut beam_rs = rs.clone();
+                beam_rs.camera = beam.camera();
+                beam_rs.settings.width = beam_rs.camera.width;
+                beam_rs.settings.height = beam_rs.camera.height;
+                beam_rs.objects.clear();
+                beam_rs.materials.clear();
+                beam_rs.object_images.clear();
+                let pixels = u64::from(beam_rs.camera.width) * u64::from(beam_rs.camera.height);
+                if pixels > grin_trace::render::MAX_PIXELS {
+                    bail!(
+                        "[optics] the shadowgraph's beam is {pixels} rays (bins x rays_per_pixel); \
+                         at most {} fit one GPU frame: fewer bins or rays_per_pixel",
+                        grin_trace::render::MAX_PIXELS
+                    );
+                }
+                let bar = progress_bar(beam_rs.settings.height);
+                let (frame, adapter, _, gpu_field, bake_cache) = render_frame(
+                    args,
+                    &beam_rs,
+                    scene.medium.as_ref(),
+                    scene_dir,
+                    gpu,
+                    &bar,
+                    &mut warnings,
+                )?;
+                bar.finish_and_clear();
+                let v = |a: [f32; 3]| glam::DVec3::from_array(a.map(f64::from));
+                // status 0 missed (exit_pos = the ray's start), 1 exited; else stopped.
+                let ends = frame
+                    .pixels
+                    .iter()
+                    .map(|p| (p.status <= 1.0).then(|| (v(p.exit_pos), v(p.exit_dir).normalize())));
+                (beam.collect(ends), adapter, gpu_field, bake_cache)
+            }
+        };
+        let (staged, optics) = crate::cmd::optics::stage_shadowgraph(&sg, output, png.as_deref())?;
         grin_output::commit(staged)?;
         let seconds = start.elapsed().as_secs_f64();
         let rays = optics["rays_launched"].as_f64().unwrap_or(0.0);
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let mut warnings = Vec::new();
-        if args.backend == Backend::Gpu {
-            let w = "the shadowgraph traces its collimated beam on the CPU (f64)".to_owned();
-            eprintln!("grin: note: {w}");
-            warnings.push(w);
-        }
         let summary = Summary {
-            backend: "cpu",
-            adapter: format!("cpu ({threads} threads)"),
+            backend: args.backend.name(),
+            adapter,
             width: scene.render.width,
             height: scene.render.height,
             spp: 1,
@@ -351,8 +399,8 @@ fn render_one(
             exr: output.to_owned(),
             png,
             warnings,
-            bake_cache: None,
-            gpu_field: None,
+            bake_cache,
+            gpu_field,
             comparison: None,
             optics: Some(optics),
         };

@@ -39,14 +39,14 @@ pub fn render_pixel(scene: &RenderScene, px: u32, py: u32) -> PixelOut {
         } else {
             1.0
         };
-        let d = scene.camera.primary_ray(px, py, sx, sy);
+        let (o, d) = scene.camera.camera_ray(px, py, sx, sy);
         // A thin lens's aperture point, drawn last (the stream is unchanged without
         // one), with the sub-pixel position's rule: none for a single-sample image.
         let (o, d) = if scene.camera.lens_radius > 0.0 && scene.settings.spp != 1 {
             let (u1, u2) = (rng.next_f32(), rng.next_f32());
             scene.camera.lens_ray(d, f64::from(u1), f64::from(u2))
         } else {
-            (scene.camera.origin, d)
+            (o, d)
         };
         let path = shade::CpuScene(scene).trace_path(o, d, f64::from(jitter), &mut rng);
         rgb += path.rgb;
