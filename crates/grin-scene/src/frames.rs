@@ -105,9 +105,16 @@ impl Scene {
     }
 
     /// The scene of frame `frame` at `fps`: the frame's file where the medium's path has
-    /// a frame token, and noise / `expr` time `t + frame / fps`.
+    /// a frame token, noise / `expr` time `t + frame / fps`, and a `[sensor]` seed of the
+    /// frame's own (a sensor's noise changes from exposure to exposure; frame 0 keeps
+    /// the scene's seed).
     pub fn at_frame(&self, frame: i64, fps: f64) -> Scene {
         let mut s = self.clone();
+        if let Some(sensor) = &mut s.sensor {
+            sensor.seed = sensor
+                .seed
+                .wrapping_add((frame as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        }
         if let Some(m) = &mut s.medium {
             let dt = frame as f64 / fps;
             match &mut m.field {
@@ -159,6 +166,17 @@ pub fn missing_frames(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_frame_gets_its_own_sensor_noise() {
+        let text = "[camera]\nposition = [0.0, 0.0, 0.0]\nlook_at = [0.0, 0.0, 1.0]\n\
+                    [sensor]\nfull_well = 1000.0\nseed = 5\n";
+        let scene = crate::parse_scene(text, std::path::Path::new("s.toml")).expect("scene");
+        let seed = |f: i64| scene.at_frame(f, 24.0).sensor.expect("sensor").seed;
+        assert_eq!(seed(0), 5);
+        assert_eq!(seed(3), seed(3));
+        assert!(seed(1) != seed(0) && seed(2) != seed(1) && seed(-1) != seed(0));
+    }
 
     #[test]
     fn every_token_style_is_replaced_zero_padded() {
