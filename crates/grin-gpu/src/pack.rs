@@ -226,23 +226,20 @@ fn atlas_images(scene: &RenderScene) -> Vec<(usize, usize, &[[f32; 3]])> {
         .collect()
 }
 
-/// The first atlas row of each of `scene.images` (the sky's image, if any, on top).
+/// The first atlas row of each of `scene.images`: the running sum of the heights of
+/// [`atlas_images`], whose last `scene.images.len()` entries they are.
 fn atlas_rows(scene: &RenderScene) -> Vec<u32> {
-    let sky_rows = match &scene.sky {
-        SkyModel::Map(map) => map.height,
-        SkyModel::Plate { image, .. } => image.height,
-        SkyModel::Gradient { .. } => 0,
-    };
-    let mut row = sky_rows as u32;
-    scene
-        .images
+    let images = atlas_images(scene);
+    let mut row = 0u32;
+    let starts: Vec<u32> = images
         .iter()
         .map(|i| {
             let r = row;
-            row += i.height as u32;
+            row += i.1 as u32;
             r
         })
-        .collect()
+        .collect();
+    starts[images.len() - scene.images.len()..].to_vec()
 }
 
 /// The image atlas as rgba32float texels: the sky's image at the top left, the
