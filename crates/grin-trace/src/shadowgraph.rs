@@ -117,34 +117,72 @@ impl Beam {
             .then(|| (bj as u32 * self.width + bi as u32) as usize)
     }
 
-    /// The shadowgraph of the beam's rays as they left the medium: `Some((p, d))` for a
-    /// ray that exited at p along d (or missed it: its start and `forward`), `None` for
-    /// one stopped inside.
-    pub fn collect(&self, ends: impl Iterator<Item = Option<(DVec3, DVec3)>>) -> Shadowgraph {
-        let mut counts = vec![0u64; (self.width * self.height) as usize];
-        let (mut landed, mut stopped) = (0, 0);
-        for end in ends {
-            match end {
-                Some((p, d)) => {
-                    if let Some(b) = self.bin(p, d) {
-                        counts[b] += 1;
-                        landed += 1;
-                    }
+    /// Count one ray as it left the medium into `tally`: `Some((p, d))` for a ray that
+    /// exited at p along d (or missed it: its start and `forward`), `None` for one
+    /// stopped inside.
+    pub fn count(&self, tally: &mut Tally, end: Option<(DVec3, DVec3)>) {
+        match end {
+            Some((p, d)) => {
+                if let Some(b) = self.bin(p, d) {
+                    tally.counts[b] += 1;
+                    tally.landed += 1;
                 }
-                None => stopped += 1,
             }
+            None => tally.stopped += 1,
         }
+    }
+
+    /// An empty tally of this beam's screen.
+    pub fn tally(&self) -> Tally {
+        Tally {
+            counts: vec![0; (self.width * self.height) as usize],
+            landed: 0,
+            stopped: 0,
+        }
+    }
+
+    /// The shadowgraph of a finished tally.
+    pub fn finish(&self, tally: Tally) -> Shadowgraph {
         let per = f64::from(self.k * self.k);
         Shadowgraph {
             width: self.width,
             height: self.height,
-            intensity: counts.iter().map(|&c| c as f64 / per).collect(),
+            intensity: tally.counts.iter().map(|&c| c as f64 / per).collect(),
             launched: u64::from(self.width) * u64::from(self.height) * u64::from(self.k * self.k),
-            landed,
-            stopped,
+            landed: tally.landed,
+            stopped: tally.stopped,
             size: self.size,
             centre: self.centre,
         }
+    }
+
+    /// The shadowgraph of the beam's rays as they left the medium (see [`Beam::count`]).
+    pub fn collect(&self, ends: impl Iterator<Item = Option<(DVec3, DVec3)>>) -> Shadowgraph {
+        let mut tally = self.tally();
+        for end in ends {
+            self.count(&mut tally, end);
+        }
+        self.finish(tally)
+    }
+}
+
+/// Rays landed per screen bin, landed in all, and stopped in the medium.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tally {
+    counts: Vec<u64>,
+    landed: u64,
+    stopped: u64,
+}
+
+impl Tally {
+    /// The sum of two tallies of one screen.
+    fn merge(mut self, other: Tally) -> Tally {
+        for (a, b) in self.counts.iter_mut().zip(other.counts) {
+            *a += b;
+        }
+        self.landed += other.landed;
+        self.stopped += other.stopped;
+        self
     }
 }
 
@@ -158,19 +196,25 @@ pub fn shadowgraph(
 ) -> Shadowgraph {
     let beam = Beam::new(&field.bounds(), cam, screen);
     let view = beam.camera();
-    let ends: Vec<Option<(DVec3, DVec3)>> = (0..view.height)
+    // One tally per rayon job, summed at the end (no ray's end is kept).
+    let tally = (0..view.height)
         .into_par_iter()
-        .flat_map_iter(|py| {
-            (0..view.width).map(move |px| {
-                let (o, d) = view.camera_ray(px, py, 0.5, 0.5);
-                let r = trace_ray::<f64>(field, settings, o, d);
-                match r.status {
-                    RayStatus::Exited => Some((r.position, r.direction)),
-                    RayStatus::Missed => Some((o, d)),
-                    _ => None,
+        .fold(
+            || beam.tally(),
+            |mut tally, py| {
+                for px in 0..view.width {
+                    let (o, d) = view.camera_ray(px, py, 0.5, 0.5);
+                    let r = trace_ray::<f64>(field, settings, o, d);
+                    let end = match r.status {
+                        RayStatus::Exited => Some((r.position, r.direction)),
+                        RayStatus::Missed => Some((o, d)),
+                        _ => None,
+                    };
+                    beam.count(&mut tally, end);
                 }
-            })
-        })
-        .collect();
-    beam.collect(ends.into_iter())
+                tally
+            },
+        )
+        .reduce(|| beam.tally(), Tally::merge);
+    beam.finish(tally)
 }
