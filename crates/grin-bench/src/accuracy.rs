@@ -138,6 +138,11 @@ pub struct Point {
     /// Rays that did not end `exited` (any makes the run failed).
     pub failed_rays: usize,
     pub rays: usize,
+    /// `auto`: what the pilot rays chose ("" for the other policies).
+    pub chosen: String,
+    /// `auto`: field evaluations the pilot rays cost, in all (not in evals_per_ray: in a
+    /// render they are spread over every pixel).
+    pub pilot_evals: u64,
     #[serde(skip)]
     pub method: Method,
 }
@@ -150,7 +155,21 @@ impl Point {
 
 /// Run `method` at `param` on `case` against `reference`.
 pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64) -> Point {
-    let settings = method.settings(param, case.scale);
+    let mut settings = method.settings(param, case.scale);
+    let mut chosen = String::new();
+    let mut pilot_evals = 0;
+    if method.policy == Policy::Auto {
+        let pilots = &case.pilots;
+        let choice = match method.precision {
+            Precision::F64 => grin_trace::auto::choose::<f64>(case.field.as_ref(), &settings, true, pilots),
+            Precision::F32 => grin_trace::auto::choose::<f32>(case.field.as_ref(), &settings, true, pilots),
+        };
+        if let Some(c) = choice {
+            settings = c.settings;
+            chosen = c.describe();
+            pilot_evals = c.spent_evals;
+        }
+    }
     let start = Instant::now();
     let results: Vec<RayResult> = case
         .rays
@@ -160,7 +179,7 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
     let ns = start.elapsed().as_nanos() as f64;
     let mut p = Point {
         case: case.name.clone(),
-        integrator: crate::methods::integrator_label(method.integrator),
+        integrator: method.integrator_label(),
         policy: method.policy.name(),
         exit: crate::methods::exit_name(method.exit),
         precision: method.precision.name(),
@@ -173,6 +192,8 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
         ns_per_ray: ns / results.len() as f64,
         failed_rays: 0,
         rays: results.len(),
+        chosen,
+        pilot_evals,
         method,
     };
     for (r, e) in results.iter().zip(&reference.exits) {

@@ -50,6 +50,9 @@ pub struct Case {
     pub source: Arc<dyn IndexField>,
     /// Rays (origin, unit direction).
     pub rays: Vec<(DVec3, DVec3)>,
+    /// The pilot rays `auto` chooses its method on: [`PILOT_RAYS`] other rays from the
+    /// same family (a render's pilots are a coarse grid of its own pixels).
+    pub pilots: Vec<(DVec3, DVec3)>,
     /// Exact exits, one per ray, where known.
     pub exact: Option<Vec<Exit>>,
     /// The field is smooth (C2 at least) inside and has no error floor of its own (not
@@ -74,6 +77,9 @@ pub(crate) fn medium(toml_text: &str) -> anyhow::Result<Arc<dyn IndexField>> {
     Ok(grin_field::build_field(&spec, Path::new("."))?)
 }
 
+/// Pilot rays of every case: as many as a render traces by default.
+pub const PILOT_RAYS: usize = grin_scene::DEFAULT_PILOT_RAYS as usize;
+
 /// Rays parallel to +z from z = -2R through a disc of impact parameters up to 0.85 R, at
 /// several azimuths (3D, not one plane).
 fn parallel_beam(count: usize, radius: f64) -> (Vec<(DVec3, DVec3)>, Vec<f64>) {
@@ -96,6 +102,7 @@ pub fn luneburg(count: usize) -> anyhow::Result<Case> {
         "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"luneburg\" }",
     )?;
     let (rays, impacts) = parallel_beam(count, r);
+    let pilots = parallel_beam(PILOT_RAYS, r).0;
     let exact = rays
         .iter()
         .zip(&impacts)
@@ -114,6 +121,7 @@ pub fn luneburg(count: usize) -> anyhow::Result<Case> {
         source: field.clone(),
         field,
         rays,
+        pilots,
         exact: Some(exact),
         smooth: true,
         scale: r,
@@ -127,26 +135,32 @@ pub fn fish_eye(count: usize) -> anyhow::Result<Case> {
     let field = medium(
         "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nambient_index = 1.0\nfield = { kind = \"maxwell-fish-eye\", n0 = 2.0, a = 1.0 }",
     )?;
-    let mut rays = Vec::with_capacity(count);
-    let mut exact = Vec::with_capacity(count);
-    for i in 0..count {
-        let f = (i as f64 + 0.5) / count as f64;
-        let phi = 2.399_963 * i as f64;
-        let r0 = DVec3::new(0.2 + 0.4 * f, 0.15 * phi.sin(), 0.1 * phi.cos());
-        // Directions spread over a cone around +y (never radial).
-        let d0 = DVec3::new(0.3 * phi.cos(), 1.0, 0.4 * phi.sin()).normalize();
-        rays.push((r0, d0));
-        exact.push(fish_eye_exit(r0, d0, a));
-    }
+    let rays = fish_eye_rays(count);
+    let exact = rays.iter().map(|&(r0, d0)| fish_eye_exit(r0, d0, a)).collect();
     Ok(Case {
         name: "fish-eye".into(),
         source: field.clone(),
         field,
         rays,
+        pilots: fish_eye_rays(PILOT_RAYS),
         exact: Some(exact),
         smooth: true,
         scale: a,
     })
+}
+
+/// Fish-eye rays: starts off the centre, directions spread over a cone around +y
+/// (never radial).
+fn fish_eye_rays(count: usize) -> Vec<(DVec3, DVec3)> {
+    (0..count)
+        .map(|i| {
+            let f = (i as f64 + 0.5) / count as f64;
+            let phi = 2.399_963 * i as f64;
+            let r0 = DVec3::new(0.2 + 0.4 * f, 0.15 * phi.sin(), 0.1 * phi.cos());
+            let d0 = DVec3::new(0.3 * phi.cos(), 1.0, 0.4 * phi.sin()).normalize();
+            (r0, d0)
+        })
+        .collect()
 }
 
 /// Where the fish-eye ray from `r0` (|r0| < a) along unit `d0` leaves the sphere r = a.
@@ -190,26 +204,35 @@ pub fn grin_rod(count: usize) -> anyhow::Result<Case> {
     let field = medium(
         "bounds = { box = { min = [-0.5, -0.5, -1.0], max = [0.5, 0.5, 1.0] } }\nfield = { kind = \"grin-rod\", n0 = 1.5, a = 0.8, axis = \"z\" }",
     )?;
-    let mut rays = Vec::with_capacity(count);
-    let mut exact = Vec::with_capacity(count);
-    for i in 0..count {
-        let f = (i as f64 + 0.5) / count as f64;
-        let phi = 2.399_963 * i as f64;
-        let e = DVec3::new(0.25 * f * phi.cos(), 0.25 * f * phi.sin(), -1.0);
-        let d = DVec3::new(0.1 * phi.sin(), -0.08 * phi.cos(), 1.0).normalize();
-        let origin = e - d * (0.5 / d.z);
-        rays.push((origin, d));
-        exact.push(rod_exit(e, d, n0, a, 1.0));
-    }
+    let entries = rod_entries(count);
+    let rays = entries.iter().map(|&(e, d)| (e - d * (0.5 / d.z), d)).collect();
+    let exact = entries.iter().map(|&(e, d)| rod_exit(e, d, n0, a, 1.0)).collect();
     Ok(Case {
         name: "grin-rod".into(),
         source: field.clone(),
         field,
         rays,
+        pilots: rod_entries(PILOT_RAYS)
+            .into_iter()
+            .map(|(e, d)| (e - d * (0.5 / d.z), d))
+            .collect(),
         exact: Some(exact),
         smooth: true,
         scale: DVec3::new(0.5, 0.5, 1.0).length(),
     })
+}
+
+/// Where the rod's rays enter the z = -1 face and their directions (slightly tilted).
+fn rod_entries(count: usize) -> Vec<(DVec3, DVec3)> {
+    (0..count)
+        .map(|i| {
+            let f = (i as f64 + 0.5) / count as f64;
+            let phi = 2.399_963 * i as f64;
+            let e = DVec3::new(0.25 * f * phi.cos(), 0.25 * f * phi.sin(), -1.0);
+            let d = DVec3::new(0.1 * phi.sin(), -0.08 * phi.cos(), 1.0).normalize();
+            (e, d)
+        })
+        .collect()
 }
 
 /// The rod ray entering at `e` (on z = -z_half) along unit `d` from air: exact exit
@@ -258,13 +281,19 @@ fn box_rays(count: usize, lo: DVec3, hi: DVec3) -> Vec<(DVec3, DVec3)> {
     rays
 }
 
-fn numeric_case(name: &str, field: Arc<dyn IndexField>, rays: Vec<(DVec3, DVec3)>) -> Case {
+fn numeric_case(
+    name: &str,
+    field: Arc<dyn IndexField>,
+    rays: Vec<(DVec3, DVec3)>,
+    pilots: Vec<(DVec3, DVec3)>,
+) -> Case {
     let scale = field.bounds().radius();
     Case {
         name: name.into(),
         source: field.clone(),
         field,
         rays,
+        pilots,
         exact: None,
         smooth: true,
         scale,
@@ -276,8 +305,9 @@ pub fn plume(count: usize) -> anyhow::Result<Case> {
     let field = medium(
         "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.000293\nfield = { kind = \"plume\", plumes = [ { a = 6.0e-3, center = [0.0, 0.0, 0.0], s = 0.25 }, { a = 4.0e-3, center = [0.3, -0.2, 0.4], s = 0.15 } ] }",
     )?;
-    let rays = box_rays(count, DVec3::splat(-0.6), DVec3::splat(0.6));
-    Ok(numeric_case("plume", field, rays))
+    let (lo, hi) = (DVec3::splat(-0.6), DVec3::splat(0.6));
+    let (rays, pilots) = (box_rays(count, lo, hi), box_rays(PILOT_RAYS, lo, hi));
+    Ok(numeric_case("plume", field, rays, pilots))
 }
 
 /// A user formula: a ring of warm air whose strength varies along z.
@@ -285,8 +315,9 @@ pub fn expr(count: usize) -> anyhow::Result<Case> {
     let field = medium(
         "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.0003\nfield = { kind = \"expr\", n = \"1.0003 - 5e-3*exp(-((x*x+y*y-0.12)^2)/0.005)*(1+0.5*sin(3*z))\" }",
     )?;
-    let rays = box_rays(count, DVec3::splat(-0.7), DVec3::splat(0.7));
-    Ok(numeric_case("expr", field, rays))
+    let (lo, hi) = (DVec3::splat(-0.7), DVec3::splat(0.7));
+    let (rays, pilots) = (box_rays(count, lo, hi), box_rays(PILOT_RAYS, lo, hi));
+    Ok(numeric_case("expr", field, rays, pilots))
 }
 
 /// fBm noise (3 octaves, delta_n up to 2e-3) in a ball.
@@ -295,7 +326,8 @@ pub fn noise(count: usize) -> anyhow::Result<Case> {
         "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nambient_index = 1.0003\nfield = { kind = \"noise\", noise = \"fbm\", octaves = 3, frequency = 2.0, amplitude = 2e-3, seed = 7 }",
     )?;
     let (rays, _) = parallel_beam(count, 1.0);
-    Ok(numeric_case("noise", field, rays))
+    let pilots = parallel_beam(PILOT_RAYS, 1.0).0;
+    Ok(numeric_case("noise", field, rays, pilots))
 }
 
 /// The plume case's index sampled onto an OpenVDB grid (voxels of 0.04, delta_n / 1e-3
@@ -339,7 +371,7 @@ pub fn vdb_plume(count: usize) -> anyhow::Result<Case> {
     ));
     // The field holds the grid in memory: the file is no longer needed.
     std::fs::remove_dir_all(&dir).ok();
-    let mut case = numeric_case("vdb-plume", field?, analytic.rays);
+    let mut case = numeric_case("vdb-plume", field?, analytic.rays, analytic.pilots);
     case.smooth = false;
     Ok(case)
 }
@@ -376,6 +408,7 @@ pub fn baked(
         field: Arc::new(field),
         source: base.source.clone(),
         rays: base.rays.clone(),
+        pilots: base.pilots.clone(),
         exact: base.exact.clone(),
         // The bake's own error is a floor under every method: no order is measured on it.
         smooth: false,

@@ -41,13 +41,15 @@ pub struct Chart {
     pub notes: Vec<(f64, f64, String)>,
 }
 
-const PALETTE: [RGBColor; 6] = [
+const PALETTE: [RGBColor; 7] = [
     RGBColor(214, 39, 40),
     RGBColor(255, 127, 14),
     RGBColor(188, 160, 34),
     RGBColor(44, 160, 44),
     RGBColor(31, 119, 180),
     RGBColor(148, 103, 189),
+    // `auto` (the pilot rays' choice): its own colour, after the six integrators.
+    RGBColor(23, 190, 207),
 ];
 
 /// Fonts searched for the chart text (Debian's fonts-dejavu-core first).

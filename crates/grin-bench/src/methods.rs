@@ -14,16 +14,22 @@ pub enum Policy {
     /// Error control at tolerance param * scale (embedded pair for `adaptive`, step
     /// doubling for the others).
     Adaptive,
-    /// `step = { auto = param }`: the accuracy knob, param the exit-direction error asked
-    /// for (rad).
+    /// Error control held to an error per unit path length for an exit-direction error
+    /// of param (rad): what `step = { auto = param }` runs without pilot rays
+    /// (`pilot_rays = 0`), with this integrator.
+    PerLength,
+    /// `step = { auto = param }` as a scene without an integrator gets it: pilot rays
+    /// (the case's `pilots`) choose the integrator and step
+    /// ([`grin_trace::auto`]); the method's integrator is its fallback, dopri.
     Auto,
 }
 
 impl Policy {
-    pub const ALL: [Policy; 4] = [
+    pub const ALL: [Policy; 5] = [
         Policy::Fixed,
         Policy::Heuristic,
         Policy::Adaptive,
+        Policy::PerLength,
         Policy::Auto,
     ];
     pub fn name(self) -> &'static str {
@@ -31,6 +37,7 @@ impl Policy {
             Policy::Fixed => "fixed",
             Policy::Heuristic => "heuristic",
             Policy::Adaptive => "adaptive",
+            Policy::PerLength => "per-length",
             Policy::Auto => "auto",
         }
     }
@@ -83,11 +90,19 @@ impl Method {
     pub fn label(&self) -> String {
         format!(
             "{} {} {} {}",
-            integrator_label(self.integrator),
+            self.integrator_label(),
             self.policy.name(),
             exit_name(self.exit),
             self.precision.name()
         )
+    }
+
+    /// The integrator's label, `auto` where the pilot rays choose it.
+    pub fn integrator_label(&self) -> &'static str {
+        match self.policy {
+            Policy::Auto => "auto",
+            _ => integrator_label(self.integrator),
+        }
     }
 
     /// The paper's method: Sharma's integrator, the gradient heuristic, bisection exit.
@@ -110,7 +125,7 @@ impl Method {
                 tolerance: param * scale,
                 initial: None,
             },
-            Policy::Auto => StepSpec::Auto(param),
+            Policy::PerLength | Policy::Auto => StepSpec::Auto(param),
         };
         TraceSettings {
             integrator: self.integrator,
@@ -135,7 +150,7 @@ impl Method {
                 };
                 ks.into_iter().map(|k| 2f64.powi(-k)).collect()
             }
-            Policy::Auto => {
+            Policy::PerLength | Policy::Auto => {
                 // Exit-direction errors asked for: the decades the summary names, and
                 // between (the same low-order limits as error control).
                 // (Error per unit length: euler needs ~1/asked^2 steps, verlet 1/asked.)
@@ -178,8 +193,18 @@ pub fn all_methods(quick: bool) -> Vec<Method> {
         &[ExitMethod::Hermite, ExitMethod::Bisection]
     };
     let mut v = Vec::new();
+    for &exit in exits {
+        for precision in [Precision::F64, Precision::F32] {
+            v.push(Method {
+                integrator: IntegratorKind::Adaptive,
+                policy: Policy::Auto,
+                exit,
+                precision,
+            });
+        }
+    }
     for &integrator in &IntegratorKind::ALL {
-        for policy in Policy::ALL {
+        for policy in Policy::ALL.into_iter().filter(|&p| p != Policy::Auto) {
             for &exit in exits {
                 for precision in [Precision::F64, Precision::F32] {
                     v.push(Method {

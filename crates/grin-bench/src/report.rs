@@ -24,7 +24,7 @@ fn select<'a>(run: &'a AccuracyRun, case: &str, precision: Precision) -> Vec<&'a
 pub fn point_name(p: &Point) -> String {
     let param = match p.method.policy {
         Policy::Adaptive => format!("tol {:.0e}", p.param),
-        Policy::Auto => format!("{:.0e} rad", p.param),
+        Policy::PerLength | Policy::Auto => format!("{:.0e} rad", p.param),
         _ => format!("ds {}", fraction(p.param)),
     };
     format!("{} {} {} ({} exit)", p.integrator, p.policy, param, p.exit)
@@ -46,7 +46,7 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
     let mut curves = Vec::new();
     let integrators = grin_scene::IntegratorKind::ALL;
     for (ci, &kind) in integrators.iter().enumerate() {
-        for policy in Policy::ALL {
+        for policy in Policy::ALL.into_iter().filter(|&p| p != Policy::Auto) {
             for exit in [ExitMethod::Hermite, ExitMethod::Bisection] {
                 // Bisection exits are drawn for the paper's method only (the CSV has all).
                 let paper =
@@ -83,12 +83,27 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
                         Policy::Fixed => LineKind::Solid,
                         Policy::Heuristic => LineKind::Dotted,
                         Policy::Adaptive => LineKind::Dashed,
-                        Policy::Auto => LineKind::Thick,
+                        Policy::PerLength | Policy::Auto => LineKind::Thick,
                     },
                     points: c,
                 });
             }
         }
+    }
+    let mut auto: Vec<(f64, f64)> = pts
+        .iter()
+        .filter(|p| p.method.policy == Policy::Auto && p.method.exit == ExitMethod::Hermite)
+        .filter(|p| !p.failed())
+        .map(|p| (p.evals_per_ray, p.err_dir))
+        .collect();
+    if !auto.is_empty() {
+        auto.sort_by(|a, b| a.0.total_cmp(&b.0));
+        curves.push(Curve {
+            label: "auto (pilot rays choose)".into(),
+            color: integrators.len(),
+            style: LineKind::Thick,
+            points: auto,
+        });
     }
     let front_idx = pareto(&pts);
     let front = front_idx
@@ -173,6 +188,8 @@ pub struct AutoRow {
     pub case: String,
     pub precision: &'static str,
     pub integrator: &'static str,
+    /// `auto`: what the pilot rays chose.
+    pub chosen: String,
     pub asked: f64,
     pub delivered: f64,
     /// delivered / asked (<= 1: the knob kept its word).
@@ -189,7 +206,10 @@ pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
     for p in run
         .points
         .iter()
-        .filter(|p| p.method.policy == Policy::Auto && p.method.exit == ExitMethod::Hermite)
+        .filter(|p| {
+            matches!(p.method.policy, Policy::Auto | Policy::PerLength)
+                && p.method.exit == ExitMethod::Hermite
+        })
     {
         let same: Vec<&Point> = select(run, &p.case, p.method.precision);
         let fixed: Vec<&Point> = same
@@ -206,6 +226,7 @@ pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
             case: p.case.clone(),
             precision: p.precision,
             integrator: p.integrator,
+            chosen: p.chosen.clone(),
             asked: p.param,
             delivered: p.err_dir,
             ratio: p.err_dir / p.param,
@@ -283,15 +304,22 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
     );
     let _ = writeln!(
         s,
-        "\n## The accuracy knob: `step = {{ auto = asked }}` (dopri and sharma, f64)\n"
+        "\n## The accuracy knob: `step = {{ auto = asked }}` (f64): `auto` (the pilot rays' choice) and error control per length with dopri and sharma\n"
     );
     let knob = auto_rows(run)
         .into_iter()
-        .filter(|r| r.precision == "f64" && (r.integrator == "dopri" || r.integrator == "sharma"))
+        .filter(|r| {
+            r.precision == "f64" && matches!(r.integrator, "auto" | "dopri" | "sharma")
+        })
         .map(|r| {
+            let how = if r.chosen.is_empty() {
+                format!("{} per-length", r.integrator)
+            } else {
+                format!("auto: {}", r.chosen)
+            };
             vec![
                 r.case.to_string(),
-                r.integrator.to_string(),
+                how,
                 format!("{:.0e}", r.asked),
                 format!("{:.1e}", r.delivered),
                 format!("{:.2}", r.ratio),
@@ -304,7 +332,7 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
         &mut s,
         &[
             "case",
-            "integrator",
+            "method",
             "asked (rad)",
             "delivered",
             "delivered / asked",

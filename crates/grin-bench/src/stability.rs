@@ -368,7 +368,7 @@ pub struct Column {
 impl Column {
     pub fn label(&self) -> String {
         let p = match self.method.policy {
-            Policy::Adaptive | Policy::Auto => format!("{:.0e}", self.param),
+            Policy::Adaptive | Policy::PerLength | Policy::Auto => format!("{:.0e}", self.param),
             _ => format!("R/{}", (1.0 / self.param).round()),
         };
         format!(

@@ -237,8 +237,8 @@ fn stability_matrix_verdicts() {
 }
 
 #[test]
-fn the_accuracy_knob_keeps_its_word_on_unbaked_fields() {
-    // step = { auto = asked }: the worst exit-direction error stays within 3x of what was
+fn error_control_per_length_keeps_its_word_on_unbaked_fields() {
+    // step = { auto = asked } without pilots: the worst exit-direction error stays within 3x of what was
     // asked on the analytic fields (the baked ones have the bake's own floor), for every
     // order (error per unit length; measured worst 1.41x, rk4 on the rod at 1e-8; with a
     // per-step tolerance verlet delivered up to 124x).
@@ -258,7 +258,7 @@ fn the_accuracy_knob_keeps_its_word_on_unbaked_fields() {
                 let p = run_point(
                     &case,
                     &r,
-                    method(kind, Policy::Auto, ExitMethod::Hermite),
+                    method(kind, Policy::PerLength, ExitMethod::Hermite),
                     asked,
                 );
                 assert!(
@@ -313,4 +313,82 @@ fn vdb_plume_case_is_the_plume_through_a_cache() {
         }
     }
     assert!(checked > 0, "no ray is deflected by over 1e-3 rad");
+}
+
+/// Cheapest fixed-step run of any integrator (steps R/2 .. R/512) within `target`.
+fn best_fixed(case: &cases::Case, r: &accuracy::Reference, target: f64) -> Option<f64> {
+    let mut best: Option<f64> = None;
+    for kind in IntegratorKind::ALL {
+        for k in 1..=9 {
+            let p = run_point(
+                case,
+                r,
+                method(kind, Policy::Fixed, ExitMethod::Hermite),
+                2f64.powi(-k),
+            );
+            if !p.failed() && p.err_dir <= target {
+                best = Some(best.map_or(p.evals_per_ray, |b: f64| b.min(p.evals_per_ray)));
+                break; // shorter steps of this integrator cost more
+            }
+        }
+    }
+    best
+}
+
+#[test]
+fn auto_delivers_what_is_asked_at_the_cost_of_the_best_fixed_step() {
+    // The default policy: pilot rays (a third of the case's rays) choose the integrator
+    // and step. Issue 10's bar: within 3x of the asked error on every unbaked field;
+    // at 1e-4 rad on the plume, expr and noise fields at most 1.5x the evaluations of
+    // the best fixed step found in hindsight and at least 4x fewer than the paper's
+    // method (sharma + heuristic + bisection, its cheapest run within 1e-4).
+    let auto = method(IntegratorKind::Adaptive, Policy::Auto, ExitMethod::Hermite);
+    for case in [
+        cases::luneburg(24).unwrap(),
+        cases::grin_rod(24).unwrap(),
+        cases::fish_eye(24).unwrap(),
+        cases::plume(36).unwrap(),
+        cases::expr(36).unwrap(),
+        cases::noise(32).unwrap(),
+    ] {
+        let r = reference(&case).unwrap();
+        for asked in [1e-2, 1e-4, 1e-6] {
+            let p = run_point(&case, &r, auto, asked);
+            assert!(
+                !p.chosen.is_empty() && p.err_dir <= 3.0 * asked,
+                "{}: asked {asked:e}, delivered {:e} ({})",
+                case.name,
+                p.err_dir,
+                p.chosen
+            );
+            if asked == 1e-4 && ["plume", "expr", "noise"].contains(&case.name.as_str()) {
+                let fixed = best_fixed(&case, &r, asked).unwrap();
+                assert!(
+                    p.evals_per_ray <= 1.5 * fixed,
+                    "{}: auto {:.1} evals/ray ({}), best fixed step {fixed:.1}",
+                    case.name,
+                    p.evals_per_ray,
+                    p.chosen
+                );
+                let paper = (1..=9)
+                    .map(|k| {
+                        run_point(
+                            &case,
+                            &r,
+                            method(IntegratorKind::Sharma, Policy::Heuristic, ExitMethod::Bisection),
+                            2f64.powi(-k),
+                        )
+                    })
+                    .find(|q| !q.failed() && q.err_dir <= asked)
+                    .unwrap();
+                assert!(
+                    4.0 * p.evals_per_ray <= paper.evals_per_ray,
+                    "{}: auto {:.1} evals/ray, the paper's method {:.1}",
+                    case.name,
+                    p.evals_per_ray,
+                    paper.evals_per_ray
+                );
+            }
+        }
+    }
 }

@@ -89,7 +89,7 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     if !scene.objects.is_empty() {
         flags |= FLAG_HAS_OBJECTS;
     }
-    params.integrator = integrator_code(s.integrator);
+    params.integrator = integrator_code(s.integrator());
     params.max_steps = s.max_steps;
     params.flags = flags;
     match &scene.sky {

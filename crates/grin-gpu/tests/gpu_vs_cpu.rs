@@ -289,7 +289,7 @@ fn every_integrator_step_policy_and_exit_matches_cpu() {
     ];
     for (integrator, step, exit, macro_cells) in cases {
         let mut scene = base.clone();
-        scene.render.integrator = integrator;
+        scene.render.integrator = Some(integrator);
         scene.render.step = step;
         scene.render.exit = exit;
         scene.render.macro_cells = macro_cells;
@@ -536,7 +536,7 @@ fn adaptive_steps_at_a_tolerance_below_f32_roundoff_do_not_stall() {
     let mut scene = grin_scene::load_scene(&path).expect("scene");
     (scene.render.width, scene.render.height, scene.render.spp) = (80, 45, 1);
     // Sharma with step doubling (the embedded pair was not affected).
-    scene.render.integrator = IntegratorKind::Sharma;
+    scene.render.integrator = Some(IntegratorKind::Sharma);
     scene.render.step = StepSpec::Adaptive {
         tolerance: 1e-10,
         initial: None,
@@ -590,7 +590,7 @@ fn renderers_with_the_same_constants_share_compiled_pipelines() {
         "the second renderer compiled again"
     );
     assert_eq!(a, b);
-    scene.render.integrator = IntegratorKind::Rk4;
+    scene.render.integrator = Some(IntegratorKind::Rk4);
     let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field)).expect("rs");
     let c = render(&rs);
     assert_eq!(ctx.pipelines_compiled(), 2);

@@ -90,7 +90,7 @@ fn setup_file(
     interp: Interp,
 ) -> Setup {
     let mut scene: Scene = load_scene(path).unwrap();
-    scene.render.integrator = integrator;
+    scene.render.integrator = Some(integrator);
     scene.render.step = step;
     scene.render.exit = exit;
     let dir = path.parent().unwrap();

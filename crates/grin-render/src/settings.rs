@@ -33,7 +33,7 @@ pub const MIN_STEP_FRACTION: f64 = 1e-9;
 impl TraceSettings {
     pub fn from_render(render: &RenderSettings) -> Self {
         TraceSettings {
-            integrator: render.integrator,
+            integrator: render.integrator(),
             step: render.step,
             max_steps: render.max_steps,
             exit: render.exit,

@@ -638,6 +638,30 @@ pub enum StepSpec {
 /// the medium's diameter (2 radii) accumulates at most the asked error.
 pub const AUTO_TOL_PER_RAD: f64 = 0.5;
 
+/// The default step: `auto` at this exit-direction error (rad), about a thirtieth of a
+/// pixel of a 60 degree, 640-pixel-wide view.
+pub const DEFAULT_AUTO_ACCURACY: f64 = 1e-4;
+
+/// Pilot rays a render or a ray table traces to resolve `auto` (`[render] pilot_rays`).
+pub const DEFAULT_PILOT_RAYS: u32 = 64;
+
+/// The integrator a scene runs when it names none and the pilots do not choose: the
+/// Dormand-Prince pair for `auto` (its error control is the cheapest per length,
+/// docs/accuracy.md), else Sharma's (the paper's).
+pub fn default_integrator(step: &StepSpec) -> IntegratorKind {
+    match step {
+        StepSpec::Auto(_) => IntegratorKind::Adaptive,
+        _ => IntegratorKind::Sharma,
+    }
+}
+
+impl RenderSettings {
+    /// The integrator the scene names, or [`default_integrator`] of its step.
+    pub fn integrator(&self) -> IntegratorKind {
+        self.integrator.unwrap_or_else(|| default_integrator(&self.step))
+    }
+}
+
 /// How the exit point on the bounds is found on the step that leaves the medium.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -657,8 +681,13 @@ pub struct RenderSettings {
     pub height: u32,
     pub spp: u32,
     pub max_depth: u32,
-    pub integrator: IntegratorKind,
+    /// `None` (the key left out): with `step = { auto = ... }` the pilot rays choose the
+    /// integrator too; with any other step, sharma.
+    pub integrator: Option<IntegratorKind>,
     pub step: StepSpec,
+    /// Rays traced before the render to resolve `step = { auto = ... }`
+    /// (`grin_trace::auto`); 0: no pilots, error control per length on every ray.
+    pub pilot_rays: u32,
     /// Per-ray cap on integration steps; a ray that hits it ends as `max_steps`.
     pub max_steps: u32,
     pub exit: ExitMethod,
@@ -693,8 +722,9 @@ impl Default for RenderSettings {
             height: 360,
             spp: 1,
             max_depth: 6,
-            integrator: IntegratorKind::Sharma,
-            step: StepSpec::Fixed(0.01),
+            integrator: None,
+            step: StepSpec::Auto(DEFAULT_AUTO_ACCURACY),
+            pilot_rays: DEFAULT_PILOT_RAYS,
             max_steps: DEFAULT_MAX_STEPS,
             exit: ExitMethod::Hermite,
             macro_cells: true,

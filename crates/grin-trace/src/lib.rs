@@ -1,6 +1,7 @@
 //! The CPU reference tracer: integrators (t-parameter form r'' = n grad n), step policies,
 //! boundaries, the per-ray loop and ray tables.
 
+pub mod auto;
 pub mod boundary;
 pub mod integrate;
 pub mod step;

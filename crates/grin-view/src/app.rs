@@ -717,11 +717,12 @@ impl App {
 
     fn controls(&mut self, ui: &mut egui::Ui) {
         let s = &mut self.settings;
+        let integrator_name = |k: Option<IntegratorKind>| k.map_or("auto", |k| k.name());
         egui::ComboBox::from_label("integrator")
-            .selected_text(s.integrator.name())
+            .selected_text(integrator_name(s.integrator))
             .show_ui(ui, |ui| {
-                for k in IntegratorKind::ALL {
-                    ui.selectable_value(&mut s.integrator, k, k.name());
+                for k in std::iter::once(None).chain(IntegratorKind::ALL.map(Some)) {
+                    ui.selectable_value(&mut s.integrator, k, integrator_name(k));
                 }
             });
         let mut kind = StepKind::of(&s.step);

@@ -25,6 +25,7 @@ use grin_gpu::{GpuContext, GpuRenderer};
 use grin_render::camera::PinholeCamera;
 use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
+use grin_render::settings::TraceSettings;
 use grin_scene::{FieldSpec, Interpolation, Scene};
 
 use crate::settings::ViewSettings;
@@ -89,6 +90,31 @@ struct Gpu<'a> {
     grid: Option<Arc<BakedField>>,
     /// The scene's objects, lights, sky and medium as JSON: what the renderer holds.
     static_key: String,
+    /// `step = { auto = ... }` as the pilot rays resolved it: the settings asked (as
+    /// JSON) and the tracer settings chosen, kept while only the camera moves.
+    auto: Option<(String, TraceSettings)>,
+}
+
+/// Resolve an `auto` step of `scene` by pilot rays (f32, as the GPU traces), or reuse
+/// `cached` when the step, integrator and pilot count asked are the same.
+fn resolve_auto(scene: &mut RenderScene, cached: &mut Option<(String, TraceSettings)>) {
+    if !matches!(scene.settings.step, grin_scene::StepSpec::Auto(_)) {
+        return;
+    }
+    let s = &scene.settings;
+    let key = json(&(s.step, s.integrator, s.pilot_rays));
+    if let Some((k, t)) = cached.as_ref()
+        && *k == key
+    {
+        grin_trace::auto::apply(scene, t);
+        return;
+    }
+    if let Some(m) = &mut scene.medium {
+        m.trace = TraceSettings::from_render(&scene.settings);
+    }
+    if let Some(c) = grin_trace::auto::resolve_scene::<f32>(scene) {
+        *cached = Some((key, c.settings));
+    }
 }
 
 struct Accum {
@@ -251,12 +277,13 @@ impl<'a> Session<'a> {
             let camera = PinholeCamera::new(&applied.camera, width, height)
                 .context("camera: the view is degenerate")?;
             if let Some(m) = &g.scene.medium {
-                grin_render::settings::TraceSettings::from_render(&applied.render)
+                TraceSettings::from_render(&applied.render)
                     .validate_for(&m.bounds)
                     .context("[render]")?;
             }
             g.scene.camera = camera;
             g.scene.settings = applied.render.clone();
+            resolve_auto(&mut g.scene, &mut g.auto);
             if !g.renderer.retarget(&g.scene, first_sample, spp_total)? {
                 // Other pipelines (integrator, step policy, flags) or a bigger image.
                 let mut renderer = GpuRenderer::new(self.ctx, &g.scene, g.grid.as_deref())?;
@@ -275,6 +302,8 @@ impl<'a> Session<'a> {
                 .with_context(|| self.path.display().to_string())?;
             // A background plate stays where the scene file's camera sees it.
             scene.pin_plate_to(&self.scene.camera);
+            let mut auto = None;
+            resolve_auto(&mut scene, &mut auto);
             let mut renderer = GpuRenderer::new(self.ctx, &scene, grid.as_deref())?;
             renderer.retarget(&scene, first_sample, spp_total)?;
             self.warnings.extend(renderer.warnings().iter().cloned());
@@ -289,6 +318,7 @@ impl<'a> Session<'a> {
                 scene,
                 grid,
                 static_key,
+                auto,
             });
             rebuilt = true;
         }

@@ -87,7 +87,8 @@ impl StepKind {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewSettings {
     pub camera: OrbitCamera,
-    pub integrator: IntegratorKind,
+    /// `None`: as the scene leaves it (with `auto` steps, chosen by the pilot rays).
+    pub integrator: Option<IntegratorKind>,
     pub step: StepSpec,
     /// How the field's grid is sampled: `None` as baked (the GPU bake picks tricubic where
     /// trilinear misses the error budget; a baked file's own or the scene's choice).

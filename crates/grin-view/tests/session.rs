@@ -90,7 +90,7 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
 
     // Integrator: rk4 spends 4 field evaluations a step, euler 1.
     let mut v = base.clone();
-    v.integrator = IntegratorKind::Euler;
+    v.integrator = Some(IntegratorKind::Euler);
     let r = render(&mut s, &v);
     assert!(
         r.evals_per_ray < 0.5 * r0.evals_per_ray,
@@ -258,9 +258,9 @@ fn reload_follows_the_file_and_keeps_the_last_good_scene() {
     new_file.max_spp = 1;
     let mut edited = v.clone();
     edited.aov = Aov::Steps;
-    edited.integrator = IntegratorKind::Sharma;
+    edited.integrator = Some(IntegratorKind::Sharma);
     edited.rebase(&v, &new_file);
-    assert_eq!(edited.integrator, IntegratorKind::Sharma);
+    assert_eq!(edited.integrator, Some(IntegratorKind::Sharma));
     assert_eq!(edited.aov, Aov::Steps);
     let r = render(&mut s, &v);
     assert!(beauty_diff(&r, &r0) > 1e-2, "{}", beauty_diff(&r, &r0));

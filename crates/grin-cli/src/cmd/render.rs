@@ -126,6 +126,9 @@ struct Summary {
     /// `[optics]`: the mode's output (channels written, ranges, PNGs).
     #[serde(skip_serializing_if = "Option::is_none")]
     optics: Option<serde_json::Value>,
+    /// `step = { auto = ... }`: what the pilot rays chose (and every candidate tried).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    auto: Option<grin_trace::auto::AutoChoice>,
 }
 
 /// The field grid on the device.
@@ -284,12 +287,21 @@ fn render_one(
         scene.render.spp = 1;
         scene.render.jitter = false;
     }
-    let rs = RenderScene::new(&scene, scene_dir, field.clone())
+    let mut rs = RenderScene::new(&scene, scene_dir, field.clone())
         .with_context(|| format!("{}", args.scene.display()))?;
+    // `step = { auto = ... }`: pilot rays choose the integrator and step, in the
+    // backend's precision, before anything is traced.
+    let auto = match args.backend {
+        Backend::Cpu => grin_trace::auto::resolve_scene::<f64>(&mut rs),
+        Backend::Gpu => grin_trace::auto::resolve_scene::<f32>(&mut rs),
+    };
     let bos_scenes = match &bos_scene {
         Some(s) => {
-            let with = RenderScene::new(s, scene_dir, field.clone())
+            let mut with = RenderScene::new(s, scene_dir, field.clone())
                 .with_context(|| format!("{}", args.scene.display()))?;
+            if let Some(a) = &auto {
+                grin_trace::auto::apply(&mut with, &a.settings);
+            }
             let mut bare = s.clone();
             bare.medium = None;
             let without = RenderScene::new(&bare, scene_dir, None)
@@ -403,6 +415,7 @@ fn render_one(
             gpu_field,
             comparison: None,
             optics: Some(optics),
+            auto,
         };
         return Ok((summary, to_stream));
     }
@@ -555,6 +568,7 @@ fn render_one(
         bake_cache,
         gpu_field,
         optics,
+        auto,
     };
     let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
     if stuck > 0 {
@@ -708,6 +722,14 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
             summary.evals_per_ray,
             wrote,
         ));
+        if let Some(a) = &summary.auto {
+            report(format!(
+                "auto {:.0e} rad: {}, chosen by pilot rays for {:.0} field evals",
+                a.asked,
+                a.describe(),
+                a.spent_evals as f64
+            ));
+        }
         if let Some(c) = &summary.comparison {
             let wrote = c
                 .difference_png

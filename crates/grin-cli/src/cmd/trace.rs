@@ -129,6 +129,9 @@ struct Summary<'a> {
     mean_evals: f64,
     seconds: f64,
     rays_per_second: f64,
+    /// `step = { auto = ... }`: what the pilot rays chose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    auto: Option<grin_trace::auto::AutoChoice>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -165,6 +168,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let rays = table::read_rays(&args.rays)?;
     let rows = &rays.rows;
+    // `step = { auto = ... }`: pilot rays (some of the table's own) choose the method.
+    let free_integrator = scene.render.integrator.is_none() && args.integrator.is_none();
+    let pilots: Vec<_> = rows.iter().map(|r| (r.origin, r.dir)).collect();
+    let pilots = grin_trace::auto::spread(&pilots, scene.render.pilot_rays as usize);
+    let auto = if pilots.is_empty() {
+        None
+    } else if args.f32 {
+        grin_trace::auto::choose::<f32>(field.as_ref(), &settings, free_integrator, &pilots)
+    } else {
+        grin_trace::auto::choose::<f64>(field.as_ref(), &settings, free_integrator, &pilots)
+    };
+    if let Some(a) = &auto {
+        settings = a.settings;
+    }
     let format = match args.format {
         Some(Format::Json) => TableFormat::Json,
         Some(Format::Csv) => TableFormat::Csv,
@@ -214,6 +231,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.mean_evals,
         args.output.display()
     );
+    if let Some(a) = &auto {
+        eprintln!(
+            "auto {:.0e} rad: {}, chosen by pilot rays for {} field evals",
+            a.asked,
+            a.describe(),
+            a.spent_evals
+        );
+    }
     if args.json {
         let summary = Summary {
             output: &args.output,
@@ -235,6 +260,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             } else {
                 0.0
             },
+            auto,
         };
         // Where the table itself went to a stream (`-o -`, a device: it may be stdout), the
         // summary goes to stderr, as `grin render` does.

@@ -201,8 +201,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bake_for_gpu(field.as_ref(), bake_res)
                 .with_context(|| format!("{}: baking", path.display()))?,
         );
-        let rs = RenderScene::new(&scene, dir, Some(baked.clone() as Arc<dyn IndexField>))
+        let mut rs = RenderScene::new(&scene, dir, Some(baked.clone() as Arc<dyn IndexField>))
             .with_context(|| path.display().to_string())?;
+        grin_trace::auto::resolve_scene::<f32>(&mut rs);
         prepared.push((label, rs, baked));
     }
 
@@ -242,7 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // makes three), so its ray-steps/s is directly comparable with the raw sample rate.
     let closeup_verlet = {
         let mut rs = closeup.1.clone();
-        rs.settings.integrator = grin_scene::IntegratorKind::Verlet;
+        rs.settings.integrator = Some(grin_scene::IntegratorKind::Verlet);
         if let Some(m) = rs.medium.as_mut() {
             m.trace.integrator = grin_scene::IntegratorKind::Verlet;
         }

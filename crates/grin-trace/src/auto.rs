@@ -1,0 +1,325 @@
+//! `step = { auto = RAD }` resolved by pilot rays: before a render or a ray table, a few
+//! of its own rays are traced with error control at a fiftieth of the asked error (the
+//! pilots' reference), then with fixed steps of each candidate integrator, halving the
+//! step (or jumping by the measured order) until the worst pilot's exit direction is
+//! within the asked error. The cheapest candidate that meets it on every pilot, or the
+//! per-length error control the tracer runs for an unresolved `auto` when that is
+//! cheaper, traces the rest.
+//!
+//! Why: error control pays six evaluations a dopri step and keeps its steps short enough
+//! for the worst place in the field everywhere; on a weak field a low-order method with
+//! long fixed steps meets the same error at a fraction of the cost, and which one does is
+//! a property of the field and the rays, which the pilots measure (docs/accuracy.md).
+//! The pilots see only the rays they are given: a render's secondary rays and pixels
+//! between the pilots are assumed no harder than the worst pilot.
+
+use glam::DVec3;
+use grin_field::{IndexField, Real};
+use grin_scene::{IntegratorKind, StepSpec};
+use rayon::prelude::*;
+
+use crate::trace::{RayResult, RayStatus, TraceSettings, trace_ray};
+
+/// The pilots' reference runs error control at this fraction of the asked error.
+pub const REFERENCE_FRACTION: f64 = 0.02;
+/// A candidate must meet this fraction of the asked error on every pilot (the rays
+/// between the pilots may be a little harder than the worst of them).
+pub const PILOT_TARGET: f64 = 0.7;
+/// Fixed steps tried per integrator at most.
+pub const MAX_TRIES: u32 = 10;
+/// The first fixed step tried, as a fraction of the medium's radius (the tracer's
+/// feature and length-scale caps shorten it where the field needs).
+pub const FIRST_STEP_REL: f64 = 0.5;
+/// No fixed step shorter than this fraction of the radius is tried: error control is
+/// cheaper long before.
+pub const SHORTEST_STEP_REL: f64 = 1.0 / 4096.0;
+
+/// One candidate the pilots measured.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Candidate {
+    pub integrator: &'static str,
+    /// Fixed step (world length); `None`: per-length error control.
+    pub fixed_step: Option<f64>,
+    /// Worst exit-direction error over the pilots, rad (infinite: a pilot ended with
+    /// another status than the reference's).
+    pub error: f64,
+    pub evals_per_ray: f64,
+}
+
+/// What the pilots chose.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AutoChoice {
+    /// The exit-direction error asked for, rad.
+    pub asked: f64,
+    #[serde(skip)]
+    pub settings: TraceSettings,
+    /// The chosen candidate (its error and cost on the pilots).
+    pub chosen: Candidate,
+    /// Pilot rays that met the medium.
+    pub pilot_rays: usize,
+    /// Field evaluations the choice cost (reference and every candidate).
+    pub spent_evals: u64,
+    /// Every candidate measured, in the order tried.
+    pub tried: Vec<Candidate>,
+}
+
+impl AutoChoice {
+    /// `verlet, fixed ds 0.0625 (pilots: 3.1e-5 rad, 18 evals/ray)`.
+    pub fn describe(&self) -> String {
+        let c = &self.chosen;
+        let how = match c.fixed_step {
+            Some(ds) => format!("fixed ds {ds:.4}"),
+            None => "error control per length".into(),
+        };
+        format!(
+            "{}, {how} (worst of {} pilots: {:.1e} rad, {:.0} evals/ray)",
+            c.integrator, self.pilot_rays, c.error, c.evals_per_ray
+        )
+    }
+}
+
+/// Worst angle between the exits of `runs` and `reference` (infinite where a status
+/// differs) and the mean evaluations per ray.
+fn measure(runs: &[RayResult], reference: &[RayResult]) -> (f64, f64) {
+    let mut worst: f64 = 0.0;
+    let mut evals = 0u64;
+    for (r, e) in runs.iter().zip(reference) {
+        evals += r.evals;
+        if r.status != e.status {
+            worst = f64::INFINITY;
+            continue;
+        }
+        if r.status == RayStatus::Exited {
+            let (a, b) = (
+                r.direction.normalize_or_zero(),
+                e.direction.normalize_or_zero(),
+            );
+            let ang = a.cross(b).length().atan2(a.dot(b));
+            worst = worst.max(if ang.is_nan() { f64::INFINITY } else { ang });
+        }
+    }
+    (worst, evals as f64 / runs.len().max(1) as f64)
+}
+
+fn trace_all<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    rays: &[(DVec3, DVec3)],
+) -> Vec<RayResult> {
+    rays.par_iter()
+        .map(|&(o, d)| trace_ray::<R>(field, settings, o, d))
+        .collect()
+}
+
+/// Resolve `settings` (whose step is `auto`) on `pilots`, tracing in precision `R`.
+/// `free_integrator`: the scene named no integrator, so every one is a candidate; else
+/// only `settings.integrator`. `None` when the step is not `auto` or no pilot meets the
+/// medium (then the tracer's error control runs: it needs no pilots).
+pub fn choose<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    free_integrator: bool,
+    pilots: &[(DVec3, DVec3)],
+) -> Option<AutoChoice> {
+    let StepSpec::Auto(asked) = settings.step else {
+        return None;
+    };
+    let radius = field.bounds().radius();
+    let reference_settings = TraceSettings {
+        integrator: IntegratorKind::Adaptive,
+        step: StepSpec::Auto(asked * REFERENCE_FRACTION),
+        ..*settings
+    };
+    let reference = trace_all::<f64>(field, &reference_settings, pilots);
+    let mut spent: u64 = reference.iter().map(|r| r.evals).sum();
+    // Only the pilots that reach the medium say anything about it.
+    let (rays, reference): (Vec<(DVec3, DVec3)>, Vec<RayResult>) = pilots
+        .iter()
+        .zip(reference)
+        .filter(|(_, r)| r.status != RayStatus::Missed)
+        .map(|(p, r)| (*p, r))
+        .unzip();
+    if rays.is_empty() {
+        return None;
+    }
+    let mut tried = Vec::new();
+    let mut run = |s: &TraceSettings, fixed_step: Option<f64>| {
+        let out = trace_all::<R>(field, s, &rays);
+        spent += out.iter().map(|r| r.evals).sum::<u64>();
+        let (error, evals_per_ray) = measure(&out, &reference);
+        let c = Candidate {
+            integrator: label(s.integrator),
+            fixed_step,
+            error,
+            evals_per_ray,
+        };
+        tried.push(c);
+        c
+    };
+    let target = PILOT_TARGET * asked;
+    // Error control per length: what an unresolved `auto` runs.
+    let control_integrator = settings.integrator;
+    let control_settings = TraceSettings {
+        integrator: control_integrator,
+        ..*settings
+    };
+    let control = run(&control_settings, None);
+    let mut best: (Candidate, TraceSettings) = (control, control_settings);
+    let kinds: Vec<IntegratorKind> = if free_integrator {
+        IntegratorKind::ALL.to_vec()
+    } else {
+        vec![settings.integrator]
+    };
+    for kind in kinds {
+        let order = f64::from(crate::integrate::order(kind));
+        let mut ds = FIRST_STEP_REL * radius;
+        for _ in 0..MAX_TRIES {
+            let s = TraceSettings {
+                integrator: kind,
+                step: StepSpec::Fixed(ds),
+                ..*settings
+            };
+            let c = run(&s, Some(ds));
+            if c.evals_per_ray >= best.0.evals_per_ray {
+                break; // shorter steps only cost more
+            }
+            if c.error <= target {
+                best = (c, s);
+                break;
+            }
+            // Jump by the measured order (a little past, so the next try is likely to
+            // meet the target), at least halving, at most by 8.
+            let factor = if c.error.is_finite() && c.error > 0.0 {
+                (0.8 * (target / c.error).powf(1.0 / order)).clamp(0.125, 0.5)
+            } else {
+                0.5
+            };
+            ds *= factor;
+            if ds < SHORTEST_STEP_REL * radius {
+                break;
+            }
+        }
+    }
+    Some(AutoChoice {
+        asked,
+        settings: best.1,
+        chosen: best.0,
+        pilot_rays: rays.len(),
+        spent_evals: spent,
+        tried,
+    })
+}
+
+/// The integrator as charts and summaries name it (`adaptive` is the Dormand-Prince pair).
+pub fn label(kind: IntegratorKind) -> &'static str {
+    match kind {
+        IntegratorKind::Adaptive => "dopri",
+        k => k.name(),
+    }
+}
+
+/// Up to `count` of `rays`, spread over the list: the j-th is ray j k + (j mod k)
+/// (k = len / count), so a list that is a grid row by row is sampled in every column,
+/// not in every k-th one only.
+pub fn spread(rays: &[(DVec3, DVec3)], count: usize) -> Vec<(DVec3, DVec3)> {
+    if count == 0 || rays.is_empty() {
+        return Vec::new();
+    }
+    let k = rays.len().div_ceil(count);
+    (0..count)
+        .map(|j| j * k + j % k)
+        .take_while(|&i| i < rays.len())
+        .map(|i| rays[i])
+        .collect()
+}
+
+/// Pilot rays of a camera: the centres of a coarse grid of pixels (about `count`, in
+/// the image's aspect ratio).
+pub fn camera_pilots(
+    camera: &grin_render::camera::PinholeCamera,
+    count: usize,
+) -> Vec<(DVec3, DVec3)> {
+    if count == 0 {
+        return Vec::new();
+    }
+    let (w, h) = (camera.width.max(1) as f64, camera.height.max(1) as f64);
+    let nx = ((count as f64 * w / h).sqrt().round() as u32).clamp(1, camera.width.max(1));
+    let ny = ((count as f64 / f64::from(nx)).round() as u32).clamp(1, camera.height.max(1));
+    let mut out = Vec::with_capacity((nx * ny) as usize);
+    for j in 0..ny {
+        for i in 0..nx {
+            let px = ((f64::from(i) + 0.5) / f64::from(nx) * w) as u32;
+            let py = ((f64::from(j) + 0.5) / f64::from(ny) * h) as u32;
+            out.push(camera.camera_ray(px, py, 0.5, 0.5));
+        }
+    }
+    out
+}
+
+/// Pilot rays for a medium seen from nowhere in particular (a camera whose view misses
+/// it: secondary rays may still cross it): `count` rays from a sphere of three radii
+/// around it towards points spread over its inner half, directions on a Fibonacci
+/// sphere.
+pub fn generic_pilots(bounds: &grin_field::Bounds, count: usize) -> Vec<(DVec3, DVec3)> {
+    let center = bounds.center();
+    let radius = bounds.radius();
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..count)
+        .map(|i| {
+            let f = (i as f64 + 0.5) / count as f64;
+            let z = 1.0 - 2.0 * f;
+            let rho = (1.0 - z * z).max(0.0).sqrt();
+            let phi = golden * i as f64;
+            let dir = DVec3::new(rho * phi.cos(), rho * phi.sin(), z);
+            // Aim off the centre by up to half the radius, across the direction.
+            let side = dir.any_orthonormal_vector();
+            let aim = center + side * (0.5 * radius * f);
+            (aim - dir * 3.0 * radius, dir)
+        })
+        .collect()
+}
+
+/// Fewer camera pilots than this meeting the medium, and generic ones are added.
+pub const MIN_CAMERA_PILOTS: usize = 8;
+
+/// The pilots of a render: camera rays that meet the medium (`[render] pilot_rays` of
+/// them at most), topped up with [`generic_pilots`] when the view barely sees it.
+pub fn scene_pilots(rs: &grin_render::scene::RenderScene) -> Vec<(DVec3, DVec3)> {
+    let count = rs.settings.pilot_rays as usize;
+    let Some(m) = &rs.medium else {
+        return Vec::new();
+    };
+    let mut pilots: Vec<(DVec3, DVec3)> = camera_pilots(&rs.camera, count)
+        .into_iter()
+        .filter(|&(o, d)| m.bounds.contains(o) || m.bounds.intersect(o, d).is_some())
+        .collect();
+    if count > 0 && pilots.len() < MIN_CAMERA_PILOTS.min(count) {
+        pilots.extend(generic_pilots(&m.bounds, count));
+    }
+    pilots
+}
+
+/// Resolve the `auto` step of `rs` (pilot rays from its camera, traced in precision
+/// `R`: f32 for the GPU) into its medium's tracer settings and its `[render]` settings,
+/// so both backends run the choice. `None`: nothing to resolve (no medium, another
+/// step policy, `pilot_rays = 0`, or no pilot met the medium); an unresolved `auto`
+/// runs error control per length.
+pub fn resolve_scene<R: Real>(rs: &mut grin_render::scene::RenderScene) -> Option<AutoChoice> {
+    let pilots = scene_pilots(rs);
+    let m = rs.medium.as_ref()?;
+    if pilots.is_empty() {
+        return None;
+    }
+    let choice = choose::<R>(m.field.as_ref(), &m.trace, rs.settings.integrator.is_none(), &pilots)?;
+    apply(rs, &choice.settings);
+    Some(choice)
+}
+
+/// Put resolved tracer settings into `rs` (its medium's and its `[render]`'s).
+pub fn apply(rs: &mut grin_render::scene::RenderScene, settings: &TraceSettings) {
+    if let Some(m) = &mut rs.medium {
+        m.trace = *settings;
+    }
+    rs.settings.integrator = Some(settings.integrator);
+    rs.settings.step = settings.step;
+}
