@@ -137,6 +137,9 @@ pub struct Point {
     pub ns_per_ray: f64,
     /// Rays that did not end `exited` (any makes the run failed).
     pub failed_rays: usize,
+    /// Rays that left `degraded` (their own error estimate above the limit; their error
+    /// is measured like the others').
+    pub degraded_rays: usize,
     pub rays: usize,
     /// `auto`: what the pilot rays chose ("" for the other policies).
     pub chosen: String,
@@ -161,8 +164,12 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
     if method.policy == Policy::Auto {
         let pilots = &case.pilots;
         let choice = match method.precision {
-            Precision::F64 => grin_trace::auto::choose::<f64>(case.field.as_ref(), &settings, true, pilots),
-            Precision::F32 => grin_trace::auto::choose::<f32>(case.field.as_ref(), &settings, true, pilots),
+            Precision::F64 => {
+                grin_trace::auto::choose::<f64>(case.field.as_ref(), &settings, true, pilots)
+            }
+            Precision::F32 => {
+                grin_trace::auto::choose::<f32>(case.field.as_ref(), &settings, true, pilots)
+            }
         };
         if let Some(c) = choice {
             settings = c.settings;
@@ -191,6 +198,7 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
         steps_per_ray: 0.0,
         ns_per_ray: ns / results.len() as f64,
         failed_rays: 0,
+        degraded_rays: 0,
         rays: results.len(),
         chosen,
         pilot_evals,
@@ -199,7 +207,10 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
     for (r, e) in results.iter().zip(&reference.exits) {
         p.evals_per_ray += r.evals as f64;
         p.steps_per_ray += f64::from(r.steps);
-        if r.status != RayStatus::Exited {
+        if r.status == RayStatus::Degraded {
+            p.degraded_rays += 1;
+        }
+        if !r.status.left() {
             p.failed_rays += 1;
             continue;
         }

@@ -136,7 +136,10 @@ pub fn fish_eye(count: usize) -> anyhow::Result<Case> {
         "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nambient_index = 1.0\nfield = { kind = \"maxwell-fish-eye\", n0 = 2.0, a = 1.0 }",
     )?;
     let rays = fish_eye_rays(count);
-    let exact = rays.iter().map(|&(r0, d0)| fish_eye_exit(r0, d0, a)).collect();
+    let exact = rays
+        .iter()
+        .map(|&(r0, d0)| fish_eye_exit(r0, d0, a))
+        .collect();
     Ok(Case {
         name: "fish-eye".into(),
         source: field.clone(),
@@ -205,8 +208,14 @@ pub fn grin_rod(count: usize) -> anyhow::Result<Case> {
         "bounds = { box = { min = [-0.5, -0.5, -1.0], max = [0.5, 0.5, 1.0] } }\nfield = { kind = \"grin-rod\", n0 = 1.5, a = 0.8, axis = \"z\" }",
     )?;
     let entries = rod_entries(count);
-    let rays = entries.iter().map(|&(e, d)| (e - d * (0.5 / d.z), d)).collect();
-    let exact = entries.iter().map(|&(e, d)| rod_exit(e, d, n0, a, 1.0)).collect();
+    let rays = entries
+        .iter()
+        .map(|&(e, d)| (e - d * (0.5 / d.z), d))
+        .collect();
+    let exact = entries
+        .iter()
+        .map(|&(e, d)| rod_exit(e, d, n0, a, 1.0))
+        .collect();
     Ok(Case {
         name: "grin-rod".into(),
         source: field.clone(),

@@ -203,14 +203,10 @@ pub struct AutoRow {
 
 pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
     let mut rows = Vec::new();
-    for p in run
-        .points
-        .iter()
-        .filter(|p| {
-            matches!(p.method.policy, Policy::Auto | Policy::PerLength)
-                && p.method.exit == ExitMethod::Hermite
-        })
-    {
+    for p in run.points.iter().filter(|p| {
+        matches!(p.method.policy, Policy::Auto | Policy::PerLength)
+            && p.method.exit == ExitMethod::Hermite
+    }) {
         let same: Vec<&Point> = select(run, &p.case, p.method.precision);
         let fixed: Vec<&Point> = same
             .iter()
@@ -308,9 +304,7 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
     );
     let knob = auto_rows(run)
         .into_iter()
-        .filter(|r| {
-            r.precision == "f64" && matches!(r.integrator, "auto" | "dopri" | "sharma")
-        })
+        .filter(|r| r.precision == "f64" && matches!(r.integrator, "auto" | "dopri" | "sharma"))
         .map(|r| {
             let how = if r.chosen.is_empty() {
                 format!("{} per-length", r.integrator)

@@ -479,7 +479,7 @@ pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
     for (r, &(_, _, truth)) in results.iter().zip(&case.rays) {
         match truth {
             Truth::Exits(e) => {
-                if r.status != RayStatus::Exited {
+                if !r.status.left() {
                     failed = true;
                     continue;
                 }
@@ -488,7 +488,8 @@ pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
                 let (ed, ep) = (nan_inf(ed), nan_inf(ep));
                 cell.err_dir = cell.err_dir.max(ed);
                 cell.err_pos = cell.err_pos.max(ep);
-                if ed > WRONG_DIR || ep > WRONG_POS {
+                // A `degraded` ray said it cannot be vouched for: not silent.
+                if r.status == RayStatus::Exited && (ed > WRONG_DIR || ep > WRONG_POS) {
                     cell.silent = true;
                 }
             }

@@ -29,7 +29,8 @@ pub struct PixelOut {
     pub steps: f32,
     /// Field evaluations per sample (mean, whole path).
     pub evals: f32,
-    /// `RayStatus` as a number: 0 missed, 1 exited, 2 absorbed, 3 max_steps, 4 error.
+    /// `RayStatus` as a number: 0 missed, 1 exited, 2 absorbed, 3 max_steps, 4 error,
+    /// 5 degraded (left, with an error estimate above the limit).
     pub status: f32,
     /// Where the camera ray left the medium (world): where it stopped for absorbed,
     /// max_steps and error; the camera's position if it missed the medium.

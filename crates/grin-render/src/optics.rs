@@ -77,10 +77,10 @@ pub fn camera_angles(cam: &PinholeCamera, d: DVec3) -> [f64; 2] {
 /// from its exit if it left it, from the camera if it missed it; `None` if it stopped
 /// in it (absorbed, max_steps, error).
 fn onward(p: &crate::image::PixelOut, cam: &PinholeCamera, d0: DVec3) -> Option<(DVec3, DVec3)> {
-    // `status`: 0 missed, 1 exited (RayStatus order).
+    // `status`: 0 missed, 1 exited, 5 degraded (left, RayStatus order).
     if p.status == 0.0 {
         Some((cam.origin, d0))
-    } else if p.status == 1.0 {
+    } else if p.status == 1.0 || p.status == 5.0 {
         Some((
             DVec3::from_array(p.exit_pos.map(f64::from)),
             DVec3::from_array(p.exit_dir.map(f64::from)).normalize(),

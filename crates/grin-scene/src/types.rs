@@ -658,7 +658,8 @@ pub fn default_integrator(step: &StepSpec) -> IntegratorKind {
 impl RenderSettings {
     /// The integrator the scene names, or [`default_integrator`] of its step.
     pub fn integrator(&self) -> IntegratorKind {
-        self.integrator.unwrap_or_else(|| default_integrator(&self.step))
+        self.integrator
+            .unwrap_or_else(|| default_integrator(&self.step))
     }
 }
 

@@ -3,6 +3,7 @@
 
 pub mod auto;
 pub mod boundary;
+pub mod estimate;
 pub mod integrate;
 pub mod step;
 pub mod table;

@@ -206,7 +206,7 @@ pub fn shadowgraph(
                     let (o, d) = view.camera_ray(px, py, 0.5, 0.5);
                     let r = trace_ray::<f64>(field, settings, o, d);
                     let end = match r.status {
-                        RayStatus::Exited => Some((r.position, r.direction)),
+                        RayStatus::Exited | RayStatus::Degraded => Some((r.position, r.direction)),
                         RayStatus::Missed => Some((o, d)),
                         _ => None,
                     };

@@ -220,6 +220,8 @@ pub struct TableSummary {
     pub absorbed: usize,
     pub max_steps: usize,
     pub error: usize,
+    /// Left the medium with an error estimate above the limit (`degraded`).
+    pub degraded: usize,
     /// Mean steps and field evaluations over the rays that entered the medium.
     pub mean_steps: f64,
     pub mean_evals: f64,
@@ -239,6 +241,7 @@ impl TableSummary {
                 RayStatus::Absorbed => s.absorbed += 1,
                 RayStatus::MaxSteps => s.max_steps += 1,
                 RayStatus::Error => s.error += 1,
+                RayStatus::Degraded => s.degraded += 1,
             }
             if r.steps > 0 {
                 entered += 1;
@@ -377,6 +380,7 @@ mod tests {
             steps: 0,
             evals: 0,
             transmittance: 1.0,
+            error_estimate: 0.0,
         }
     }
 

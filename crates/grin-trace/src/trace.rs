@@ -15,6 +15,7 @@ pub use grin_render::settings::{MIN_STEP_FRACTION, TraceError, TraceSettings};
 use crate::boundary::{
     Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface, refract,
 };
+use crate::estimate::{DEGRADED_RAD, ErrorEstimate};
 use crate::integrate::{self, RayState, is_finite_v};
 use crate::step::{StepController, Taken};
 
@@ -49,16 +50,26 @@ pub enum RayStatus {
     /// Bad input (zero or non-finite direction, non-finite origin) or the field failed
     /// (non-finite state, n <= 0).
     Error,
+    /// Left the medium (position and direction as for `Exited`), but the low-order
+    /// integrator's own error estimate is above [`crate::estimate::DEGRADED_RAD`]: an
+    /// answer grin does not vouch for.
+    Degraded,
 }
 
 impl RayStatus {
-    pub const ALL: [RayStatus; 5] = [
+    pub const ALL: [RayStatus; 6] = [
         RayStatus::Missed,
         RayStatus::Exited,
         RayStatus::Absorbed,
         RayStatus::MaxSteps,
         RayStatus::Error,
+        RayStatus::Degraded,
     ];
+
+    /// Left the medium: `exited`, or `degraded`.
+    pub fn left(self) -> bool {
+        matches!(self, RayStatus::Exited | RayStatus::Degraded)
+    }
 
     /// The name used in ray tables.
     pub fn name(self) -> &'static str {
@@ -68,6 +79,7 @@ impl RayStatus {
             RayStatus::Absorbed => "absorbed",
             RayStatus::MaxSteps => "max_steps",
             RayStatus::Error => "error",
+            RayStatus::Degraded => "degraded",
         }
     }
 }
@@ -90,6 +102,10 @@ pub struct RayResult {
     pub evals: u64,
     /// Product of the Fresnel transmittances at the surface crossings.
     pub transmittance: f64,
+    /// The ray's own estimate of its exit-direction error (rad; low-order integrators,
+    /// [`crate::estimate`]), 0 where there is none, infinite where the exit itself is
+    /// uncertain (a grazing exit within the position error).
+    pub error_estimate: f64,
 }
 
 /// Tell the tracer to keep going after a segment, or to stop the ray there (`absorbed`).
@@ -143,6 +159,7 @@ pub fn trace_ray_jittered<R: Real>(
         steps: 0,
         evals: 0,
         transmittance: 1.0,
+        error_estimate: 0.0,
     };
     let len2 = dir.length_squared();
     if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
@@ -219,6 +236,7 @@ pub fn trace_ray_jittered<R: Real>(
         .with_jitter(first_step_scale);
     let len_scale = bounds.radius();
     let exit_tol = exit_tolerance::<R>(&bounds);
+    let mut estimate = ErrorEstimate::new(integrate::order(settings.integrator));
 
     loop {
         r = state.r;
@@ -270,8 +288,9 @@ pub fn trace_ray_jittered<R: Real>(
             comp = RayState::zero();
             s0 = R::sample_field(field, state.r);
             res.evals += 1;
+            estimate.break_sequence();
             if exits {
-                match leave(&bounds, &mut res, &mut state, &s0, n_amb, p1) {
+                match leave(&bounds, &mut res, &mut state, &s0, n_amb, p1, &mut estimate) {
                     Some(done) => return done,
                     None => continue,
                 }
@@ -308,6 +327,24 @@ pub fn trace_ray_jittered<R: Real>(
             }
         };
         let seg = accumulate(&mut res, state, &s0, next, &s1, h);
+        estimate.step(
+            state.t.to_dvec3(),
+            next.t.to_dvec3(),
+            s0.n_grad_n().to_dvec3(),
+            s1.n_grad_n().to_dvec3(),
+            h.to_f64(),
+            s0.n.to_f64(),
+        );
+        if !outside && estimate.is_active() {
+            let p = next.r.to_dvec3();
+            estimate.check_approach(
+                -bounds.signed_distance(p),
+                bounds.normal(p),
+                next.t.to_dvec3(),
+                s1.n.to_f64(),
+                s1.n_grad_n().to_dvec3(),
+            );
+        }
         res.steps += 1;
         if observer(&seg) == Control::Stop {
             res.status = RayStatus::Absorbed;
@@ -319,7 +356,7 @@ pub fn trace_ray_jittered<R: Real>(
         s0 = s1;
         if outside {
             let p = state.r.to_dvec3();
-            if let Some(done) = leave(&bounds, &mut res, &mut state, &s0, n_amb, p) {
+            if let Some(done) = leave(&bounds, &mut res, &mut state, &s0, n_amb, p, &mut estimate) {
                 return done;
             }
         }
@@ -327,7 +364,8 @@ pub fn trace_ray_jittered<R: Real>(
 }
 
 /// At the surface point `p` with the inside state `state`: refract out (returns the
-/// finished result) or reflect totally back inside (updates `state`, returns None).
+/// finished result: `exited`, or `degraded` where the error `estimate` is above
+/// [`DEGRADED_RAD`]) or reflect totally back inside (updates `state`, returns None).
 fn leave<R: Real>(
     bounds: &Bounds,
     res: &mut RayResult,
@@ -335,18 +373,30 @@ fn leave<R: Real>(
     s: &FieldSample<R>,
     n_amb: f64,
     p: DVec3,
+    estimate: &mut ErrorEstimate,
 ) -> Option<RayResult> {
     let n_in = s.n.to_f64();
     let d_in = state.t.to_dvec3().normalize_or_zero();
     match refract(d_in, bounds.normal(p), n_in, n_amb) {
         Interface::Transmitted { dir, reflectance } => {
             res.transmittance *= 1.0 - reflectance;
-            res.status = RayStatus::Exited;
+            res.error_estimate = estimate.value(
+                state.t.to_dvec3(),
+                n_in,
+                bounds.normal(p),
+                s.n_grad_n().to_dvec3(),
+            );
+            res.status = if res.error_estimate > DEGRADED_RAD {
+                RayStatus::Degraded
+            } else {
+                RayStatus::Exited
+            };
             res.position = p;
             res.direction = dir;
             Some(*res)
         }
         Interface::Reflected { .. } => {
+            estimate.break_sequence();
             // Mirror T itself (not n times the unit direction), so |T| and the components
             // along the surface are kept exactly.
             let normal = R::V3::from_dvec3(bounds.normal(p));

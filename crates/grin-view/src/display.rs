@@ -16,7 +16,8 @@ pub enum Aov {
     Steps,
     /// Optical path difference against the straight ray: blue negative, red positive.
     Opd,
-    /// Ray status: grey missed, green exited, blue absorbed, orange max_steps, red error.
+    /// Ray status: grey missed, green exited, blue absorbed, orange max_steps, red error,
+    /// yellow degraded.
     Status,
 }
 
@@ -41,12 +42,13 @@ impl Aov {
 }
 
 /// Status colours, indexed by `PixelOut::status`.
-pub const STATUS_COLOURS: [[u8; 3]; 5] = [
+pub const STATUS_COLOURS: [[u8; 3]; 6] = [
     [90, 90, 90],
     [40, 170, 70],
     [50, 90, 200],
     [240, 150, 20],
     [220, 30, 30],
+    [230, 220, 40],
 ];
 
 /// An 8-bit RGBA picture of a frame's `aov`, and the value the full colour scale

@@ -384,11 +384,12 @@ fn render_one(
                 )?;
                 bar.finish_and_clear();
                 let v = |a: [f32; 3]| glam::DVec3::from_array(a.map(f64::from));
-                // status 0 missed (exit_pos = the ray's start), 1 exited; else stopped.
-                let ends = frame
-                    .pixels
-                    .iter()
-                    .map(|p| (p.status <= 1.0).then(|| (v(p.exit_pos), v(p.exit_dir).normalize())));
+                // status 0 missed (exit_pos = the ray's start), 1 exited, 5 degraded;
+                // else stopped.
+                let ends = frame.pixels.iter().map(|p| {
+                    (p.status <= 1.0 || p.status == 5.0)
+                        .then(|| (v(p.exit_pos), v(p.exit_dir).normalize()))
+                });
                 (beam.collect(ends), adapter, gpu_field, bake_cache)
             }
         };
@@ -575,6 +576,15 @@ fn render_one(
         let w = format!(
             "{stuck} pixels stopped in the medium (max_steps {}, error {}): see the aov.status channel",
             summary.status_counts["max_steps"], summary.status_counts["error"]
+        );
+        eprintln!("grin: warning: {w}");
+        summary.warnings.push(w);
+    }
+    let degraded = summary.status_counts["degraded"];
+    if degraded > 0 {
+        let w = format!(
+            "{degraded} pixels left the medium `degraded`: the low-order integrator's own error              estimate is above {} rad there (aov.status 5); a higher-order integrator, shorter              steps or step = {{ auto = ... }} resolve them",
+            grin_trace::estimate::DEGRADED_RAD
         );
         eprintln!("grin: warning: {w}");
         summary.warnings.push(w);

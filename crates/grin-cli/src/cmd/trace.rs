@@ -121,6 +121,8 @@ struct Summary<'a> {
     precision: &'static str,
     rays: usize,
     exited: usize,
+    /// Left the medium with an error estimate above the limit.
+    degraded: usize,
     missed: usize,
     absorbed: usize,
     max_steps: usize,
@@ -218,11 +220,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let s = TableSummary::of(&results);
     let precision = if args.f32 { "f32" } else { "f64" };
     eprintln!(
-        "traced {} rays ({}, {}, {precision}) in {seconds:.3} s: {} exited, {} missed, {} max_steps, {} absorbed, {} error; mean {:.1} steps, {:.1} evals per ray -> {}",
+        "traced {} rays ({}, {}, {precision}) in {seconds:.3} s: {} exited, {} degraded, {} missed, {} max_steps, {} absorbed, {} error; mean {:.1} steps, {:.1} evals per ray -> {}",
         s.rays,
         field.describe(),
         settings.integrator.name(),
         s.exited,
+        s.degraded,
         s.missed,
         s.max_steps,
         s.absorbed,
@@ -248,6 +251,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             precision,
             rays: s.rays,
             exited: s.exited,
+            degraded: s.degraded,
             missed: s.missed,
             absorbed: s.absorbed,
             max_steps: s.max_steps,

@@ -22,6 +22,8 @@ pub enum MarchEnd {
         point: DVec3,
         dir: DVec3,
         transmittance: f64,
+        /// The tracer's status was `degraded` (its error estimate is above the limit).
+        degraded: bool,
     },
     /// A step's chord met a scene object inside the medium; `dir` is the chord direction.
     Object {
@@ -106,10 +108,11 @@ impl CpuMedium<'_> {
         stats.length += res.length;
         match res.status {
             RayStatus::Missed => MarchEnd::Missed,
-            RayStatus::Exited => MarchEnd::Exited {
+            RayStatus::Exited | RayStatus::Degraded => MarchEnd::Exited {
                 point: res.position,
                 dir: res.direction,
                 transmittance: res.transmittance,
+                degraded: res.status == RayStatus::Degraded,
             },
             RayStatus::Absorbed => match met {
                 Some((hit, d, chord_len, _)) => {

@@ -24,7 +24,7 @@ pub const AMBIENT_SKY_WEIGHT: f64 = 0.2;
 pub const EVENTS_PER_DEPTH: u32 = 3;
 
 /// The `status` AOV value of a ray status (the order of `RayStatus::ALL`: missed 0,
-/// exited 1, absorbed 2, max_steps 3, error 4).
+/// exited 1, absorbed 2, max_steps 3, error 4, degraded 5).
 pub fn status_code(status: RayStatus) -> u8 {
     match status {
         RayStatus::Missed => 0,
@@ -32,6 +32,7 @@ pub fn status_code(status: RayStatus) -> u8 {
         RayStatus::Absorbed => 2,
         RayStatus::MaxSteps => 3,
         RayStatus::Error => 4,
+        RayStatus::Degraded => 5,
     }
 }
 
@@ -187,12 +188,18 @@ impl CpuScene<'_> {
                             point,
                             dir: out,
                             transmittance,
+                            degraded,
                         } => {
                             throughput *= transmittance;
                             origin = point;
                             stopped_at = point;
                             dir = out;
-                            (RayStatus::Exited, None)
+                            let status = if degraded {
+                                RayStatus::Degraded
+                            } else {
+                                RayStatus::Exited
+                            };
+                            (status, None)
                         }
                         MarchEnd::Object {
                             hit,
@@ -224,12 +231,12 @@ impl CpuScene<'_> {
                         aov.exit_dir = dir;
                         aov.exit_pos = stopped_at;
                         aov.deflection_deg = entry_dir.angle_between(dir).to_degrees();
-                        aov.opd = if status == RayStatus::Exited {
+                        aov.opd = if status.left() {
                             stats.opl - m.ambient * straight
                         } else {
                             0.0
                         };
-                        aov.opd_plane = if status == RayStatus::Exited {
+                        aov.opd_plane = if status.left() {
                             aov.opd
                                 + m.ambient * opd_tail(straight_exit, entry_dir, stopped_at, dir)
                         } else {
@@ -238,7 +245,9 @@ impl CpuScene<'_> {
                     }
                     match (status, next) {
                         (_, Some(hit)) => (hit, dir),
-                        (RayStatus::Exited | RayStatus::Missed, None) => continue,
+                        (RayStatus::Exited | RayStatus::Degraded | RayStatus::Missed, None) => {
+                            continue;
+                        }
                         // max_steps or error: the path ends here, black.
                         _ => break,
                     }
@@ -454,6 +463,7 @@ impl CpuScene<'_> {
                 point,
                 dir,
                 transmittance,
+                ..
             } => {
                 let remaining = (dist - to_entry - stats.length).max(0.0);
                 let after = self
