@@ -57,6 +57,114 @@ const STATUS_EXITED: u32 = 1u;
 const STATUS_ABSORBED: u32 = 2u;
 const STATUS_MAX_STEPS: u32 = 3u;
 const STATUS_ERROR: u32 = 4u;
+const STATUS_DEGRADED: u32 = 5u;
+
+// The ray's own error estimate for euler, symplectic-euler and verlet
+// (grin_trace::estimate::ErrorEstimate): a ray leaving with it above DEGRADED_RAD ends
+// STATUS_DEGRADED, not STATUS_EXITED.
+const DEGRADED_RAD: f32 = 3e-3;
+const POSITION_SAFETY: f32 = 4.0;
+// The estimate of an exit that is itself uncertain (the CPU's is infinite; WGSL has no
+// infinity literal).
+const UNSURE_ESTIMATE: f32 = 3.0e38;
+
+struct ErrorEstimate {
+    // 1, 2, or 0 (no estimate: higher orders).
+    order: u32,
+    sum: f32,
+    bend: f32,
+    pos: f32,
+    near_miss: bool,
+    has_prev: bool,
+    prev_d: vec3<f32>,
+    prev_h: f32,
+}
+
+fn estimate_new() -> ErrorEstimate {
+    var order = integrator_order(INTEGRATOR);
+    if order > 2u {
+        order = 0u;
+    }
+    return ErrorEstimate(order, 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0);
+}
+
+// |v| across the unit direction u.
+fn across(v: vec3<f32>, u: vec3<f32>) -> f32 {
+    return length(v - u * dot(v, u));
+}
+
+// A step of t-length h from T = t0, D = d0 (index n0) to T = t1, D = d1.
+fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, d0: vec3<f32>, d1: vec3<f32>, h: f32, n0: f32) {
+    if (*e).order == 0u || !(h > 0.0) || !(n0 > 0.0) {
+        return;
+    }
+    if dot(t0, t1) <= 0.0 {
+        (*e).near_miss = true;
+    }
+    let u = normalize_or_zero(t0);
+    var local = 0.0;
+    var local_r = 0.0;
+    if (*e).order == 1u {
+        local = 0.5 * h * across(d1 - d0, u);
+        local_r = 0.5 * h * h * across(d0, u);
+    } else {
+        if (*e).has_prev && (*e).prev_h > 0.0 {
+            let hp = (*e).prev_h;
+            let second = 2.0 * ((d1 - d0) / h - (d0 - (*e).prev_d) / hp) / (h + hp);
+            local = h * h * h / 12.0 * across(second, u);
+        }
+        local_r = h * h / 6.0 * across(d1 - d0, u);
+    }
+    (*e).bend += across(d0, u) * h / n0;
+    if finite3(vec3<f32>(local, local_r, 0.0)) {
+        (*e).pos += local_r + (*e).sum * h * n0;
+        (*e).sum += local / n0;
+    }
+    (*e).has_prev = true;
+    (*e).prev_d = d0;
+    (*e).prev_h = h;
+}
+
+// At a step end inside, `depth` from the surface of outward unit `normal`: a near miss
+// if the path's closest approach is within the position error of the surface.
+fn estimate_check_approach(e: ptr<function, ErrorEstimate>, depth: f32, normal: vec3<f32>, t: vec3<f32>, n: f32, d: vec3<f32>) {
+    if (*e).order == 0u || (*e).near_miss || !(n > 0.0) {
+        return;
+    }
+    let v = dot(normalize_or_zero(t), normal);
+    let kappa = -dot(d, normal) / (n * n);
+    if v > 0.0 && kappa > 0.0 {
+        let closest = depth - v * v / (2.0 * kappa);
+        if abs(closest) < POSITION_SAFETY * (*e).pos {
+            (*e).near_miss = true;
+        }
+    }
+}
+
+// The estimate at an exit through `normal` with T = t, index n, D = d (infinite where
+// the exit itself is uncertain).
+fn estimate_value(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: vec3<f32>) -> f32 {
+    if e.order == 0u || !(n > 0.0) {
+        return 0.0;
+    }
+    let drift = abs(length(t) - n) / n * 2.0 * e.bend;
+    let u = normalize_or_zero(t);
+    let c = abs(dot(u, normal));
+    let curvature = across(d, u) / (n * n);
+    let reach = 2.0 * curvature * POSITION_SAFETY * e.pos;
+    if reach > c * c || e.near_miss {
+        return UNSURE_ESTIMATE;
+    }
+    return max(e.sum, drift);
+}
+
+// STATUS_EXITED, or STATUS_DEGRADED where the estimate is above DEGRADED_RAD.
+fn exit_status(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: vec3<f32>) -> u32 {
+    if e.order != 0u && estimate_value(e, t, n, normal, d) > DEGRADED_RAD {
+        return STATUS_DEGRADED;
+    }
+    return STATUS_EXITED;
+}
 
 struct MarchStats {
     steps: u32,
@@ -465,6 +573,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     }
     var state = RayState(start, d_in * s0.n);
     var ctrl = step_controller_new(jitter);
+    var est = estimate_new();
     let len_scale = ctrl.len_scale;
     let exit_tol = exit_tolerance();
     let max_steps = params.max_steps;
@@ -544,8 +653,13 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 (*stats).length += fly_len;
                 (*stats).opl += n * fly_len;
                 seg = Segment(position, direction * n, next.r, direction * n, taken.h);
+                est.has_prev = false;
             } else {
                 seg = accumulate(stats, state, s0, next, s1, taken.h);
+                if est.order != 0u {
+                    estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, s1.n * s1.grad_n, taken.h, s0.n);
+                    estimate_check_approach(&est, -bounds_signed_distance(next.r), bounds_normal(next.r), next.t, s1.n, s1.n * s1.grad_n);
+                }
             }
             (*stats).steps += 1u;
             hit = chord_hit(seg);
@@ -585,6 +699,9 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             (*stats).evals += 1u;
             s1 = sample_field(next.r);
             seg = accumulate(stats, state, s0, next, s1, h);
+            if est.order != 0u {
+                estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, s1.n * s1.grad_n, h, s0.n);
+            }
             (*stats).steps += 1u;
             hit = chord_hit(seg);
             if hit.found {
@@ -598,10 +715,12 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         let p = state.r;
         let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
         if i.transmitted {
-            return march_end(END_EXITED, STATUS_EXITED, p, i.dir, transmittance * (1.0 - i.reflectance));
+            let status = exit_status(est, state.t, s0.n, bounds_normal(p), s0.n * s0.grad_n);
+            return march_end(END_EXITED, status, p, i.dir, transmittance * (1.0 - i.reflectance));
         }
         let nrm = bounds_normal(p);
         state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
+        est.has_prev = false;
     }
     return march_end(END_STOPPED, STATUS_MAX_STEPS, state.r, normalize_or_zero(state.t), transmittance);
 }

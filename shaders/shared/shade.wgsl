@@ -167,7 +167,7 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
                 aov.exit_dir = dir;
                 aov.exit_pos = end.point;
                 aov.deflection_deg = angle_between_deg(entry_dir, dir);
-                if status == STATUS_EXITED {
+                if status == STATUS_EXITED || status == STATUS_DEGRADED {
                     aov.opd = stats.opl - ambient_index() * straight;
                     aov.opd_plane = aov.opd + ambient_index() * opd_tail(straight_exit, entry_dir, end.point, dir);
                 } else {
@@ -175,7 +175,7 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
                 }
             }
             if !has_hit {
-                if status == STATUS_EXITED || status == STATUS_MISSED {
+                if status == STATUS_EXITED || status == STATUS_DEGRADED || status == STATUS_MISSED {
                     continue;
                 }
                 // max_steps or error: the path ends here, black.

@@ -371,9 +371,12 @@ impl Column {
             Policy::Adaptive | Policy::PerLength | Policy::Auto => format!("{:.0e}", self.param),
             _ => format!("R/{}", (1.0 / self.param).round()),
         };
+        if self.method.policy == Policy::Auto {
+            return format!("auto {p} {}", self.method.precision.name());
+        }
         format!(
             "{} {} {} {}",
-            crate::methods::integrator_label(self.method.integrator),
+            self.method.integrator_label(),
             self.method.policy.name(),
             p,
             self.method.precision.name()
@@ -407,6 +410,19 @@ pub fn columns(quick: bool) -> Vec<Column> {
             add(Policy::Adaptive, 1e-9, Precision::F64);
         }
         add(Policy::Adaptive, 1e-9, Precision::F32);
+    }
+    // The default: `auto` at 1e-4 rad, the pilot rays (the case's own) choosing the
+    // integrator and step, in both precisions.
+    for precision in [Precision::F64, Precision::F32] {
+        v.push(Column {
+            method: Method {
+                integrator: IntegratorKind::Adaptive,
+                policy: Policy::Auto,
+                exit: ExitMethod::Hermite,
+                precision,
+            },
+            param: grin_scene::DEFAULT_AUTO_ACCURACY,
+        });
     }
     v
 }
@@ -451,6 +467,17 @@ fn has_nan(r: &RayResult) -> bool {
 pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
     let mut settings = col.method.settings(col.param, case.scale);
     settings.max_steps = case.max_steps;
+    if col.method.policy == Policy::Auto {
+        let pilots: Vec<(DVec3, DVec3)> = case.rays.iter().map(|&(o, d, _)| (o, d)).collect();
+        let field = case.field.as_ref();
+        let choice = match col.method.precision {
+            Precision::F64 => grin_trace::auto::choose::<f64>(field, &settings, true, &pilots),
+            Precision::F32 => grin_trace::auto::choose::<f32>(field, &settings, true, &pilots),
+        };
+        if let Some(c) = choice {
+            settings = c.settings;
+        }
+    }
     let start = Instant::now();
     let results: Vec<RayResult> = case
         .rays

@@ -123,6 +123,12 @@ fn mirrored_constants_have_the_same_values() {
             f64::from(status_code(RayStatus::MaxSteps)),
         ),
         ("STATUS_ERROR", f64::from(status_code(RayStatus::Error))),
+        (
+            "STATUS_DEGRADED",
+            f64::from(status_code(RayStatus::Degraded)),
+        ),
+        ("DEGRADED_RAD", grin_trace::estimate::DEGRADED_RAD),
+        ("POSITION_SAFETY", grin_trace::estimate::POSITION_SAFETY),
     ];
     let mut problems = Vec::new();
     for (name, rust) in &mirrored {

@@ -20,11 +20,16 @@ use rayon::prelude::*;
 
 use crate::trace::{RayResult, RayStatus, TraceSettings, trace_ray};
 
-/// The pilots' reference runs error control at this fraction of the asked error.
-pub const REFERENCE_FRACTION: f64 = 0.02;
+/// The pilots' reference runs error control at this fraction of the asked error
+/// (tighter costs much more on baked grids, whose interpolant is only C2: at 1e-5 of
+/// 1e-6 rad the reference through a tricubic Luneburg bake ran into max_steps).
+pub const REFERENCE_FRACTION: f64 = 0.01;
 /// A candidate must meet this fraction of the asked error on every pilot (the rays
 /// between the pilots may be a little harder than the worst of them).
 pub const PILOT_TARGET: f64 = 0.7;
+/// Error control per length is tried at the asked error and this many times tighter
+/// by 10 at most.
+pub const CONTROL_TRIES: u32 = 3;
 /// Fixed steps tried per integrator at most.
 pub const MAX_TRIES: u32 = 10;
 /// The first fixed step tried, as a fraction of the medium's radius (the tracer's
@@ -55,6 +60,9 @@ pub struct AutoChoice {
     pub settings: TraceSettings,
     /// The chosen candidate (its error and cost on the pilots).
     pub chosen: Candidate,
+    /// Whether the chosen candidate met the asked error on every pilot (false: none
+    /// did, and this is the closest one; the renderer warns).
+    pub met: bool,
     /// Pilot rays that met the medium.
     pub pilot_rays: usize,
     /// Field evaluations the choice cost (reference and every candidate).
@@ -67,9 +75,12 @@ impl AutoChoice {
     /// `verlet, fixed ds 0.0625 (pilots: 3.1e-5 rad, 18 evals/ray)`.
     pub fn describe(&self) -> String {
         let c = &self.chosen;
-        let how = match c.fixed_step {
-            Some(ds) => format!("fixed ds {ds:.4}"),
-            None => "error control per length".into(),
+        let how = match (c.fixed_step, self.settings.step) {
+            (Some(ds), _) => format!("fixed ds {ds:.4}"),
+            (None, StepSpec::Auto(tol)) if tol < self.asked => {
+                format!("error control per length at {tol:.0e} rad")
+            }
+            (None, _) => "error control per length".into(),
         };
         format!(
             "{}, {how} (worst of {} pilots: {:.1e} rad, {:.0} evals/ray)",
@@ -129,15 +140,17 @@ pub fn choose<R: Real>(
     let reference_settings = TraceSettings {
         integrator: IntegratorKind::Adaptive,
         step: StepSpec::Auto(asked * REFERENCE_FRACTION),
+        max_steps: settings.max_steps.min(grin_scene::DEFAULT_MAX_STEPS),
         ..*settings
     };
     let reference = trace_all::<f64>(field, &reference_settings, pilots);
     let mut spent: u64 = reference.iter().map(|r| r.evals).sum();
-    // Only the pilots that reach the medium say anything about it.
+    // Only the pilots that cross the medium say anything about how to: not those that
+    // miss it, nor those the reference could not finish (trapped, or beyond its steps).
     let (rays, reference): (Vec<(DVec3, DVec3)>, Vec<RayResult>) = pilots
         .iter()
         .zip(reference)
-        .filter(|(_, r)| r.status != RayStatus::Missed)
+        .filter(|(_, r)| r.status.left())
         .map(|(p, r)| (*p, r))
         .unzip();
     if rays.is_empty() {
@@ -158,14 +171,33 @@ pub fn choose<R: Real>(
         c
     };
     let target = PILOT_TARGET * asked;
-    // Error control per length: what an unresolved `auto` runs.
-    let control_integrator = settings.integrator;
-    let control_settings = TraceSettings {
-        integrator: control_integrator,
-        ..*settings
+    // Error control per length (what an unresolved `auto` runs), tightened by 10 while
+    // the pilots say it misses (rays whose exit is ill-conditioned: grazing ones).
+    let mut best: Option<(Candidate, TraceSettings)> = None;
+    let mut closest: Option<(Candidate, TraceSettings)> = None;
+    let mut keep_closest = |c: Candidate, s: TraceSettings| {
+        if closest.as_ref().is_none_or(|(b, _)| c.error < b.error) {
+            closest = Some((c, s));
+        }
     };
-    let control = run(&control_settings, None);
-    let mut best: (Candidate, TraceSettings) = (control, control_settings);
+    let mut tol = asked;
+    // While nothing meets the target, fixed steps costing more than this are not tried
+    // (twice the tightest error control's cost: beyond it no step is worth its cost).
+    let mut bound: f64 = 0.0;
+    for _ in 0..CONTROL_TRIES {
+        let s = TraceSettings {
+            step: StepSpec::Auto(tol),
+            ..*settings
+        };
+        let c = run(&s, None);
+        keep_closest(c, s);
+        bound = bound.max(2.0 * c.evals_per_ray);
+        if c.error <= target {
+            best = Some((c, s));
+            break;
+        }
+        tol *= 0.1;
+    }
     let kinds: Vec<IntegratorKind> = if free_integrator {
         IntegratorKind::ALL.to_vec()
     } else {
@@ -181,11 +213,13 @@ pub fn choose<R: Real>(
                 ..*settings
             };
             let c = run(&s, Some(ds));
-            if c.evals_per_ray >= best.0.evals_per_ray {
+            keep_closest(c, s);
+            let limit = best.as_ref().map_or(bound, |(b, _)| b.evals_per_ray);
+            if c.evals_per_ray >= limit {
                 break; // shorter steps only cost more
             }
             if c.error <= target {
-                best = (c, s);
+                best = Some((c, s));
                 break;
             }
             // Jump by the measured order (a little past, so the next try is likely to
@@ -201,10 +235,14 @@ pub fn choose<R: Real>(
             }
         }
     }
+    // Nothing met it: the closest candidate, and the choice says so.
+    let met = best.is_some();
+    let (chosen, chosen_settings) = best.or(closest)?;
     Some(AutoChoice {
         asked,
-        settings: best.1,
-        chosen: best.0,
+        settings: chosen_settings,
+        chosen,
+        met,
         pilot_rays: rays.len(),
         spent_evals: spent,
         tried,

@@ -295,6 +295,15 @@ fn render_one(
         Backend::Cpu => grin_trace::auto::resolve_scene::<f64>(&mut rs),
         Backend::Gpu => grin_trace::auto::resolve_scene::<f32>(&mut rs),
     };
+    let auto_warning = auto.as_ref().filter(|a| !a.met).map(|a| {
+        let w = format!(
+            "auto {:.0e} rad: no method met it on the pilot rays within the steps tried;              rendering with the closest, {}",
+            a.asked,
+            a.describe()
+        );
+        eprintln!("grin: warning: {w}");
+        w
+    });
     let bos_scenes = match &bos_scene {
         Some(s) => {
             let mut with = RenderScene::new(s, scene_dir, field.clone())
@@ -340,7 +349,7 @@ fn render_one(
             .medium
             .as_ref()
             .context("[optics] a shadowgraph needs a [medium]")?;
-        let mut warnings = Vec::new();
+        let mut warnings: Vec<String> = auto_warning.iter().cloned().collect();
         let (sg, adapter, gpu_field, bake_cache) = match args.backend {
             Backend::Cpu => {
                 let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -433,7 +442,7 @@ fn render_one(
     let passes = if bos_scenes.is_some() { 3 } else { 1 };
     let bar = progress_bar(scene.render.height * passes);
     let setup_start = Instant::now();
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<String> = auto_warning.into_iter().collect();
     let (frame, adapter, seconds, gpu_field, bake_cache) = render_frame(
         args,
         &rs,

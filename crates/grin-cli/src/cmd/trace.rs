@@ -183,6 +183,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let Some(a) = &auto {
         settings = a.settings;
+        if !a.met {
+            eprintln!(
+                "grin: warning: auto {:.0e} rad: no method met it on the pilot rays within                  the steps tried; tracing with the closest, {}",
+                a.asked,
+                a.describe()
+            );
+        }
     }
     let format = match args.format {
         Some(Format::Json) => TableFormat::Json,

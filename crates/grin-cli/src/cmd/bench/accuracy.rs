@@ -22,8 +22,8 @@ pub struct Args {
     /// Print the summary (decade table and orders) as JSON on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Only the cases whose name contains this (e.g. `luneburg`, `baked`): the full
-    /// suite is long, and one case at a time fits a CI step.
+    /// Only the case of this name, else the cases whose name contains it (e.g.
+    /// `baked`): the full suite is long, and one case at a time fits a CI step.
     #[arg(long, value_name = "NAME")]
     pub case: Option<String>,
 }
@@ -38,7 +38,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut cases = cases::suite(suite)?;
     if let Some(want) = &args.case {
         let names: Vec<String> = cases.iter().map(|c| c.name.to_string()).collect();
-        cases.retain(|c| c.name.contains(want.as_str()));
+        // A name that is a case's whole name selects that case alone (`plume`, not
+        // `vdb-plume` and the baked plumes too).
+        if cases.iter().any(|c| c.name == *want) {
+            cases.retain(|c| c.name == *want);
+        } else {
+            cases.retain(|c| c.name.contains(want.as_str()));
+        }
         anyhow::ensure!(
             !cases.is_empty(),
             "--case {want}: no case of this suite matches (cases: {})",
