@@ -18,7 +18,7 @@ use grin_field::{IndexField, Real};
 use grin_scene::{IntegratorKind, StepSpec};
 use rayon::prelude::*;
 
-use crate::trace::{RayResult, RayStatus, TraceSettings, trace_ray};
+use crate::trace::{RayResult, TraceSettings, trace_ray};
 
 /// The pilots' reference runs error control at this fraction of the asked error
 /// (tighter costs much more on baked grids, whose interpolant is only C2: at 1e-5 of
