@@ -265,3 +265,84 @@ fn step_cap_reports_max_steps() {
     assert!(length > 0.04 && length < 0.0401, "length {length}");
     assert!(opl > length && opl < 2f64.sqrt() * length, "opl {opl}");
 }
+
+/// Rays through the lens of `LUNEBURG_SCENE` at impacts 0.1 .. 1.4 (radius 1.5), along +x.
+fn beam_rows(count: usize) -> String {
+    let mut s = String::from("ox,oy,oz,dx,dy,dz\n");
+    for i in 0..count {
+        let y = 0.1 + 1.3 * i as f64 / (count - 1) as f64;
+        s.push_str(&format!("-3,{y},0.05,1,0,0\n"));
+    }
+    s
+}
+
+/// The default method: a scene without `integrator` or `step` traces with `auto` 1e-4,
+/// the pilot rays (some of the table's) choose a method that meets it, the summary says
+/// which; every ray ends `exited` within the asked error of the exact Luneburg exit
+/// direction (through the focus on the far side: the exit direction makes the angle
+/// asin(p / R) with the axis, p the impact).
+#[test]
+fn the_default_method_is_auto_and_meets_its_error() {
+    let d = Dir::new();
+    let scene_text =
+        LUNEBURG_SCENE.replace("integrator = \"sharma\"\nstep = { fixed = 0.004 }\n", "");
+    assert!(!scene_text.contains("step ="));
+    let scene = d.write("lens.toml", &scene_text);
+    let rays = d.write("rays.csv", &beam_rows(24));
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &rays, &out], &["--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("json summary on stdout");
+    let auto = &summary["auto"];
+    assert_eq!(auto["asked"], 1e-4, "{summary}");
+    assert_eq!(auto["met"], true, "{summary}");
+    assert!(
+        auto["chosen"]["error"].as_f64().unwrap() <= 0.7e-4,
+        "{summary}"
+    );
+    assert!(
+        stderr(&o).contains("chosen by pilot rays"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(summary["exited"], 24, "{summary}");
+    for (i, (status, v)) in read_output(&out).iter().enumerate() {
+        assert_eq!(status, "exited");
+        let (p, q) = (&v[6..9], &v[9..12]);
+        let impact = 0.1 + 1.3 * i as f64 / 23.0;
+        let b = (impact * impact + 0.05 * 0.05).sqrt() / 1.5;
+        // Leaves through the focus (2, 0, 0) at angle asin(b) off the axis.
+        assert!(
+            (p[0] - 2.0).abs() < 1e-3 && p[1].abs() < 1e-3,
+            "ray {i} leaves at {p:?}"
+        );
+        let angle = (q[0].clamp(-1.0, 1.0)).acos();
+        assert!(
+            (angle - b.asin()).abs() < 3e-4,
+            "ray {i}: {angle} vs {}",
+            b.asin()
+        );
+    }
+}
+
+/// Euler at a coarse step through the lens: rays whose own error estimate is above
+/// 3 mrad end `degraded` (counted in the summary), not `exited` with a wrong answer.
+#[test]
+fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let rays = d.write("rays.csv", &beam_rows(12));
+    let out = d.path("out.csv");
+    let o = run(
+        &[&scene, &rays, &out],
+        &["--json", "--integrator", "euler", "--step", "fixed=0.05"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("json summary on stdout");
+    assert_eq!(summary["degraded"], 12, "{summary}");
+    assert!(summary.get("auto").is_none(), "{summary}");
+    let rows = read_output(&out);
+    assert!(rows.iter().all(|r| r.0 == "degraded"));
+}

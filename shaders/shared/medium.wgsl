@@ -116,9 +116,11 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
         local_r = h * h / 6.0 * across(d1 - d0, u);
     }
     (*e).bend += across(d0, u) * h / n0;
-    if finite3(vec3<f32>(local, local_r, 0.0)) {
+    // The position error's feedback: D sampled e_r off turns T by |dD/dr| e_r h.
+    let feedback = length(d1 - d0) * (*e).pos / n0;
+    if finite3(vec3<f32>(local, local_r, feedback)) {
         (*e).pos += local_r + (*e).sum * h * n0;
-        (*e).sum += local / n0;
+        (*e).sum += (local + feedback) / n0;
     }
     (*e).has_prev = true;
     (*e).prev_d = d0;

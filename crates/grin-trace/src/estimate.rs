@@ -94,9 +94,12 @@ impl ErrorEstimate {
             1 => 0.5 * h * h * across(d0),
             _ => h * h / 6.0 * across(d1 - d0),
         };
-        if local.is_finite() && local_r.is_finite() {
+        // A position error e_r turns the ray too: D is sampled e_r off, which changes T
+        // by |dD/dr| e_r h, with |dD/dr| ~ |D1 - D0| / (h n) over the step.
+        let feedback = (d1 - d0).length() * self.pos / n0;
+        if local.is_finite() && local_r.is_finite() && feedback.is_finite() {
             self.pos += local_r + self.sum * h * n0;
-            self.sum += local / n0;
+            self.sum += (local + feedback) / n0;
         }
         self.prev = Some((d0, h));
     }
@@ -183,8 +186,9 @@ mod tests {
     }
 
     #[test]
-    fn second_order_estimate_vanishes_where_d_is_linear_in_t() {
-        // D = t x: D'' = 0, verlet's local error term is zero.
+    fn second_order_estimate_grows_with_the_second_derivative_of_d() {
+        // D = t x: D'' = 0, verlet's local error term is zero (what is left is the
+        // position error's feedback, h^2/6 |dD| |dD|/h per step, small).
         let mut e = ErrorEstimate::new(2);
         for k in 0..5 {
             let t = f64::from(k) * 0.1;
@@ -197,8 +201,8 @@ mod tests {
                 1.0,
             );
         }
-        assert!(e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO) < 1e-15);
-        // D = t^2 x: D'' = 2, each step after the first adds h^3/12 * 2.
+        let linear = e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO);
+        // D = t^2 x: D'' = 2, each step after the first adds h^3/12 * 2 (and feedback).
         let mut e = ErrorEstimate::new(2);
         for k in 0..5 {
             let t = f64::from(k) * 0.1;
@@ -212,11 +216,9 @@ mod tests {
             );
         }
         let want = 4.0 * 1e-3 / 12.0 * 2.0;
-        assert!(
-            (e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO) - want).abs() < 1e-12,
-            "{}",
-            e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO)
-        );
+        let quadratic = e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO);
+        assert!(linear < 0.3 * want, "{linear}");
+        assert!(quadratic >= want && quadratic < 2.0 * want, "{quadratic}");
     }
 
     #[test]
