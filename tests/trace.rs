@@ -298,7 +298,7 @@ fn the_default_method_is_auto_and_meets_its_error() {
     assert_eq!(auto["asked"], 1e-4, "{summary}");
     assert_eq!(auto["met"], true, "{summary}");
     assert!(
-        auto["chosen"]["error"].as_f64().unwrap() <= 0.7e-4,
+        auto["chosen"]["error"].as_f64().expect("error") <= 0.7e-4,
         "{summary}"
     );
     assert!(
