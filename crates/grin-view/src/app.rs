@@ -337,6 +337,7 @@ impl App {
             converged_seconds: self.converged_after,
             steps_per_ray: f.rendered.steps_per_ray,
             evals_per_ray: f.rendered.evals_per_ray,
+            method: f.rendered.method.clone(),
             bake_cache: f.cache,
             field_grid: f.field_grid.map(|g| g.0),
             warnings: f.warnings.clone(),
@@ -673,6 +674,12 @@ impl App {
                 "{:.1} steps, {:.1} field evals per ray",
                 r.steps_per_ray, r.evals_per_ray
             ));
+            let chosen = if matches!(f.settings.step, grin_scene::StepSpec::Auto(_)) {
+                " (chosen by pilot rays)"
+            } else {
+                ""
+            };
+            ui.label(format!("method: {}{chosen}", r.method));
             ui.label(format!(
                 "{}x{} ({:.0}%), {} / {} spp{}",
                 r.frame.width,

@@ -100,6 +100,8 @@ pub struct ViewSummary {
     pub converged_seconds: Option<f64>,
     pub steps_per_ray: f64,
     pub evals_per_ray: f64,
+    /// The integrator and step traced (with `auto`, the pilot rays' choice).
+    pub method: String,
     pub bake_cache: Option<grin_gpu::cache::CacheUse>,
     pub field_grid: Option<[u32; 3]>,
     pub warnings: Vec<String>,

@@ -68,6 +68,23 @@ pub struct Rendered {
     pub evals_per_ray: f64,
     /// The accumulation reached `max_spp`.
     pub converged: bool,
+    /// The integrator and step traced (what `auto` resolved to).
+    pub method: String,
+}
+
+/// `sharma, fixed ds 0.2500`: the integrator and step of `s`.
+pub fn method_name(s: &grin_scene::RenderSettings) -> String {
+    let k = s.integrator().name();
+    match s.step {
+        grin_scene::StepSpec::Fixed(ds) => format!("{k}, fixed ds {ds:.4}"),
+        grin_scene::StepSpec::Heuristic { min, max, .. } => {
+            format!("{k}, heuristic ds {min:.4} .. {max:.4}")
+        }
+        grin_scene::StepSpec::Adaptive { tolerance, .. } => {
+            format!("{k}, error control {tolerance:.0e} per step")
+        }
+        grin_scene::StepSpec::Auto(rad) => format!("{k}, error control per length {rad:.0e} rad"),
+    }
 }
 
 /// Why nothing was rendered: cancelled (a newer view is waiting), or an error to show.
@@ -330,6 +347,7 @@ impl<'a> Session<'a> {
         let Some(g) = &self.gpus[slot] else {
             return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
         };
+        let method = method_name(&g.scene.settings);
         let start = Instant::now();
         let frame = match g.renderer.render(&|_| {}, cancel) {
             Ok(f) => f,
@@ -382,6 +400,7 @@ impl<'a> Session<'a> {
             steps_per_ray,
             evals_per_ray,
             converged: accum.samples >= settings.max_spp,
+            method,
         })
     }
 

@@ -120,6 +120,11 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
         r.steps_per_ray
     );
     assert!(beauty_diff(&r, &r0) < 0.05, "same picture, other steps");
+    // The panel shows what was traced: the file's method, and with `auto` what the pilot
+    // rays chose among the named integrator's steps.
+    assert_eq!(r0.method, "rk4, fixed ds 0.0200");
+    assert!(r.method.starts_with("rk4, "), "{}", r.method);
+    assert_ne!(r.method, r0.method);
 
     // Interpolation: the tricubic B-spline of the same grid bends rays differently from
     // its trilinear interpolation.
