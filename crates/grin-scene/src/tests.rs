@@ -419,6 +419,11 @@ fn render_errors() {
             "scene.toml:25:1: render.max_steps: must be in 1..=1073741824 (2^30), got 0",
         ),
         (
+            "height = 36",
+            "height = 36\npilot_rays = 1000000000",
+            "scene.toml:25:1: render.pilot_rays: must be in 0..=4096 (0: no pilots), got 1000000000",
+        ),
+        (
             "step = { heuristic = { min = 0.002, max = 0.05 } }",
             "step = { fixed = 0.0 }",
             "scene.toml:25:10: render.step.fixed: must be > 0, got 0",

@@ -21,6 +21,9 @@ pub const MAX_STEPS: u32 = 1 << 30;
 /// structure), and on the GPU tens of thousands of objects ended every medium pixel in
 /// `error`. A thousand keeps a frame interactive on lavapipe.
 pub const MAX_OBJECTS: usize = 1024;
+/// Most pilot rays accepted (`render.pilot_rays`): a few hundred already resolve any
+/// view the pilots can; millions would trace a frame's worth before the frame.
+pub const MAX_PILOT_RAYS: u32 = 4096;
 /// Noise octaves accepted: beyond 16 the octaves are finer than f64 noise lattices resolve.
 pub const MAX_NOISE_OCTAVES: u32 = 16;
 
@@ -623,6 +626,15 @@ fn render(r: &RenderSettings) -> Check {
         return fail(
             "render.max_steps",
             format!("must be in 1..={MAX_STEPS} (2^30), got {}", r.max_steps),
+        );
+    }
+    if r.pilot_rays > MAX_PILOT_RAYS {
+        return fail(
+            "render.pilot_rays",
+            format!(
+                "must be in 0..={MAX_PILOT_RAYS} (0: no pilots), got {}",
+                r.pilot_rays
+            ),
         );
     }
     match r.step {

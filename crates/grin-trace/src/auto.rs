@@ -367,3 +367,66 @@ pub fn apply(rs: &mut grin_render::scene::RenderScene, settings: &TraceSettings)
     rs.settings.integrator = Some(settings.integrator);
     rs.settings.step = settings.step;
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+    use std::sync::Arc;
+
+    use super::*;
+    use grin_render::scene::RenderScene;
+
+    /// The Luneburg lens (radius 1) seen from z = -4, with `render` lines added.
+    fn lens(render: &str) -> RenderScene {
+        let text = format!(
+            "[camera]\nposition = [0.0, 0.0, -4.0]\nlook_at = [0.0, 0.0, 0.0]\n\
+             [medium]\nbounds = {{ sphere = {{ center = [0.0, 0.0, 0.0], radius = 1.0 }} }}\n\
+             field = {{ kind = \"luneburg\" }}\n[render]\nwidth = 64\nheight = 36\n{render}"
+        );
+        let scene = grin_scene::parse_scene(&text, Path::new("lens.toml")).expect("scene");
+        let medium = scene.medium.as_ref().expect("medium");
+        let field: Arc<dyn IndexField> =
+            grin_field::build_field(medium, Path::new(".")).expect("field");
+        RenderScene::new(&scene, Path::new("."), Some(field)).expect("render scene")
+    }
+
+    #[test]
+    fn the_default_resolves_to_a_method_that_meets_it_on_the_pilots() {
+        let mut rs = lens("");
+        assert_eq!(
+            rs.settings.step,
+            StepSpec::Auto(grin_scene::DEFAULT_AUTO_ACCURACY)
+        );
+        let c = resolve_scene::<f64>(&mut rs).expect("resolved");
+        assert!(c.met && c.chosen.error <= PILOT_TARGET * c.asked, "{c:?}");
+        assert!(c.pilot_rays >= MIN_CAMERA_PILOTS, "{}", c.pilot_rays);
+        // Both places the backends read agree with the choice.
+        let m = rs.medium.as_ref().expect("medium");
+        assert_eq!(m.trace, c.settings);
+        assert_eq!(rs.settings.step, c.settings.step);
+        assert_eq!(rs.settings.integrator, Some(c.settings.integrator));
+        // The cheapest candidate that met the target was chosen.
+        let cheaper_met = c
+            .tried
+            .iter()
+            .filter(|t| t.error <= PILOT_TARGET * c.asked)
+            .any(|t| t.evals_per_ray < c.chosen.evals_per_ray);
+        assert!(!cheaper_met, "{:?}", c.tried);
+    }
+
+    #[test]
+    fn a_named_integrator_is_kept_and_zero_pilots_leave_error_control() {
+        let mut rs = lens("integrator = \"rk4\"\n");
+        let c = resolve_scene::<f64>(&mut rs).expect("resolved");
+        assert_eq!(c.settings.integrator, IntegratorKind::Rk4);
+        let mut rs = lens("pilot_rays = 0\n");
+        assert!(resolve_scene::<f64>(&mut rs).is_none());
+        assert_eq!(
+            rs.settings.step,
+            StepSpec::Auto(grin_scene::DEFAULT_AUTO_ACCURACY)
+        );
+        // Another policy is not touched.
+        let mut rs = lens("step = { fixed = 0.01 }\n");
+        assert!(resolve_scene::<f64>(&mut rs).is_none());
+    }
+}
