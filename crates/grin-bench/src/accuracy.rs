@@ -45,6 +45,20 @@ pub fn trace(
     }
 }
 
+/// `auto` resolved on `pilots` in the chosen precision, every integrator a candidate
+/// (as for a scene that names none).
+pub fn choose_auto(
+    field: &dyn grin_field::IndexField,
+    settings: &TraceSettings,
+    precision: Precision,
+    pilots: &[(DVec3, DVec3)],
+) -> Option<grin_trace::auto::AutoChoice> {
+    match precision {
+        Precision::F64 => grin_trace::auto::choose::<f64>(field, settings, true, pilots),
+        Precision::F32 => grin_trace::auto::choose::<f32>(field, settings, true, pilots),
+    }
+}
+
 /// Settings of the numerical reference.
 pub fn reference_settings(scale: f64) -> TraceSettings {
     Method {
@@ -110,11 +124,7 @@ pub fn reference(case: &Case) -> anyhow::Result<Reference> {
     }
 }
 
-/// Angle between two directions (accurate for tiny angles: atan2 of |a x b| and a . b).
-pub fn angle(a: DVec3, b: DVec3) -> f64 {
-    let (a, b) = (a.normalize_or_zero(), b.normalize_or_zero());
-    a.cross(b).length().atan2(a.dot(b))
-}
+pub use grin_trace::auto::angle;
 
 /// One run: a method at one parameter on one case.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -162,15 +172,12 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
     let mut chosen = String::new();
     let mut pilot_evals = 0;
     if method.policy == Policy::Auto {
-        let pilots = &case.pilots;
-        let choice = match method.precision {
-            Precision::F64 => {
-                grin_trace::auto::choose::<f64>(case.field.as_ref(), &settings, true, pilots)
-            }
-            Precision::F32 => {
-                grin_trace::auto::choose::<f32>(case.field.as_ref(), &settings, true, pilots)
-            }
-        };
+        let choice = choose_auto(
+            case.field.as_ref(),
+            &settings,
+            method.precision,
+            &case.pilots,
+        );
         if let Some(c) = choice {
             settings = c.settings;
             chosen = c.describe();

@@ -78,12 +78,7 @@ pub fn exit_name(exit: ExitMethod) -> &'static str {
 }
 
 /// The integrator's name as charts show it (`adaptive` is the Dormand-Prince pair).
-pub fn integrator_label(kind: IntegratorKind) -> &'static str {
-    match kind {
-        IntegratorKind::Adaptive => "dopri",
-        k => k.name(),
-    }
-}
+pub use grin_trace::auto::label as integrator_label;
 
 impl Method {
     /// `rk4 fixed hermite f64`.

@@ -24,7 +24,7 @@ use grin_scene::{ExitMethod, IntegratorKind};
 use grin_trace::{RayResult, RayStatus};
 use rayon::prelude::*;
 
-use crate::accuracy::{angle, trace};
+use crate::accuracy::{angle, choose_auto, trace};
 use crate::cases::{Exit, medium, rod_exit};
 use crate::methods::{Method, Policy, Precision};
 
@@ -469,11 +469,12 @@ pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
     settings.max_steps = case.max_steps;
     if col.method.policy == Policy::Auto {
         let pilots: Vec<(DVec3, DVec3)> = case.rays.iter().map(|&(o, d, _)| (o, d)).collect();
-        let field = case.field.as_ref();
-        let choice = match col.method.precision {
-            Precision::F64 => grin_trace::auto::choose::<f64>(field, &settings, true, &pilots),
-            Precision::F32 => grin_trace::auto::choose::<f32>(field, &settings, true, &pilots),
-        };
+        let choice = choose_auto(
+            case.field.as_ref(),
+            &settings,
+            col.method.precision,
+            &pilots,
+        );
         if let Some(c) = choice {
             settings = c.settings;
         }

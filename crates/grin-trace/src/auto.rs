@@ -1,10 +1,11 @@
 //! `step = { auto = RAD }` resolved by pilot rays: before a render or a ray table, a few
-//! of its own rays are traced with error control at a fiftieth of the asked error (the
-//! pilots' reference), then with fixed steps of each candidate integrator, halving the
-//! step (or jumping by the measured order) until the worst pilot's exit direction is
-//! within the asked error. The cheapest candidate that meets it on every pilot, or the
-//! per-length error control the tracer runs for an unresolved `auto` when that is
-//! cheaper, traces the rest.
+//! of its own rays are traced with error control at a hundredth of the asked error (the
+//! pilots' reference), then with the per-length error control an unresolved `auto` runs
+//! (tightened by 10 while it misses), then with fixed steps of each candidate integrator,
+//! jumping by the measured order (at least halving) until the worst pilot's exit
+//! direction is within [`PILOT_TARGET`] of the asked error. The cheapest candidate that
+//! meets it on every pilot traces the rest; if none does, the closest, and the choice
+//! says so (`met`).
 //!
 //! Why: error control pays six evaluations a dopri step and keeps its steps short enough
 //! for the worst place in the field everywhere; on a weak field a low-order method with
@@ -72,7 +73,7 @@ pub struct AutoChoice {
 }
 
 impl AutoChoice {
-    /// `verlet, fixed ds 0.0625 (pilots: 3.1e-5 rad, 18 evals/ray)`.
+    /// `verlet, fixed ds 0.0625 (worst of 64 pilots: 3.1e-5 rad, 18 evals/ray)`.
     pub fn describe(&self) -> String {
         let c = &self.chosen;
         let how = match (c.fixed_step, self.settings.step) {
@@ -89,6 +90,32 @@ impl AutoChoice {
     }
 }
 
+impl AutoChoice {
+    /// The line `grin render` and `grin trace` print: `auto 1e-4 rad: <describe>, chosen
+    /// by pilot rays for N field evals`.
+    pub fn summary_line(&self) -> String {
+        format!(
+            "auto {:.0e} rad: {}, chosen by pilot rays for {} field evals",
+            self.asked,
+            self.describe(),
+            self.spent_evals
+        )
+    }
+
+    /// The warning when no candidate met the asked error (`None` when one did);
+    /// `verb`: what the closest one is used for (`rendering`, `tracing`).
+    pub fn unmet_warning(&self, verb: &str) -> Option<String> {
+        (!self.met).then(|| {
+            format!(
+                "auto {:.0e} rad: no method met it on the pilot rays within the steps tried; \
+                 {verb} with the closest, {}",
+                self.asked,
+                self.describe()
+            )
+        })
+    }
+}
+
 /// Worst angle between the exits of `runs` and `reference` (infinite where a status
 /// differs) and the mean evaluations per ray.
 fn measure(runs: &[RayResult], reference: &[RayResult]) -> (f64, f64) {
@@ -102,15 +129,17 @@ fn measure(runs: &[RayResult], reference: &[RayResult]) -> (f64, f64) {
             continue;
         }
         if r.status.left() {
-            let (a, b) = (
-                r.direction.normalize_or_zero(),
-                e.direction.normalize_or_zero(),
-            );
-            let ang = a.cross(b).length().atan2(a.dot(b));
+            let ang = angle(r.direction, e.direction);
             worst = worst.max(if ang.is_nan() { f64::INFINITY } else { ang });
         }
     }
     (worst, evals as f64 / runs.len().max(1) as f64)
+}
+
+/// Angle between two directions (accurate for tiny angles: atan2 of |a x b| and a . b).
+pub fn angle(a: DVec3, b: DVec3) -> f64 {
+    let (a, b) = (a.normalize_or_zero(), b.normalize_or_zero());
+    a.cross(b).length().atan2(a.dot(b))
 }
 
 fn trace_all<R: Real>(

@@ -187,36 +187,21 @@ mod tests {
 
     #[test]
     fn second_order_estimate_grows_with_the_second_derivative_of_d() {
+        // Verlet's estimate after five steps of h = 0.1 along +z, D = d(t) along x.
+        let after_five = |d: fn(f64) -> DVec3| {
+            let mut e = ErrorEstimate::new(2);
+            for k in 0..5 {
+                let t = f64::from(k) * 0.1;
+                e.step(DVec3::Z, DVec3::Z, d(t), d(t + 0.1), 0.1, 1.0);
+            }
+            e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO)
+        };
         // D = t x: D'' = 0, verlet's local error term is zero (what is left is the
         // position error's feedback, h^2/6 |dD| |dD|/h per step, small).
-        let mut e = ErrorEstimate::new(2);
-        for k in 0..5 {
-            let t = f64::from(k) * 0.1;
-            e.step(
-                DVec3::Z,
-                DVec3::Z,
-                DVec3::X * t,
-                DVec3::X * (t + 0.1),
-                0.1,
-                1.0,
-            );
-        }
-        let linear = e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO);
+        let linear = after_five(|t| DVec3::X * t);
         // D = t^2 x: D'' = 2, each step after the first adds h^3/12 * 2 (and feedback).
-        let mut e = ErrorEstimate::new(2);
-        for k in 0..5 {
-            let t = f64::from(k) * 0.1;
-            e.step(
-                DVec3::Z,
-                DVec3::Z,
-                DVec3::X * t * t,
-                DVec3::X * (t + 0.1) * (t + 0.1),
-                0.1,
-                1.0,
-            );
-        }
+        let quadratic = after_five(|t| DVec3::X * t * t);
         let want = 4.0 * 1e-3 / 12.0 * 2.0;
-        let quadratic = e.value(DVec3::Z, 1.0, DVec3::Z, DVec3::ZERO);
         assert!(linear < 0.3 * want, "{linear}");
         assert!(quadratic >= want && quadratic < 2.0 * want, "{quadratic}");
     }

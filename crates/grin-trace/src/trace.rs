@@ -327,23 +327,28 @@ pub fn trace_ray_jittered<R: Real>(
             }
         };
         let seg = accumulate(&mut res, state, &s0, next, &s1, h);
-        estimate.step(
-            state.t.to_dvec3(),
-            next.t.to_dvec3(),
-            s0.n_grad_n().to_dvec3(),
-            s1.n_grad_n().to_dvec3(),
-            h.to_f64(),
-            s0.n.to_f64(),
-        );
-        if !outside && estimate.is_active() {
-            let p = next.r.to_dvec3();
-            estimate.check_approach(
-                -bounds.signed_distance(p),
-                bounds.normal(p),
+        // The low-order integrators' own error estimate (nothing to do for the others:
+        // no conversions on their hot path).
+        if estimate.is_active() {
+            let d1 = s1.n_grad_n().to_dvec3();
+            estimate.step(
+                state.t.to_dvec3(),
                 next.t.to_dvec3(),
-                s1.n.to_f64(),
-                s1.n_grad_n().to_dvec3(),
+                s0.n_grad_n().to_dvec3(),
+                d1,
+                h.to_f64(),
+                s0.n.to_f64(),
             );
+            if !outside {
+                let p = next.r.to_dvec3();
+                estimate.check_approach(
+                    -bounds.signed_distance(p),
+                    bounds.normal(p),
+                    next.t.to_dvec3(),
+                    s1.n.to_f64(),
+                    d1,
+                );
+            }
         }
         res.steps += 1;
         if observer(&seg) == Control::Stop {

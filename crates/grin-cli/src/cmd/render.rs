@@ -295,15 +295,10 @@ fn render_one(
         Backend::Cpu => grin_trace::auto::resolve_scene::<f64>(&mut rs),
         Backend::Gpu => grin_trace::auto::resolve_scene::<f32>(&mut rs),
     };
-    let auto_warning = auto.as_ref().filter(|a| !a.met).map(|a| {
-        let w = format!(
-            "auto {:.0e} rad: no method met it on the pilot rays within the steps tried;              rendering with the closest, {}",
-            a.asked,
-            a.describe()
-        );
+    let auto_warning = auto.as_ref().and_then(|a| a.unmet_warning("rendering"));
+    if let Some(w) = &auto_warning {
         eprintln!("grin: warning: {w}");
-        w
-    });
+    }
     let bos_scenes = match &bos_scene {
         Some(s) => {
             let mut with = RenderScene::new(s, scene_dir, field.clone())
@@ -742,12 +737,7 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
             wrote,
         ));
         if let Some(a) = &summary.auto {
-            report(format!(
-                "auto {:.0e} rad: {}, chosen by pilot rays for {:.0} field evals",
-                a.asked,
-                a.describe(),
-                a.spent_evals as f64
-            ));
+            report(a.summary_line());
         }
         if let Some(c) = &summary.comparison {
             let wrote = c

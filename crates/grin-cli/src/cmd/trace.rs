@@ -183,12 +183,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let Some(a) = &auto {
         settings = a.settings;
-        if !a.met {
-            eprintln!(
-                "grin: warning: auto {:.0e} rad: no method met it on the pilot rays within                  the steps tried; tracing with the closest, {}",
-                a.asked,
-                a.describe()
-            );
+        if let Some(w) = a.unmet_warning("tracing") {
+            eprintln!("grin: warning: {w}");
         }
     }
     let format = match args.format {
@@ -242,12 +238,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.output.display()
     );
     if let Some(a) = &auto {
-        eprintln!(
-            "auto {:.0e} rad: {}, chosen by pilot rays for {} field evals",
-            a.asked,
-            a.describe(),
-            a.spent_evals
-        );
+        eprintln!("{}", a.summary_line());
     }
     if args.json {
         let summary = Summary {
