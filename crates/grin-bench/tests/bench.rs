@@ -412,3 +412,36 @@ fn auto_delivers_what_is_asked_at_the_cost_of_the_best_fixed_step() {
         }
     }
 }
+
+/// In f32 a ray on a macro-cell face of a baked grid used to get flights of a few ulps
+/// that did not move it, and repeat them until max_steps (2^20 in the sweep): the f32 runs
+/// of the baked plume took 20-60 ms a ray. Flights shorter than a thousandth of a voxel are
+/// not taken now (the GPU's floor): f32 takes the steps f64 takes, and every ray leaves.
+#[test]
+fn f32_rays_do_not_stall_on_macro_cell_faces() {
+    let base = cases::plume(36).expect("plume");
+    let baked = cases::baked(
+        &base,
+        64,
+        grin_field::baked::Interp::Trilinear,
+        grin_field::baked::Storage::F32,
+    )
+    .expect("bake");
+    let r = reference(&baked).expect("reference");
+    for integrator in [IntegratorKind::Rk4, IntegratorKind::Verlet] {
+        let m = |precision| Method {
+            precision,
+            ..method(integrator, Policy::Fixed, ExitMethod::Hermite)
+        };
+        let f64_run = run_point(&baked, &r, m(Precision::F64), 0.25);
+        let f32_run = run_point(&baked, &r, m(Precision::F32), 0.25);
+        assert_eq!(f32_run.failed_rays, 0, "{integrator:?}");
+        assert!(
+            f32_run.steps_per_ray < 1.5 * f64_run.steps_per_ray,
+            "{integrator:?}: f32 {} steps a ray, f64 {}",
+            f32_run.steps_per_ray,
+            f64_run.steps_per_ray
+        );
+        assert!(f32_run.err_dir < 1e-3, "{}", f32_run.err_dir);
+    }
+}

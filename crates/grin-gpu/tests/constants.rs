@@ -101,6 +101,7 @@ fn mirrored_constants_have_the_same_values() {
         ("EXIT_TOL_REL", boundary::EXIT_TOL_REL),
         ("EXIT_TOL_EPS", boundary::EXIT_TOL_EPS),
         ("MIN_SPAN_REL", trace::MIN_SPAN_REL),
+        ("MIN_FLIGHT_VOXELS", trace::MIN_FLIGHT_VOXELS),
         ("ENTRY_NUDGE_EPS", trace::ENTRY_NUDGE_EPS),
         ("EXIT_NEWTON_ITERATIONS", u(trace::EXIT_NEWTON_ITERATIONS)),
         ("EXCURSION_ITERATIONS", u(boundary::EXCURSION_ITERATIONS)),

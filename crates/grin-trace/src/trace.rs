@@ -23,6 +23,13 @@ use crate::step::{StepController, Taken};
 /// straight flight (and could otherwise stall a ray at a cell face).
 pub const MIN_SPAN_REL: f64 = 1e-9;
 
+/// A straight flight shorter than this fraction of the field's grid spacing is not taken
+/// (an integration step is, just as straight in a homogeneous cell). In f32 a ray on a
+/// macro-cell face can get a span of a few ulps that does not move it once rounded: without
+/// this floor such rays repeated zero-length flights until `max_steps` (the f32 runs of the
+/// bench's baked plume: ~1M flights, 20-60 ms a ray). The GPU's twin is older (heat haze).
+pub const MIN_FLIGHT_VOXELS: f64 = 1e-3;
+
 /// Newton refinements of the Hermite exit on the integrator's own state (each one
 /// re-step): the cubic's root is accurate to O(h^4), two steps of Newton to the
 /// integrator's order at any step length the controllers choose.
@@ -237,6 +244,8 @@ pub fn trace_ray_jittered<R: Real>(
     let len_scale = bounds.radius();
     let exit_tol = exit_tolerance::<R>(&bounds);
     let mut estimate = ErrorEstimate::new(integrate::order(settings.integrator));
+    let min_flight = (MIN_SPAN_REL * len_scale)
+        .max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
 
     loop {
         r = state.r;
@@ -255,7 +264,7 @@ pub fn trace_ray_jittered<R: Real>(
         // Straight flight through a homogeneous macro cell.
         if settings.macro_cells
             && let Some(span) = field.homogeneous_span(res.position, res.direction)
-            && span > MIN_SPAN_REL * len_scale
+            && span > min_flight
         {
             let p = res.position;
             let dir_w = res.direction;
