@@ -14,6 +14,10 @@
 //                    bounds_signed_distance, refract    signed_distance}, boundary::refract
 //   stage_scene      intersect_scene, sky_radiance    grin_render::primitives::intersect_scene,
 //                                                     grin_render::sky::SkyModel::sky_radiance
+//   stage_march      march_medium (a whole ray)       grin_trace::trace_ray (no jitter)
+//
+// stage_march is also the GPU column of `grin bench accuracy` (grin_gpu::march): a ray
+// table traced by the render kernel's own medium loop.
 
 // Keep in sync with grin_gpu::stages::StageIn.
 struct StageIn {
@@ -35,7 +39,8 @@ struct StageOut {
     ds_next: f32,    // the controller's step after this one
     err_t: vec3<f32>,
     code: u32,       // stage_leave: 0 stayed inside, 1 the step ended outside, 2 it tunnelled;
-                     // stage_flight: may_fly; stage_surface: bounds met, refraction transmitted
+                     // stage_flight: may_fly; stage_surface: bounds met, refraction transmitted;
+                     // stage_march: STATUS_* | END_* << 8
 }
 
 @group(1) @binding(0) var<storage, read> stage_in: array<StageIn>;
@@ -206,5 +211,29 @@ fn stage_scene(@builtin(global_invocation_id) gid: vec3<u32>) {
     out.err_r = hit.normal;
     out.code = select(0u, hit.object + 1u, hit.found);
     out.grad_n = sky_radiance(d);
+    stage_out[gid.x] = out;
+}
+
+// A whole ray through the medium from r along t (outside: entered with refraction, as a
+// camera ray is), no jitter: the end point (r), direction (t), optical path (h), length
+// (n), field evaluations, steps (ds_next, exact below 2^24), transmittance (err_t.x) and
+// status (code: STATUS_* in the low byte, END_* in the next).
+@compute @workgroup_size(64, 1, 1)
+fn stage_march(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&stage_in) {
+        return;
+    }
+    let input = stage_in[gid.x];
+    var stats = MarchStats(0u, 0u, 0.0, 0.0);
+    let end = march_medium(input.r, input.t, 1.0, &stats);
+    var out = stage_blank();
+    out.r = end.point;
+    out.t = end.dir;
+    out.h = stats.opl;
+    out.n = stats.length;
+    out.evals = stats.evals;
+    out.ds_next = f32(stats.steps);
+    out.err_t = vec3<f32>(end.transmittance, 0.0, 0.0);
+    out.code = end.status | (end.kind << 8u);
     stage_out[gid.x] = out;
 }

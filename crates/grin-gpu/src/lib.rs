@@ -28,6 +28,7 @@ pub mod device;
 pub mod error;
 pub mod field;
 pub mod gpu_data;
+pub mod march;
 mod pack;
 mod pipelines;
 pub mod render;
@@ -36,4 +37,5 @@ pub mod stages;
 
 pub use device::{GpuContext, describe_adapter};
 pub use error::GpuError;
+pub use march::GpuRayTracer;
 pub use render::GpuRenderer;

@@ -149,6 +149,19 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
 
 /// The object array (each object, then copies of those a chord inside the medium can
 /// meet, listed in `params.medium_objects`) and the light array, each padded to one
+/// Copy into `p` (fresh from [`frame_params`]) what the field's upload and the object
+/// arrays filled into `uploaded`: the grid, the macro cells, the objects in the medium.
+pub(crate) fn copy_uploaded(p: &mut FrameParams, uploaded: &FrameParams) {
+    p.grid_origin = uploaded.grid_origin;
+    p.grid_inv_spacing = uploaded.grid_inv_spacing;
+    p.grid_dims = uploaded.grid_dims;
+    p.macro_dims = uploaded.macro_dims;
+    p.macro_cell_voxels = uploaded.macro_cell_voxels;
+    p.macro_threshold = uploaded.macro_threshold;
+    p.medium_objects_first = uploaded.medium_objects_first;
+    p.medium_objects_count = uploaded.medium_objects_count;
+}
+
 /// element (storage arrays may not be empty).
 pub(crate) fn scene_arrays(
     scene: &RenderScene,

@@ -14,7 +14,7 @@ use crate::field::{
     upload_field,
 };
 use crate::gpu_data::*;
-use crate::pack::{env_texels, env_texture, frame_params, scene_arrays};
+use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::{GpuContext, GpuError, shaders};
 
@@ -330,14 +330,7 @@ impl<'a> GpuRenderer<'a> {
         let mut p = frame_params(scene)?;
         let old = &self.params;
         // What the field's upload and the object arrays placed in the parameters.
-        p.grid_origin = old.grid_origin;
-        p.grid_inv_spacing = old.grid_inv_spacing;
-        p.grid_dims = old.grid_dims;
-        p.macro_dims = old.macro_dims;
-        p.macro_cell_voxels = old.macro_cell_voxels;
-        p.macro_threshold = old.macro_threshold;
-        p.medium_objects_first = old.medium_objects_first;
-        p.medium_objects_count = old.medium_objects_count;
+        copy_uploaded(&mut p, old);
         p.flags |= self.scene_flags;
         if old.flags & FLAG_MACRO_CELLS == 0 {
             p.flags &= !FLAG_MACRO_CELLS;

@@ -244,8 +244,8 @@ pub fn trace_ray_jittered<R: Real>(
     let len_scale = bounds.radius();
     let exit_tol = exit_tolerance::<R>(&bounds);
     let mut estimate = ErrorEstimate::new(integrate::order(settings.integrator));
-    let min_flight = (MIN_SPAN_REL * len_scale)
-        .max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
+    let min_flight =
+        (MIN_SPAN_REL * len_scale).max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
 
     loop {
         r = state.r;

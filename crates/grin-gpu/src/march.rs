@@ -1,0 +1,219 @@
+//! A ray table on the GPU: the render kernel's own medium loop (`march_medium`, run by
+//! the `stage_march` entry point of shaders/stages.wgsl) on given rays through a baked
+//! field, with the tracer's settings. What `grin bench accuracy` measures the GPU with:
+//! the same rays, methods and error measure as its CPU columns, in the GPU's arithmetic
+//! and timed on the adapter.
+//!
+//! ```ignore
+//! let ctx = GpuContext::new_headless()?;
+//! let mut gpu = GpuRayTracer::new(&ctx, baked)?;               // Arc<BakedField>
+//! let (rays_out, seconds) = gpu.trace(&settings, &rays, 1)?;  // Vec<GpuRay>
+//! gpu.set_field(other_baked)?;                                 // pipelines are kept
+//! ```
+//!
+//! One pipeline per set of the kernel's constants (integrator, step policy, exit method,
+//! flags, bounds shape) is compiled on first use and kept across fields; step sizes and
+//! tolerances are parameters.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use glam::DVec3;
+use grin_field::IndexField;
+use grin_field::baked::BakedField;
+use grin_render::camera::PinholeCamera;
+use grin_render::scene::{RenderScene, SceneMedium};
+use grin_render::settings::TraceSettings;
+use grin_render::sky::SkyModel;
+use grin_scene::RenderSettings;
+
+use crate::gpu_data::{FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
+use crate::pack::{copy_uploaded, frame_params};
+use crate::pipelines::pipeline_constants;
+use crate::stages::{Stage, StageIn, StageKit, StageOut};
+use crate::{GpuContext, GpuError};
+
+/// Traces rays through one baked field on the GPU.
+pub struct GpuRayTracer<'a> {
+    kit: StageKit<'a>,
+    field: Arc<BakedField>,
+    /// The parameters as the field's upload left them (grid, macro cells, flags).
+    uploaded: FrameParams,
+    pipelines: HashMap<Vec<u64>, wgpu::ComputePipeline>,
+}
+
+impl std::fmt::Debug for GpuRayTracer<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuRayTracer")
+            .field("field", &self.field.geometry().dims)
+            .field("pipelines", &self.pipelines.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// A scene of nothing but `field`, marched with `trace` (no jitter).
+fn ray_scene(field: &Arc<BakedField>, trace: &TraceSettings) -> Result<RenderScene, GpuError> {
+    let settings = RenderSettings {
+        width: 1,
+        height: 1,
+        integrator: Some(trace.integrator),
+        step: trace.step,
+        max_steps: trace.max_steps,
+        exit: trace.exit,
+        macro_cells: trace.macro_cells,
+        jitter: false,
+        pilot_rays: 0,
+        ..RenderSettings::default()
+    };
+    let medium = SceneMedium::new(Arc::clone(field) as Arc<dyn IndexField>, &settings)
+        .map_err(|e| GpuError::Unsupported(format!("tracer settings: {e}")))?;
+    let camera = PinholeCamera {
+        origin: DVec3::ZERO,
+        forward: DVec3::Z,
+        right: DVec3::X,
+        up: DVec3::Y,
+        tan_half_fov_y: 1.0,
+        width: 1,
+        height: 1,
+        lens_radius: 0.0,
+        focus_distance: 1.0,
+        ortho: None,
+    };
+    Ok(RenderScene {
+        camera,
+        objects: Vec::new(),
+        materials: Vec::new(),
+        lights: Vec::new(),
+        sky: SkyModel::Gradient {
+            horizon: DVec3::ONE,
+            zenith: DVec3::ONE,
+            ground: DVec3::ONE,
+        },
+        medium: Some(medium),
+        settings,
+        images: Vec::new(),
+        object_images: Vec::new(),
+    })
+}
+
+impl<'a> GpuRayTracer<'a> {
+    /// Upload `field` (its own interpolation and storage, as a render would).
+    pub fn new(ctx: &'a GpuContext, field: Arc<BakedField>) -> Result<Self, GpuError> {
+        let scene = ray_scene(
+            &field,
+            &TraceSettings::from_render(&RenderSettings::default()),
+        )?;
+        let kit = StageKit::new(ctx, &scene, &field)?;
+        let uploaded = kit.params;
+        Ok(GpuRayTracer {
+            kit,
+            field,
+            uploaded,
+            pipelines: HashMap::new(),
+        })
+    }
+
+    /// Trace through `field` from now on (uploaded unless it is the current one); the
+    /// compiled pipelines are kept.
+    pub fn set_field(&mut self, field: Arc<BakedField>) -> Result<(), GpuError> {
+        if Arc::ptr_eq(&field, &self.field) {
+            return Ok(());
+        }
+        let scene = ray_scene(
+            &field,
+            &TraceSettings::from_render(&RenderSettings::default()),
+        )?;
+        self.kit.set_scene(&scene, &field)?;
+        self.uploaded = self.kit.params;
+        self.field = field;
+        Ok(())
+    }
+
+    /// Pipelines compiled so far (one per integrator, step policy and exit used).
+    pub fn pipelines_compiled(&self) -> usize {
+        self.pipelines.len()
+    }
+
+    /// Trace `rays` (origin, direction; origins outside the bounds enter with
+    /// refraction) with `settings`, each ray `copies` times in one dispatch (to time a
+    /// batch big enough for the adapter; results are the first copy's). Returns the
+    /// results, in the order of `rays`, and the seconds the kernel took.
+    pub fn trace(
+        &mut self,
+        settings: &TraceSettings,
+        rays: &[(DVec3, DVec3)],
+        copies: usize,
+    ) -> Result<(Vec<GpuRay>, f64), GpuError> {
+        let mut params = frame_params(&ray_scene(&self.field, settings)?)?;
+        copy_uploaded(&mut params, &self.uploaded);
+        params.flags |= self.uploaded.flags & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC);
+        if self.uploaded.flags & FLAG_MACRO_CELLS == 0 {
+            params.flags &= !FLAG_MACRO_CELLS;
+        }
+        let key: Vec<u64> = pipeline_constants(&params, crate::gpu_data::PASS_ALL)
+            .iter()
+            .map(|(_, v)| v.to_bits())
+            .collect();
+        if !self.pipelines.contains_key(&key) {
+            let pipeline = self.kit.pipeline(Stage::March, &params)?;
+            self.pipelines.insert(key.clone(), pipeline);
+        }
+        self.kit.set_params(params);
+        let input: Vec<StageIn> = (0..copies.max(1))
+            .flat_map(|_| rays.iter())
+            .map(|&(o, d)| StageIn {
+                r: o.as_vec3().to_array(),
+                h: 0.0,
+                t: d.as_vec3().to_array(),
+                ds_adapt: 0.0,
+            })
+            .collect();
+        let pipeline = self
+            .pipelines
+            .get(&key)
+            .ok_or_else(|| GpuError::Unsupported("pipeline cache lost an entry".into()))?;
+        let (out, seconds) = self.kit.dispatch(pipeline, &input)?;
+        Ok((
+            out.iter().take(rays.len()).map(GpuRay::from).collect(),
+            seconds,
+        ))
+    }
+}
+
+/// One traced ray, as the CPU tracer's `grin_trace::RayResult` reports it (f32 values).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpuRay {
+    /// `grin_trace::RayStatus`'s code: 0 missed, 1 exited, 2 absorbed, 3 max_steps,
+    /// 4 error, 5 degraded (`STATUS_*` in shaders/shared/medium.wgsl).
+    pub status: u32,
+    /// Where the ray left the medium (or stopped).
+    pub position: DVec3,
+    /// Unit direction there (after refraction out).
+    pub direction: DVec3,
+    /// Optical path length inside the medium.
+    pub opl: f64,
+    /// Geometric length inside the medium.
+    pub length: f64,
+    /// Steps (straight flights included).
+    pub steps: u32,
+    /// Field evaluations.
+    pub evals: u32,
+    /// Product of the Fresnel transmittances at the crossings.
+    pub transmittance: f64,
+}
+
+impl From<&StageOut> for GpuRay {
+    fn from(o: &StageOut) -> Self {
+        let v = |a: [f32; 3]| glam::Vec3::from_array(a).as_dvec3();
+        GpuRay {
+            status: o.code & 0xff,
+            position: v(o.r),
+            direction: v(o.t),
+            opl: f64::from(o.h),
+            length: f64::from(o.n),
+            steps: o.ds_next as u32,
+            evals: o.evals,
+            transmittance: f64::from(o.err_t[0]),
+        }
+    }
+}

@@ -1,0 +1,127 @@
+//! The GPU ray table (`grin_gpu::march`, the GPU column of `grin bench accuracy`) against
+//! its CPU twin: the same rays through the same baked fields, traced by the render
+//! kernel's `march_medium` and by `grin_trace::trace_ray::<f32>`.
+
+mod harness;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::DVec3;
+use grin_field::baked::{BakedField, Interp};
+use grin_gpu::GpuRayTracer;
+use grin_render::settings::TraceSettings;
+use grin_scene::{ExitMethod, IntegratorKind, StepSpec, load_scene};
+use grin_trace::{RayStatus, trace_ray};
+
+fn baked(name: &str, resolution: usize, interp: Interp) -> Arc<BakedField> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../data/scenes/{name}.toml"));
+    let scene = load_scene(&path).unwrap();
+    let b = harness::baked(&scene, path.parent().unwrap(), resolution).unwrap();
+    Arc::new(Arc::try_unwrap(b).unwrap().with_interp(interp))
+}
+
+/// A fan of rays from outside the bounds through the medium's centre region.
+fn rays(field: &BakedField, count: usize) -> Vec<(DVec3, DVec3)> {
+    use grin_field::IndexField;
+    let b = field.bounds();
+    let (c, r) = (b.center(), b.radius());
+    (0..count)
+        .map(|i| {
+            let f = i as f64 / count as f64;
+            let offset = DVec3::new(0.8 * r * (f - 0.5), 0.3 * r * (6.0 * f).sin(), 0.0);
+            (
+                c + offset - DVec3::Z * 3.0 * r,
+                DVec3::new(0.02 * f, 0.0, 1.0),
+            )
+        })
+        .collect()
+}
+
+fn settings(integrator: IntegratorKind, step: StepSpec, exit: ExitMethod) -> TraceSettings {
+    TraceSettings {
+        integrator,
+        step,
+        max_steps: 100_000,
+        exit,
+        macro_cells: true,
+    }
+}
+
+#[test]
+fn gpu_ray_table_matches_the_cpu_f32_twin() {
+    let Some(ctx) = harness::context("gpu_ray_table_matches_the_cpu_f32_twin") else {
+        return;
+    };
+    let lens = baked("luneburg", 48, Interp::Tricubic);
+    let plume = baked("plume", 48, Interp::Trilinear);
+    let mut gpu = GpuRayTracer::new(&ctx, Arc::clone(&lens)).unwrap();
+    let methods = [
+        settings(
+            IntegratorKind::Rk4,
+            StepSpec::Fixed(0.05),
+            ExitMethod::Hermite,
+        ),
+        settings(
+            IntegratorKind::Sharma,
+            StepSpec::Fixed(0.05),
+            ExitMethod::Bisection,
+        ),
+        settings(
+            IntegratorKind::Adaptive,
+            StepSpec::Auto(1e-4),
+            ExitMethod::Hermite,
+        ),
+    ];
+    let mut compared = 0;
+    let (mut worst_angle, mut worst_evals) = (0.0f64, 0.0f64);
+    for field in [&lens, &plume] {
+        gpu.set_field(Arc::clone(field)).unwrap();
+        let rays = rays(field, 40);
+        for s in &methods {
+            let (out, seconds) = gpu.trace(s, &rays, 1).unwrap();
+            assert_eq!(out.len(), rays.len());
+            assert!(seconds > 0.0);
+            for ((o, d), g) in rays.iter().zip(&out) {
+                let c = trace_ray::<f32>(field.as_ref(), s, *o, *d);
+                let status = RayStatus::ALL[g.status as usize];
+                assert_eq!(status, c.status, "{s:?} ray {o} {d}");
+                if !c.status.left() {
+                    continue;
+                }
+                compared += 1;
+                let angle = g.direction.angle_between(c.direction);
+                worst_angle = worst_angle.max(angle);
+                assert!(
+                    angle < 2e-5,
+                    "{s:?} ray from {o}: direction {angle} rad apart"
+                );
+                assert!(
+                    (g.position - c.position).length() < 1e-4,
+                    "{s:?} ray from {o}: exit {} vs {}",
+                    g.position,
+                    c.position
+                );
+                assert!((g.opl - c.opl).abs() < 1e-4 * c.opl.max(1.0));
+                // The same steps and field samples, up to an f32 rounding that moves a
+                // step across a face or an adaptive acceptance.
+                let (ge, ce) = (f64::from(g.evals), c.evals as f64);
+                worst_evals = worst_evals.max((ge - ce).abs() / ce);
+                assert!((ge - ce).abs() <= 0.1 * ce + 8.0, "evals {ge} vs {ce}");
+            }
+        }
+    }
+    eprintln!(
+        "{compared} rays: worst direction difference {worst_angle:.2e} rad, evals {:.1}% apart",
+        100.0 * worst_evals
+    );
+    assert!(compared > 150, "{compared} rays compared");
+    // One pipeline per method (the bounds' shape is a constant too: sphere and box).
+    assert_eq!(gpu.pipelines_compiled(), 2 * methods.len());
+    // Copies trace the same rays: the first copy's results are returned.
+    gpu.set_field(Arc::clone(&lens)).unwrap();
+    let rays = rays(&lens, 8);
+    let (one, _) = gpu.trace(&methods[0], &rays, 1).unwrap();
+    let (many, _) = gpu.trace(&methods[0], &rays, 50).unwrap();
+    assert_eq!(one, many);
+}
