@@ -2,6 +2,8 @@
 //! its CPU twin: the same rays through the same baked fields, traced by the render
 //! kernel's `march_medium` and by `grin_trace::trace_ray::<f32>`.
 
+#![allow(clippy::unwrap_used)]
+
 mod harness;
 
 use std::path::Path;
