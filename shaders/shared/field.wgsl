@@ -77,6 +77,33 @@ fn mirror_index(i: i32, n: i32) -> i32 {
     return select(m, period - m, m >= n);
 }
 
+// The tricubic sum is written out without loops, in the order of the CPU twin's loops
+// (z outer, then y, then x): lavapipe (Mesa's gallivm) stops every loop of a shader
+// invocation after 65535 iterations in all (LP_MAX_TGSI_LOOP_ITERATIONS, shared by every
+// loop), and the 4x4x4 loops here spent ~20 of them per sample, ending rays of more than
+// ~2300 samples as `error` (the GPU column of `grin bench accuracy`).
+fn mirror4(b: i32, n: i32) -> vec4<i32> {
+    return vec4<i32>(mirror_index(b, n), mirror_index(b + 1, n), mirror_index(b + 2, n), mirror_index(b + 3, n));
+}
+
+fn tricubic_row(acc: vec4<f32>, ix: vec4<i32>, j: i32, k: i32, wjk: f32, wx: vec4<f32>) -> vec4<f32> {
+    var out = acc;
+    out += voxel(ix.x, j, k) * (wjk * wx.x);
+    out += voxel(ix.y, j, k) * (wjk * wx.y);
+    out += voxel(ix.z, j, k) * (wjk * wx.z);
+    out += voxel(ix.w, j, k) * (wjk * wx.w);
+    return out;
+}
+
+fn tricubic_plane(acc: vec4<f32>, ix: vec4<i32>, iy: vec4<i32>, k: i32, wz: f32, wx: vec4<f32>, wy: vec4<f32>) -> vec4<f32> {
+    var out = acc;
+    out = tricubic_row(out, ix, iy.x, k, wz * wy.x, wx);
+    out = tricubic_row(out, ix, iy.y, k, wz * wy.y, wx);
+    out = tricubic_row(out, ix, iy.z, k, wz * wy.z, wx);
+    out = tricubic_row(out, ix, iy.w, k, wz * wy.w, wx);
+    return out;
+}
+
 fn tricubic(g: vec3<f32>) -> vec4<f32> {
     let d = vec3<i32>(params.grid_dims);
     let fl = floor(g);
@@ -84,17 +111,14 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
     let wy = bspline_weights(g.y - fl.y);
     let wz = bspline_weights(g.z - fl.z);
     let b = vec3<i32>(fl) - vec3<i32>(1);
+    let ix = mirror4(b.x, d.x);
+    let iy = mirror4(b.y, d.y);
+    let iz = mirror4(b.z, d.z);
     var out = vec4<f32>(0.0);
-    for (var c = 0; c < 4; c++) {
-        let k = mirror_index(b.z + c, d.z);
-        for (var r = 0; r < 4; r++) {
-            let j = mirror_index(b.y + r, d.y);
-            let wjk = wz[c] * wy[r];
-            for (var a = 0; a < 4; a++) {
-                out += voxel(mirror_index(b.x + a, d.x), j, k) * (wjk * wx[a]);
-            }
-        }
-    }
+    out = tricubic_plane(out, ix, iy, iz.x, wz.x, wx, wy);
+    out = tricubic_plane(out, ix, iy, iz.y, wz.y, wx, wy);
+    out = tricubic_plane(out, ix, iy, iz.z, wz.z, wx, wy);
+    out = tricubic_plane(out, ix, iy, iz.w, wz.w, wx, wy);
     return out;
 }
 

@@ -127,3 +127,53 @@ fn gpu_ray_table_matches_the_cpu_f32_twin() {
     let (many, _) = gpu.trace(&methods[0], &rays, 50).unwrap();
     assert_eq!(one, many);
 }
+
+/// lavapipe (Mesa's gallivm) stops all loops of a shader invocation after 65535
+/// iterations in all (`LP_MAX_TGSI_LOOP_ITERATIONS`). The tricubic sample's 4x4x4 loops
+/// spent ~20 a sample and the Dormand-Prince stages 27 a step, so rays of more than ~2300
+/// tricubic samples or ~1900 dopri steps ended `error` on the GPU (the bench's GPU column
+/// found it: every run below R/256 on a tricubic grid). Both are written out now; what is
+/// left is ~3 iterations a step (~21,800 steps a ray on lavapipe; no limit on a GPU).
+#[test]
+fn long_rays_are_not_cut_short_by_lavapipes_loop_limit() {
+    let Some(ctx) = harness::context("long_rays_are_not_cut_short_by_lavapipes_loop_limit") else {
+        return;
+    };
+    let lens = baked("luneburg", 48, Interp::Tricubic);
+    let mut gpu = GpuRayTracer::new(&ctx, Arc::clone(&lens)).unwrap();
+    let rays = rays(&lens, 4);
+    for (s, min_steps) in [
+        // ~2000 steps, ~8000 tricubic samples.
+        (
+            settings(
+                IntegratorKind::Rk4,
+                StepSpec::Fixed(1.0 / 1024.0),
+                ExitMethod::Hermite,
+            ),
+            1900,
+        ),
+        // ~4000 Dormand-Prince steps.
+        (
+            settings(
+                IntegratorKind::Adaptive,
+                StepSpec::Fixed(1.0 / 2048.0),
+                ExitMethod::Hermite,
+            ),
+            3800,
+        ),
+    ] {
+        let (out, _) = gpu.trace(&s, &rays, 1).unwrap();
+        for ((o, d), g) in rays.iter().zip(&out) {
+            let c = trace_ray::<f32>(lens.as_ref(), &s, *o, *d);
+            assert_eq!(c.status, RayStatus::Exited);
+            assert!(c.steps >= min_steps, "{} steps", c.steps);
+            assert_eq!(
+                g.status, 1,
+                "{s:?}: GPU status {} after {} steps",
+                g.status, g.steps
+            );
+            assert_eq!(g.steps, c.steps);
+            assert!(g.direction.angle_between(c.direction) < 2e-5);
+        }
+    }
+}
