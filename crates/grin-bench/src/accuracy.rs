@@ -31,7 +31,7 @@ pub struct Reference {
     pub numeric_vs_exact: Option<f64>,
 }
 
-/// Trace a ray in the chosen precision.
+/// Trace a ray on the CPU in the chosen precision ([`Precision::Gpu`]: the f32 twin).
 pub fn trace(
     field: &dyn grin_field::IndexField,
     settings: &TraceSettings,
@@ -41,12 +41,13 @@ pub fn trace(
 ) -> RayResult {
     match precision {
         Precision::F64 => trace_ray::<f64>(field, settings, origin, dir),
-        Precision::F32 => trace_ray::<f32>(field, settings, origin, dir),
+        Precision::F32 | Precision::Gpu => trace_ray::<f32>(field, settings, origin, dir),
     }
 }
 
 /// `auto` resolved on `pilots` in the chosen precision, every integrator a candidate
-/// (as for a scene that names none).
+/// (as for a scene that names none). For the GPU, in the f32 twin on the CPU, as
+/// `grin render --backend gpu` chooses.
 pub fn choose_auto(
     field: &dyn grin_field::IndexField,
     settings: &TraceSettings,
@@ -55,7 +56,9 @@ pub fn choose_auto(
 ) -> Option<grin_trace::auto::AutoChoice> {
     match precision {
         Precision::F64 => grin_trace::auto::choose::<f64>(field, settings, true, pilots),
-        Precision::F32 => grin_trace::auto::choose::<f32>(field, settings, true, pilots),
+        Precision::F32 | Precision::Gpu => {
+            grin_trace::auto::choose::<f32>(field, settings, true, pilots)
+        }
     }
 }
 
@@ -144,7 +147,12 @@ pub struct Point {
     pub err_opl: f64,
     pub evals_per_ray: f64,
     pub steps_per_ray: f64,
+    /// Wall time a ray: on the CPU one thread's (runs go in parallel: compare within a
+    /// run); on the GPU the kernel's time over `timed_rays` (copies of the case's rays in
+    /// one dispatch), divided by them.
     pub ns_per_ray: f64,
+    /// Rays the time was taken over.
+    pub timed_rays: usize,
     /// Rays that did not end `exited` (any makes the run failed).
     pub failed_rays: usize,
     /// Rays that left `degraded` (their own error estimate above the limit; their error
@@ -166,24 +174,26 @@ impl Point {
     }
 }
 
-/// Run `method` at `param` on `case` against `reference`.
-pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64) -> Point {
-    let mut settings = method.settings(param, case.scale);
-    let mut chosen = String::new();
-    let mut pilot_evals = 0;
-    if method.policy == Policy::Auto {
-        let choice = choose_auto(
+/// The tracer settings of `method` at `param` on `case`: `auto` resolved on the case's
+/// pilots. With what the pilots chose and what they cost ("", 0 for the other policies).
+fn resolve(case: &Case, method: Method, param: f64) -> (TraceSettings, String, u64) {
+    let settings = method.settings(param, case.scale);
+    if method.policy == Policy::Auto
+        && let Some(c) = choose_auto(
             case.field.as_ref(),
             &settings,
             method.precision,
             &case.pilots,
-        );
-        if let Some(c) = choice {
-            settings = c.settings;
-            chosen = c.describe();
-            pilot_evals = c.spent_evals;
-        }
+        )
+    {
+        return (c.settings, c.describe(), c.spent_evals);
     }
+    (settings, String::new(), 0)
+}
+
+/// Run `method` at `param` on `case` against `reference`, on the CPU.
+pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64) -> Point {
+    let (settings, chosen, pilot_evals) = resolve(case, method, param);
     let start = Instant::now();
     let results: Vec<RayResult> = case
         .rays
@@ -191,6 +201,81 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
         .map(|&(o, d)| trace(case.field.as_ref(), &settings, method.precision, o, d))
         .collect();
     let ns = start.elapsed().as_nanos() as f64;
+    Point {
+        ns_per_ray: ns / results.len() as f64,
+        timed_rays: results.len(),
+        chosen,
+        pilot_evals,
+        ..score(case, reference, method, param, &results)
+    }
+}
+
+/// Field evaluations a timed GPU dispatch aims at (copies of the case's rays), and the
+/// most copies: enough work to fill the adapter, little enough for a sweep.
+pub const GPU_TIMED_EVALS: f64 = 2e5;
+pub const GPU_MAX_COPIES: usize = 512;
+
+/// Run `method` (its precision [`Precision::Gpu`]) at `param` on `case`'s baked field on
+/// the GPU: the case's rays once for the results, then copies of them in one dispatch
+/// for the time (about [`GPU_TIMED_EVALS`] evaluations).
+pub fn run_gpu_point(
+    gpu: &mut grin_gpu::GpuRayTracer,
+    case: &Case,
+    reference: &Reference,
+    method: Method,
+    param: f64,
+) -> anyhow::Result<Point> {
+    let Some(baked) = &case.baked else {
+        anyhow::bail!("case {}: the GPU traces baked fields only", case.name);
+    };
+    gpu.set_field(std::sync::Arc::clone(baked))?;
+    let (settings, chosen, pilot_evals) = resolve(case, method, param);
+    let (out, seconds) = gpu.trace(&settings, &case.rays, 1)?;
+    let results: Vec<RayResult> = out.iter().map(gpu_result).collect();
+    let evals: f64 = out.iter().map(|r| f64::from(r.evals)).sum();
+    let copies = ((GPU_TIMED_EVALS / evals.max(1.0)).ceil() as usize).clamp(1, GPU_MAX_COPIES);
+    let (seconds, timed) = if copies > 1 {
+        let (_, s) = gpu.trace(&settings, &case.rays, copies)?;
+        (s, case.rays.len() * copies)
+    } else {
+        (seconds, case.rays.len())
+    };
+    Ok(Point {
+        ns_per_ray: seconds * 1e9 / timed as f64,
+        timed_rays: timed,
+        chosen,
+        pilot_evals,
+        ..score(case, reference, method, param, &results)
+    })
+}
+
+/// A GPU ray as the CPU tracer reports one (no error estimate comes back: its status
+/// says `degraded`).
+fn gpu_result(g: &grin_gpu::march::GpuRay) -> RayResult {
+    RayResult {
+        status: RayStatus::ALL
+            .get(g.status as usize)
+            .copied()
+            .unwrap_or(RayStatus::Error),
+        position: g.position,
+        direction: g.direction,
+        opl: g.opl,
+        length: g.length,
+        steps: g.steps,
+        evals: u64::from(g.evals),
+        transmittance: g.transmittance,
+        error_estimate: 0.0,
+    }
+}
+
+/// The errors and costs of a run from its rays' results (no time, no pilots yet).
+fn score(
+    case: &Case,
+    reference: &Reference,
+    method: Method,
+    param: f64,
+    results: &[RayResult],
+) -> Point {
     let mut p = Point {
         case: case.name.clone(),
         integrator: method.integrator_label(),
@@ -203,12 +288,13 @@ pub fn run_point(case: &Case, reference: &Reference, method: Method, param: f64)
         err_opl: 0.0,
         evals_per_ray: 0.0,
         steps_per_ray: 0.0,
-        ns_per_ray: ns / results.len() as f64,
+        ns_per_ray: 0.0,
+        timed_rays: 0,
         failed_rays: 0,
         degraded_rays: 0,
         rays: results.len(),
-        chosen,
-        pilot_evals,
+        chosen: String::new(),
+        pilot_evals: 0,
         method,
     };
     for (r, e) in results.iter().zip(&reference.exits) {
@@ -267,10 +353,11 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
     for case in cases.iter().filter(|c| c.smooth) {
         for &integrator in &IntegratorKind::ALL {
             for exit in [ExitMethod::Hermite, ExitMethod::Bisection] {
-                for precision in [Precision::F64, Precision::F32] {
-                    let floor = match precision {
-                        Precision::F64 => ORDER_MIN_ERR_F64,
-                        Precision::F32 => ORDER_MIN_ERR_F32,
+                for precision in Precision::ALL {
+                    let floor = if precision.is_f32() {
+                        ORDER_MIN_ERR_F32
+                    } else {
+                        ORDER_MIN_ERR_F64
                     };
                     let pts: Vec<&Point> = points
                         .iter()
@@ -363,12 +450,27 @@ pub struct AccuracyRun {
     pub points: Vec<Point>,
     pub orders: Vec<Order>,
     pub seconds: f64,
+    pub gpu: GpuColumn,
 }
 
-/// Run the sweep over `cases`; `progress(done, total)` after each case's method.
+/// What became of the GPU column.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct GpuColumn {
+    /// The adapter the GPU runs ran on (`None`: no GPU runs).
+    pub adapter: Option<String>,
+    /// Why there are no GPU runs (not asked for, no adapter, no baked case).
+    pub skipped: Option<String>,
+    /// Pipelines the GPU runs compiled, and the GPU part's wall time.
+    pub pipelines: usize,
+    pub seconds: f64,
+}
+
+/// Run the sweep over `cases` on the CPU, then (`gpu`) the GPU column on the cases
+/// with a baked field; `progress(done, total)` after each run.
 pub fn run(
     cases: Vec<Case>,
     quick: bool,
+    gpu: bool,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> anyhow::Result<AccuracyRun> {
     let start = Instant::now();
@@ -380,18 +482,60 @@ pub fn run(
                 .flat_map(move |m| m.params(quick).into_iter().map(move |p| (c, *m, p)))
         })
         .collect();
+    let gpu_jobs: Vec<(usize, Method, f64)> = if gpu {
+        let methods = crate::methods::gpu_methods(quick);
+        (0..cases.len())
+            .filter(|&c| cases[c].baked.is_some())
+            .flat_map(|c| {
+                methods
+                    .iter()
+                    .flat_map(move |m| m.params(quick).into_iter().map(move |p| (c, *m, p)))
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let references: Vec<Reference> = cases.iter().map(reference).collect::<Result<_, _>>()?;
-    let total = jobs.len() as u64;
+    let total = (jobs.len() + gpu_jobs.len()) as u64;
     let done = std::sync::atomic::AtomicU64::new(0);
-    let points: Vec<Point> = jobs
+    let tick = || {
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress(d, total);
+    };
+    let mut points: Vec<Point> = jobs
         .par_iter()
         .map(|&(c, m, p)| {
             let pt = run_point(&cases[c], &references[c], m, p);
-            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(d, total);
+            tick();
             pt
         })
         .collect();
+    let mut column = GpuColumn::default();
+    if !gpu {
+        column.skipped = Some("not asked for (--no-gpu)".into());
+    } else if gpu_jobs.is_empty() {
+        column.skipped = Some("no case of this run has a baked field".into());
+    } else {
+        match grin_gpu::GpuContext::new_headless() {
+            Err(e) => column.skipped = Some(format!("no GPU adapter: {e}")),
+            Ok(ctx) => {
+                let gpu_start = Instant::now();
+                column.adapter = Some(ctx.adapter_name());
+                let first = cases[gpu_jobs[0].0].baked.clone();
+                let Some(first) = first else {
+                    anyhow::bail!("a GPU job without a baked field");
+                };
+                let mut tracer = grin_gpu::GpuRayTracer::new(&ctx, first)?;
+                for &(c, m, p) in &gpu_jobs {
+                    points.push(run_gpu_point(&mut tracer, &cases[c], &references[c], m, p)?);
+                    tick();
+                }
+                column.pipelines = tracer.pipelines_compiled();
+                column.seconds = gpu_start.elapsed().as_secs_f64();
+            }
+        }
+    }
     let orders = orders(&cases, &points);
     Ok(AccuracyRun {
         cases,
@@ -399,5 +543,6 @@ pub fn run(
         points,
         orders,
         seconds: start.elapsed().as_secs_f64(),
+        gpu: column,
     })
 }

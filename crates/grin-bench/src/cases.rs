@@ -27,7 +27,7 @@ use std::sync::Arc;
 use glam::DVec3;
 use grin_field::IndexField;
 use grin_field::bake::{self, BakeOptions};
-use grin_field::baked::{Interp, Storage};
+use grin_field::baked::{BakedField, Interp, Storage};
 use grin_scene::MediumSpec;
 
 /// How a ray leaves the medium (what every method is measured on).
@@ -60,6 +60,8 @@ pub struct Case {
     pub smooth: bool,
     /// Length scale errors are divided by (the bounds' radius).
     pub scale: f64,
+    /// `field` itself where it is a baked grid: the GPU column traces it.
+    pub baked: Option<Arc<BakedField>>,
 }
 
 /// Which cases a run includes.
@@ -125,6 +127,7 @@ pub fn luneburg(count: usize) -> anyhow::Result<Case> {
         exact: Some(exact),
         smooth: true,
         scale: r,
+        baked: None,
     })
 }
 
@@ -149,6 +152,7 @@ pub fn fish_eye(count: usize) -> anyhow::Result<Case> {
         exact: Some(exact),
         smooth: true,
         scale: a,
+        baked: None,
     })
 }
 
@@ -228,6 +232,7 @@ pub fn grin_rod(count: usize) -> anyhow::Result<Case> {
         exact: Some(exact),
         smooth: true,
         scale: DVec3::new(0.5, 0.5, 1.0).length(),
+        baked: None,
     })
 }
 
@@ -306,6 +311,7 @@ fn numeric_case(
         exact: None,
         smooth: true,
         scale,
+        baked: None,
     }
 }
 
@@ -401,6 +407,7 @@ pub fn baked(
         ..BakeOptions::default()
     };
     let (field, _report) = bake::bake(base.source.as_ref(), &opts, &|_, _, _| {})?;
+    let field = Arc::new(field);
     let interp_name = match interp {
         Interp::Trilinear => "trilinear",
         Interp::Tricubic => "tricubic",
@@ -414,7 +421,8 @@ pub fn baked(
             "{}-baked{resolution}-{interp_name}-{storage_name}",
             base.name
         ),
-        field: Arc::new(field),
+        field: Arc::clone(&field) as Arc<dyn IndexField>,
+        baked: Some(field),
         source: base.source.clone(),
         rays: base.rays.clone(),
         pilots: base.pilots.clone(),

@@ -43,20 +43,32 @@ impl Policy {
     }
 }
 
-/// Arithmetic of the integration.
+/// Arithmetic and backend of the integration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Precision {
     F64,
     /// What the GPU computes (the CPU f32 twin).
     F32,
+    /// The GPU itself: the render kernel's `march_medium` in f32 on the adapter
+    /// ([`grin_gpu::GpuRayTracer`]), on the cases whose field is a baked grid (the only
+    /// field the GPU samples). On the CPU (auto's pilots) it stands for the f32 twin.
+    Gpu,
 }
 
 impl Precision {
+    pub const ALL: [Precision; 3] = [Precision::F64, Precision::F32, Precision::Gpu];
+
     pub fn name(self) -> &'static str {
         match self {
             Precision::F64 => "f64",
             Precision::F32 => "f32",
+            Precision::Gpu => "gpu",
         }
+    }
+
+    /// f32 arithmetic (the CPU twin or the GPU).
+    pub fn is_f32(self) -> bool {
+        self != Precision::F64
     }
 }
 
@@ -224,4 +236,43 @@ pub fn all_methods(quick: bool) -> Vec<Method> {
         }
     }
     v
+}
+
+/// The methods of the GPU column: every CPU f32 method with the Hermite exit (the
+/// default; the bisection exit is held against the CPU in grin-gpu's tests) and the
+/// paper's method; `--quick`: the paper's method, sharma at fixed steps, error control
+/// per length (dopri) and `auto`.
+pub fn gpu_methods(quick: bool) -> Vec<Method> {
+    let gpu = |integrator, policy, exit| Method {
+        integrator,
+        policy,
+        exit,
+        precision: Precision::Gpu,
+    };
+    if quick {
+        return vec![
+            gpu(
+                IntegratorKind::Sharma,
+                Policy::Heuristic,
+                ExitMethod::Bisection,
+            ),
+            gpu(IntegratorKind::Sharma, Policy::Fixed, ExitMethod::Hermite),
+            gpu(
+                IntegratorKind::Adaptive,
+                Policy::PerLength,
+                ExitMethod::Hermite,
+            ),
+            gpu(IntegratorKind::Adaptive, Policy::Auto, ExitMethod::Hermite),
+        ];
+    }
+    all_methods(false)
+        .into_iter()
+        .filter(|m| {
+            m.precision == Precision::F32 && (m.exit == ExitMethod::Hermite || m.is_paper())
+        })
+        .map(|m| Method {
+            precision: Precision::Gpu,
+            ..m
+        })
+        .collect()
 }

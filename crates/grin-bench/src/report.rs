@@ -27,6 +27,10 @@ pub fn point_name(p: &Point) -> String {
         Policy::PerLength | Policy::Auto => format!("{:.0e} rad", p.param),
         _ => format!("ds {}", fraction(p.param)),
     };
+    if p.method.policy == Policy::Auto {
+        // The integrator is the pilots' choice: `auto 1e-4 rad (hermite exit)`.
+        return format!("{} {} ({} exit)", p.policy, param, p.exit);
+    }
     format!("{} {} {} ({} exit)", p.integrator, p.policy, param, p.exit)
 }
 
@@ -152,8 +156,11 @@ pub struct DecadeRow {
 pub fn decade_rows(run: &AccuracyRun) -> Vec<DecadeRow> {
     let mut rows = Vec::new();
     for case in &run.cases {
-        for precision in [Precision::F64, Precision::F32] {
+        for precision in Precision::ALL {
             let pts = select(run, &case.name, precision);
+            if pts.is_empty() {
+                continue;
+            }
             let paper: Vec<&Point> = pts
                 .iter()
                 .copied()
@@ -229,6 +236,109 @@ pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
             evals: p.evals_per_ray,
             best_fixed_evals: cheapest_at(&fixed, p.param).map(|q| q.evals_per_ray),
             paper_evals: cheapest_at(&paper, p.param).map(|q| q.evals_per_ray),
+        });
+    }
+    rows
+}
+
+/// Pixels of the frame the GPU's time per ray is quoted for (640x360).
+pub const FRAME_PIXELS: f64 = 640.0 * 360.0;
+
+/// Within this factor of each other (or both below [`GPU_AGREE_FLOOR`] rad), a GPU run's
+/// error and its CPU f32 twin's agree.
+pub const GPU_AGREE_FACTOR: f64 = 2.0;
+pub const GPU_AGREE_FLOOR: f64 = 1e-6;
+
+/// The GPU column of one case: how its errors compare with the CPU f32 twin's (same
+/// method and parameter), and what it costs.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct GpuRow {
+    pub case: String,
+    pub runs: usize,
+    /// Runs whose error agrees with the twin's ([`GPU_AGREE_FACTOR`]; both failed counts).
+    pub agree: usize,
+    /// The run that disagrees most: name, GPU error, twin's error.
+    pub worst: Option<(String, f64, f64)>,
+    /// Medians over the case's runs: GPU ns a ray (a batch on the adapter) and the CPU
+    /// f32 twin's (one thread).
+    pub gpu_ns_per_ray: f64,
+    pub cpu_f32_ns_per_ray: f64,
+    /// Per error decade: the cheapest GPU run meeting it, its evals a ray and ms for a
+    /// 640x360 frame of such rays.
+    pub decades: Vec<(f64, Option<String>, Option<f64>, Option<f64>)>,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// One [`GpuRow`] per case with GPU runs.
+pub fn gpu_rows(run: &AccuracyRun) -> Vec<GpuRow> {
+    let mut rows = Vec::new();
+    for case in &run.cases {
+        let gpu = select(run, &case.name, Precision::Gpu);
+        if gpu.is_empty() {
+            continue;
+        }
+        let cpu = select(run, &case.name, Precision::F32);
+        let twin = |g: &Point| {
+            cpu.iter().copied().find(|c| {
+                c.method.integrator == g.method.integrator
+                    && c.method.policy == g.method.policy
+                    && c.method.exit == g.method.exit
+                    && c.param == g.param
+            })
+        };
+        let mut agree = 0;
+        let mut worst: Option<(String, f64, f64)> = None;
+        let mut worst_gap = 0.0;
+        let mut twin_ns = Vec::new();
+        for g in &gpu {
+            let Some(c) = twin(g) else { continue };
+            twin_ns.push(c.ns_per_ray);
+            let gap = if g.failed() && c.failed() {
+                0.0
+            } else if g.failed() || c.failed() {
+                f64::INFINITY
+            } else if g.err_dir.max(c.err_dir) <= GPU_AGREE_FLOOR {
+                0.0
+            } else {
+                (g.err_dir.max(GPU_AGREE_FLOOR) / c.err_dir.max(GPU_AGREE_FLOOR))
+                    .ln()
+                    .abs()
+            };
+            if gap <= GPU_AGREE_FACTOR.ln() {
+                agree += 1;
+            }
+            if gap > worst_gap {
+                worst_gap = gap;
+                worst = Some((point_name(g), g.err_dir, c.err_dir));
+            }
+        }
+        let decades = DECADES
+            .iter()
+            .map(|&t| {
+                let best = cheapest_at(&gpu, t);
+                (
+                    t,
+                    best.map(point_name),
+                    best.map(|p| p.evals_per_ray),
+                    best.map(|p| p.ns_per_ray * FRAME_PIXELS * 1e-6),
+                )
+            })
+            .collect();
+        rows.push(GpuRow {
+            case: case.name.clone(),
+            runs: gpu.len(),
+            agree,
+            worst,
+            gpu_ns_per_ray: median(gpu.iter().map(|p| p.ns_per_ray).collect()),
+            cpu_f32_ns_per_ray: median(twin_ns),
+            decades,
         });
     }
     rows
@@ -336,6 +446,7 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
         ],
         knob,
     );
+    gpu_markdown(&mut s, run);
     let _ = writeln!(
         s,
         "\n## Measured convergence orders (fixed steps, smooth cases)\n"
@@ -371,6 +482,56 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
         run.points.len()
     );
     s
+}
+
+/// The GPU column's section of summary.md.
+fn gpu_markdown(s: &mut String, run: &AccuracyRun) {
+    let _ = writeln!(s, "\n## The GPU column\n");
+    let Some(adapter) = &run.gpu.adapter else {
+        let why = run.gpu.skipped.as_deref().unwrap_or("no GPU runs");
+        let _ = writeln!(s, "No GPU runs: {why}.");
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "On `{adapter}`: the render kernel's own `march_medium` (f32) on the cases with a baked field, the same rays and error measure; {} pipelines, {:.1} s. A run *agrees* with its CPU f32 twin (same method and parameter) when their errors are within {GPU_AGREE_FACTOR}x (or both below {GPU_AGREE_FLOOR:.0e} rad, or both failed). GPU ns a ray: the kernel's time over a batch of copies of the case's rays (about {GPU_TIMED_EVALS:.0e} field evaluations); CPU: one thread. Frame ms: a 640x360 frame of such rays.\n",
+        run.gpu.pipelines,
+        run.gpu.seconds,
+        GPU_TIMED_EVALS = crate::accuracy::GPU_TIMED_EVALS
+    );
+    let rows = gpu_rows(run).into_iter().map(|r| {
+        let decade = |i: usize| {
+            let (_, name, evals, ms) = &r.decades[i];
+            match (name, evals, ms) {
+                (Some(n), Some(e), Some(ms)) => format!("{n}: {e:.0} evals, {ms:.0} ms"),
+                _ => "none reaches it".into(),
+            }
+        };
+        vec![
+            r.case.clone(),
+            format!("{}/{}", r.agree, r.runs),
+            r.worst
+                .as_ref()
+                .map_or("-".into(), |(n, g, c)| format!("{n}: {g:.1e} vs {c:.1e}")),
+            format!("{:.0}", r.gpu_ns_per_ray),
+            format!("{:.0}", r.cpu_f32_ns_per_ray),
+            decade(0),
+            decade(1),
+        ]
+    });
+    table(
+        s,
+        &[
+            "case",
+            "agree with the f32 twin",
+            "widest gap (gpu vs twin, rad)",
+            "gpu ns/ray (median)",
+            "cpu f32 ns/ray (median)",
+            "cheapest <= 1e-2 (frame ms)",
+            "cheapest <= 1e-4 (frame ms)",
+        ],
+        rows,
+    );
 }
 
 fn csv_text<T: serde::Serialize>(rows: &[T]) -> anyhow::Result<Vec<u8>> {
@@ -410,7 +571,10 @@ pub fn write_accuracy(run: &AccuracyRun, dir: &Path, command: &str) -> anyhow::R
         summary_markdown(run, command).into_bytes(),
     )?;
     for case in &run.cases {
-        for precision in [Precision::F64, Precision::F32] {
+        for precision in Precision::ALL {
+            if select(run, &case.name, precision).is_empty() {
+                continue;
+            }
             let chart = case_chart(run, &case.name, precision);
             let stem = format!("chart-{}-{}", case.name, precision.name());
             add(format!("{stem}.svg"), svg(&chart)?.into_bytes())?;

@@ -109,8 +109,34 @@ fn dopri_keeps_its_order_through_the_default_hermite_exit() {
 #[test]
 fn quick_sweep_writes_csv_markdown_and_charts() {
     let cases = cases::suite(Suite::Quick).unwrap();
-    let run = accuracy::run(cases, true, &|_, _| {}).unwrap();
+    let run = accuracy::run(cases, true, true, &|_, _| {}).unwrap();
     assert!(run.points.len() > 100);
+    // The GPU column: the baked lens traced by the render kernel (lavapipe in CI). No
+    // adapter fails the test unless GRIN_ALLOW_NO_GPU=1 says to skip loudly.
+    let gpu_rows = grin_bench::report::gpu_rows(&run);
+    match &run.gpu.adapter {
+        None => {
+            let why = run.gpu.skipped.clone().unwrap_or_default();
+            assert_eq!(
+                std::env::var("GRIN_ALLOW_NO_GPU").as_deref(),
+                Ok("1"),
+                "no GPU column: {why}"
+            );
+            eprintln!("*** SKIPPED the GPU column: {why}");
+        }
+        Some(adapter) => {
+            assert_eq!(gpu_rows.len(), 1, "{gpu_rows:?}");
+            let row = &gpu_rows[0];
+            assert_eq!(row.case, "luneburg-baked32-tricubic-f32");
+            // 4 methods x 3 parameters; the paper's method, fixed sharma and both error
+            // controls give the GPU the error its CPU f32 twin has.
+            assert_eq!(row.runs, 12);
+            assert_eq!(row.agree, row.runs, "{row:?} on {adapter}");
+            assert!(row.gpu_ns_per_ray > 0.0 && row.cpu_f32_ns_per_ray > 0.0);
+            // Something meets 1e-4 rad on the GPU too.
+            assert!(row.decades[1].1.is_some(), "{row:?}");
+        }
+    }
     // Pareto front: cost ascending, error strictly descending.
     let lune: Vec<&Point> = run
         .points
@@ -152,6 +178,14 @@ fn quick_sweep_writes_csv_markdown_and_charts() {
     assert_eq!((png.width(), png.height()), grin_bench::chart::SIZE);
     let md = std::fs::read_to_string(dir.path().join("summary.md")).unwrap();
     assert!(md.contains("| luneburg | f64 | 1e-4 |"), "{md}");
+    assert!(md.contains("## The GPU column"), "{md}");
+    if run.gpu.adapter.is_some() {
+        assert!(files.contains(&"chart-luneburg-baked32-tricubic-f32-gpu.svg".to_string()));
+        assert!(
+            md.contains("| luneburg-baked32-tricubic-f32 | gpu | 1e-4 |"),
+            "{md}"
+        );
+    }
 }
 
 #[test]

@@ -26,6 +26,11 @@ pub struct Args {
     /// `baked`): the full suite is long, and one case at a time fits a CI step.
     #[arg(long, value_name = "NAME")]
     pub case: Option<String>,
+    /// No GPU column (by default the cases with a baked field are traced on the GPU
+    /// too, by the render kernel's own march; without an adapter the column is skipped
+    /// with a warning).
+    #[arg(long)]
+    pub no_gpu: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -73,7 +78,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     };
-    let run = accuracy::run(cases, args.quick, &progress)?;
+    let run = accuracy::run(cases, args.quick, !args.no_gpu, &progress)?;
     bar.finish_and_clear();
     let mut command = String::from("grin bench accuracy");
     if args.quick {
@@ -81,6 +86,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(want) = &args.case {
         command.push_str(&format!(" --case {want}"));
+    }
+    if args.no_gpu {
+        command.push_str(" --no-gpu");
+    }
+    if !args.no_gpu
+        && let Some(why) = &run.gpu.skipped
+    {
+        eprintln!("warning: no GPU column: {why}");
     }
     let files = report::write_accuracy(&run, &args.output, &command)?;
     let rows = report::decade_rows(&run);
@@ -97,6 +110,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             })).collect::<Vec<_>>(),
             "decades": rows,
             "orders": run.orders,
+            "gpu": serde_json::json!({
+                "column": run.gpu,
+                "cases": report::gpu_rows(&run),
+            }),
             "output": args.output.display().to_string(),
             "files": files,
         });
@@ -120,6 +137,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r.paper_ratio
                 .map_or("-".into(), |x| format!("{x:.1}x the evals"))
         );
+    }
+    if let Some(adapter) = &run.gpu.adapter {
+        outln!(
+            "GPU column on {adapter}: {} pipelines, {:.1} s",
+            run.gpu.pipelines,
+            run.gpu.seconds
+        );
+        for r in report::gpu_rows(&run) {
+            outln!(
+                "{:<34} gpu: {}/{} runs agree with the cpu f32 twin; {:.0} ns/ray (cpu f32 one thread {:.0})",
+                r.case,
+                r.agree,
+                r.runs,
+                r.gpu_ns_per_ray,
+                r.cpu_f32_ns_per_ray
+            );
+        }
     }
     outln!("wrote {} files to {}", files.len(), args.output.display());
     Ok(())
