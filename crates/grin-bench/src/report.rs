@@ -263,9 +263,16 @@ pub struct GpuRow {
     /// f32 twin's (one thread).
     pub gpu_ns_per_ray: f64,
     pub cpu_f32_ns_per_ray: f64,
-    /// Per error decade: the cheapest GPU run meeting it, its evals a ray and ms for a
-    /// 640x360 frame of such rays.
-    pub decades: Vec<(f64, Option<String>, Option<f64>, Option<f64>)>,
+    /// Per error decade ([`DECADES`]): the cheapest GPU run meeting it.
+    pub decades: Vec<GpuDecade>,
+}
+
+/// The cheapest GPU run within an error: its name, evals a ray and ms for a 640x360
+/// frame of such rays (`None`: no run reaches it).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct GpuDecade {
+    pub target: f64,
+    pub best: Option<(String, f64, f64)>,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -321,14 +328,15 @@ pub fn gpu_rows(run: &AccuracyRun) -> Vec<GpuRow> {
         }
         let decades = DECADES
             .iter()
-            .map(|&t| {
-                let best = cheapest_at(&gpu, t);
-                (
-                    t,
-                    best.map(point_name),
-                    best.map(|p| p.evals_per_ray),
-                    best.map(|p| p.ns_per_ray * FRAME_PIXELS * 1e-6),
-                )
+            .map(|&t| GpuDecade {
+                target: t,
+                best: cheapest_at(&gpu, t).map(|p| {
+                    (
+                        point_name(p),
+                        p.evals_per_ray,
+                        p.ns_per_ray * FRAME_PIXELS * 1e-6,
+                    )
+                }),
             })
             .collect();
         rows.push(GpuRow {
@@ -500,12 +508,9 @@ fn gpu_markdown(s: &mut String, run: &AccuracyRun) {
         GPU_TIMED_EVALS = crate::accuracy::GPU_TIMED_EVALS
     );
     let rows = gpu_rows(run).into_iter().map(|r| {
-        let decade = |i: usize| {
-            let (_, name, evals, ms) = &r.decades[i];
-            match (name, evals, ms) {
-                (Some(n), Some(e), Some(ms)) => format!("{n}: {e:.0} evals, {ms:.0} ms"),
-                _ => "none reaches it".into(),
-            }
+        let decade = |i: usize| match &r.decades[i].best {
+            Some((n, e, ms)) => format!("{n}: {e:.0} evals, {ms:.0} ms"),
+            None => "none reaches it".into(),
         };
         vec![
             r.case.clone(),

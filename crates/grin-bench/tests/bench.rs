@@ -134,7 +134,7 @@ fn quick_sweep_writes_csv_markdown_and_charts() {
             assert_eq!(row.agree, row.runs, "{row:?} on {adapter}");
             assert!(row.gpu_ns_per_ray > 0.0 && row.cpu_f32_ns_per_ray > 0.0);
             // Something meets 1e-4 rad on the GPU too.
-            assert!(row.decades[1].1.is_some(), "{row:?}");
+            assert!(row.decades[1].best.is_some(), "{row:?}");
         }
     }
     // Pareto front: cost ascending, error strictly descending.
