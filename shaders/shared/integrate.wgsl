@@ -18,14 +18,48 @@ struct Step {
     // Embedded local error estimate (e_r, e_T) of the adaptive pair.
     err_r: vec3<f32>,
     err_t: vec3<f32>,
+    // The increments (dr, dT) the state is the start plus: march_medium adds them with
+    // compensation (add_compensated), as the CPU's tracer does.
+    delta: RayState,
 }
 
 fn no_sample() -> FieldSample {
     return FieldSample(0.0, vec3<f32>(0.0), 0.0);
 }
 
+fn zero_state() -> RayState {
+    return RayState(vec3<f32>(0.0), vec3<f32>(0.0));
+}
+
+// A state that is not a step's (a straight flight's end): no increments to compensate.
 fn plain_step(r: vec3<f32>, t: vec3<f32>, evals: u32) -> Step {
-    return Step(RayState(r, t), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0));
+    return Step(RayState(r, t), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0), zero_state());
+}
+
+// s + (dr, dT) (Step::plain).
+fn advance(s: RayState, dr: vec3<f32>, dt: vec3<f32>, evals: u32) -> Step {
+    return Step(RayState(s.r + dr, s.t + dt), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0), RayState(dr, dt));
+}
+
+// Knuth's TwoSum per component: a + b rounded (sum) and the roundoff it lost (lost).
+struct TwoSum {
+    sum: vec3<f32>,
+    lost: vec3<f32>,
+}
+
+fn two_sum(a: vec3<f32>, b: vec3<f32>) -> TwoSum {
+    let sum = a + b;
+    let b_virtual = sum - a;
+    return TwoSum(sum, (a - (sum - b_virtual)) + (b - b_virtual));
+}
+
+// Compensated state update (integrate::add_compensated): s + delta + comp, leaving in comp
+// what the new state could not hold. Start (and restart after a jump) with zero_state().
+fn add_compensated(s: RayState, delta: RayState, comp: ptr<function, RayState>) -> RayState {
+    let r = two_sum(s.r, delta.r + (*comp).r);
+    let t = two_sum(s.t, delta.t + (*comp).t);
+    *comp = RayState(r.lost, t.lost);
+    return RayState(r.sum, t.sum);
 }
 
 // D = n grad n at p: one field evaluation.
@@ -35,21 +69,22 @@ fn sample_d(p: vec3<f32>) -> vec3<f32> {
 }
 
 fn euler_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
-    return plain_step(s.r + s.t * h, s.t + d0 * h, 0u);
+    return advance(s, s.t * h, d0 * h, 0u);
 }
 
 fn symplectic_euler_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
-    let t1 = s.t + d0 * h;
-    return plain_step(s.r + t1 * h, t1, 0u);
+    let dt = d0 * h;
+    return advance(s, (s.t + dt) * h, dt, 0u);
 }
 
 fn verlet_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     let half = h * 0.5;
     let t_half = s.t + d0 * half;
-    let r1 = s.r + t_half * h;
+    let dr = t_half * h;
+    let r1 = s.r + dr;
     let end = sample_field(r1);
-    let t1 = t_half + end.grad_n * end.n * half;
-    return Step(RayState(r1, t1), 1u, true, end, vec3<f32>(0.0), vec3<f32>(0.0));
+    let dt = (d0 + end.grad_n * end.n) * half;
+    return Step(RayState(r1, s.t + dt), 1u, true, end, vec3<f32>(0.0), vec3<f32>(0.0), RayState(dr, dt));
 }
 
 // Sharma, Kumar & Ghatak 1982 (the paper's Listing 2): A = h D(r),
@@ -59,9 +94,9 @@ fn sharma_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     let b = sample_d(s.r + s.t * (h * 0.5) + a * (h * 0.125)) * h;
     let c = sample_d(s.r + s.t * h + b * (h * 0.5)) * h;
     let sixth = 1.0 / 6.0;
-    let r1 = s.r + (s.t + (a + b * 2.0) * sixth) * h;
-    let t1 = s.t + (a + b * 4.0 + c) * sixth;
-    return plain_step(r1, t1, 2u);
+    let dr = (s.t + (a + b * 2.0) * sixth) * h;
+    let dt = (a + b * 4.0 + c) * sixth;
+    return advance(s, dr, dt, 2u);
 }
 
 // Classical RK4 on (r, T).
@@ -76,9 +111,9 @@ fn rk4_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     let t4 = s.t + d3 * h;
     let d4 = sample_d(s.r + t3 * h);
     let sixth = h * (1.0 / 6.0);
-    let r_new = s.r + (t1 + t2 * 2.0 + t3 * 2.0 + t4) * sixth;
-    let t_new = s.t + (d1 + d2 * 2.0 + d3 * 2.0 + d4) * sixth;
-    return plain_step(r_new, t_new, 3u);
+    let dr = (t1 + t2 * 2.0 + t3 * 2.0 + t4) * sixth;
+    let dt = (d1 + d2 * 2.0 + d3 * 2.0 + d4) * sixth;
+    return advance(s, dr, dt, 3u);
 }
 
 // Dormand & Prince (1980) tableau rows a_ij (i = 2..7, 6 entries each; row 7 = the
@@ -100,8 +135,10 @@ const DOPRI_E = array<f32, 7>(
 // invocation's loops after 65535 iterations in all, and the stage loops spent 27 of them
 // a step (rays of ~1900 steps ended `error`).
 fn dopri_stage(s: RayState, dr: vec3<f32>, dt: vec3<f32>, h: f32) -> DopriStage {
-    let f = sample_field(s.r + dr * h);
-    return DopriStage(s.r + dr * h, s.t + dt * h, f.grad_n * f.n, f);
+    let dr_h = dr * h;
+    let dt_h = dt * h;
+    let f = sample_field(s.r + dr_h);
+    return DopriStage(s.r + dr_h, s.t + dt_h, f.grad_n * f.n, f, RayState(dr_h, dt_h));
 }
 
 struct DopriStage {
@@ -109,6 +146,8 @@ struct DopriStage {
     t: vec3<f32>,
     d: vec3<f32>,
     f: FieldSample,
+    // The stage's increments from the step's start.
+    delta: RayState,
 }
 
 fn dopri_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
@@ -141,7 +180,7 @@ fn dopri_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     );
     let er = t0 * DOPRI_E[0] + k1.t * DOPRI_E[1] + k2.t * DOPRI_E[2] + k3.t * DOPRI_E[3] + k4.t * DOPRI_E[4] + k5.t * DOPRI_E[5] + k6.t * DOPRI_E[6];
     let et = d0 * DOPRI_E[0] + k1.d * DOPRI_E[1] + k2.d * DOPRI_E[2] + k3.d * DOPRI_E[3] + k4.d * DOPRI_E[4] + k5.d * DOPRI_E[5] + k6.d * DOPRI_E[6];
-    return Step(RayState(k6.r, k6.t), 6u, true, k6.f, er * h, et * h);
+    return Step(RayState(k6.r, k6.t), 6u, true, k6.f, er * h, et * h, k6.delta);
 }
 
 // Order of accuracy of the integrator's position (integrate::order).

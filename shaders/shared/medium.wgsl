@@ -587,6 +587,9 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     // out of the step's critical path. Each outer pass ends with a counted step or
     // flight, or a total reflection after one: 2 * max_steps + 2 passes bound it.
     let min_flight = max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS / max_element(params.grid_inv_spacing));
+    // Roundoff of the state updates not yet added in (compensated summation, reset at
+    // every jump of the state: flights, the surface, reflections), as trace_ray.
+    var comp = zero_state();
     for (var guard = 0u; guard < 2u * max_steps + 2u; guard++) {
         var event = MARCH_EVENT_STOP;
         var taken: Taken;
@@ -643,6 +646,11 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                     event = MARCH_EVENT_LEAVE;
                     break;
                 }
+            }
+            if fly {
+                comp = zero_state();
+            } else {
+                next = add_compensated(state, taken.step.delta, &comp);
             }
             if taken.step.has_end && !fly {
                 s1 = taken.step.end;
@@ -723,6 +731,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         let nrm = bounds_normal(p);
         state.t = state.t - nrm * (2.0 * dot(state.t, nrm));
         est.has_prev = false;
+        comp = zero_state();
     }
     return march_end(END_STOPPED, STATUS_MAX_STEPS, state.r, normalize_or_zero(state.t), transmittance);
 }

@@ -88,6 +88,8 @@ fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32
     let et = (second.state.t - big.state.t) * scale;
     let err = error_norm(ctrl, er, et, mid.n);
     second.evals = big.evals + first.evals + mid_evals + second.evals;
+    // Both halves' increments from s (Controller::doubled).
+    second.delta = RayState((first.state.r - s.r) + second.delta.r, (first.state.t - s.t) + second.delta.t);
     // The error rides in err_r.x of the returned Taken's step (read by take_adaptive).
     second.err_r = vec3<f32>(err, 0.0, 0.0);
     return Taken(second, h, 0u);
