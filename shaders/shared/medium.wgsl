@@ -160,12 +160,36 @@ fn estimate_value(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: 
     return max(e.sum, drift);
 }
 
-// STATUS_EXITED, or STATUS_DEGRADED where the estimate is above DEGRADED_RAD.
-fn exit_status(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: vec3<f32>) -> u32 {
-    if e.order != 0u && estimate_value(e, t, n, normal, d) > DEGRADED_RAD {
+// STATUS_EXITED, or STATUS_DEGRADED where the estimate plus what the crossings of the
+// bounds added (`surface`) is above DEGRADED_RAD.
+fn exit_status(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: vec3<f32>, surface: f32) -> u32 {
+    var v = surface;
+    if e.order != 0u {
+        v += estimate_value(e, t, n, normal, d);
+    }
+    if v > DEGRADED_RAD {
         return STATUS_DEGRADED;
     }
     return STATUS_EXITED;
+}
+
+// boundary::refraction_uncertainty: the direction error a refraction at the bounds adds
+// when the field's n is uncertain by dn (amplified by tan of the refracted angle);
+// UNSURE_ESTIMATE where dn could turn transmission into total reflection or back.
+fn refraction_uncertainty(d: vec3<f32>, normal: vec3<f32>, n1: f32, n2: f32, n_field: f32, dn: f32) -> f32 {
+    if !(dn > 0.0) {
+        return 0.0;
+    }
+    let cos_i = min(abs(dot(d, normal)), 1.0);
+    let eta = n1 / n2;
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+    if abs(1.0 - sin2_t) <= 2.0 * sin2_t * dn / n_field {
+        return UNSURE_ESTIMATE;
+    }
+    if sin2_t >= 1.0 {
+        return 0.0;
+    }
+    return dn * sqrt(sin2_t / (1.0 - sin2_t)) / n_field;
 }
 
 struct MarchStats {
@@ -558,6 +582,8 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             start = start - bounds_normal(start) * nudge;
         }
     }
+    // Direction error the crossings of the bounds add (trace_ray's surface_error).
+    var surface_err = 0.0;
     // The first sample: where the ray enters, or where it starts inside.
     var s0 = sample_field(start);
     (*stats).evals += 1u;
@@ -566,9 +592,10 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         if !sample_ok(s0) {
             return march_end(END_STOPPED, STATUS_ERROR, start, d, transmittance);
         }
+        surface_err += refraction_uncertainty(d, bounds_normal(start), n_amb, s0.n, s0.n, params.n_uncertainty);
         let i = refract(d, bounds_normal(start), n_amb, s0.n);
         if !i.transmitted {
-            return march_end(END_EXITED, STATUS_EXITED, start, i.dir, transmittance);
+            return march_end(END_EXITED, select(STATUS_EXITED, STATUS_DEGRADED, surface_err > DEGRADED_RAD), start, i.dir, transmittance);
         }
         transmittance *= 1.0 - i.reflectance;
         d_in = i.dir;
@@ -723,9 +750,10 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         // On the surface (a step cut there, or a flight to it): leave(), refract out or
         // reflect T totally back inside.
         let p = state.r;
+        surface_err += refraction_uncertainty(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb, s0.n, params.n_uncertainty);
         let i = refract(normalize_or_zero(state.t), bounds_normal(p), s0.n, n_amb);
         if i.transmitted {
-            let status = exit_status(est, state.t, s0.n, bounds_normal(p), s0.n * s0.grad_n);
+            let status = exit_status(est, state.t, s0.n, bounds_normal(p), s0.n * s0.grad_n, surface_err);
             return march_end(END_EXITED, status, p, i.dir, transmittance * (1.0 - i.reflectance));
         }
         let nrm = bounds_normal(p);

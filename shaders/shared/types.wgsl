@@ -53,7 +53,7 @@ struct FrameParams {
     sky_zenith: vec3<f32>,
     focus_distance: f32,         // thin lens: distance in focus along cam_forward
     sky_ground: vec3<f32>,
-    _pad7: f32,
+    n_uncertainty: f32,          // the baked field's max |n error| (IndexField::n_uncertainty)
     plate_forward: vec3<f32>,    // the background plate's camera (the scene's)
     plate_tan_half_fov_y: f32,
     plate_right: vec3<f32>,

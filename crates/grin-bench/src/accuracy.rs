@@ -251,7 +251,7 @@ pub fn run_gpu_point(
 
 /// A GPU ray as the CPU tracer reports one (no error estimate comes back: its status
 /// says `degraded`).
-fn gpu_result(g: &grin_gpu::march::GpuRay) -> RayResult {
+pub fn gpu_result(g: &grin_gpu::march::GpuRay) -> RayResult {
     RayResult {
         status: RayStatus::ALL
             .get(g.status as usize)
@@ -372,12 +372,22 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
                     if pts.is_empty() {
                         continue;
                     }
-                    let used: Vec<&&Point> = pts
+                    // The step is the one taken, not the one asked for: every policy
+                    // caps steps at the field's feature size, so R/2 .. R/8 can be the
+                    // same run on the plume. 1 / steps a ray is proportional to the mean
+                    // step (the rays' paths are the same in every run); runs that took
+                    // the same steps count once.
+                    let mut used: Vec<&&Point> = Vec::new();
+                    for p in pts
                         .iter()
                         .filter(|p| !p.failed() && p.err_dir > floor && p.err_dir < ORDER_MAX_ERR)
-                        .collect();
+                    {
+                        if !used.iter().any(|q| q.steps_per_ray == p.steps_per_ray) {
+                            used.push(p);
+                        }
+                    }
                     let measured = (used.len() >= 3).then(|| {
-                        let hs: Vec<f64> = used.iter().map(|p| p.param).collect();
+                        let hs: Vec<f64> = used.iter().map(|p| 1.0 / p.steps_per_ray).collect();
                         let es: Vec<f64> = used.iter().map(|p| p.err_dir).collect();
                         log_slope(&hs, &es)
                     });

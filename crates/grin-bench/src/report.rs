@@ -114,18 +114,25 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
         .iter()
         .map(|&i| (pts[i].evals_per_ray, pts[i].err_dir))
         .collect();
-    let notes = DECADES
-        .iter()
-        .filter_map(|&target| {
-            cheapest_at(&pts, target).map(|p| {
-                (
-                    p.evals_per_ray,
-                    p.err_dir,
-                    format!("  <= {target:.0e} rad: {}", point_name(p)),
-                )
-            })
-        })
-        .collect();
+    // One note per point: a run that is the cheapest at several decades names them all
+    // (`<= 1e-2, 1e-4 rad: ...`) instead of printing over itself.
+    let mut notes: Vec<(f64, f64, String)> = Vec::new();
+    for target in DECADES {
+        let Some(p) = cheapest_at(&pts, target) else {
+            continue;
+        };
+        match notes
+            .iter_mut()
+            .find(|n| n.0 == p.evals_per_ray && n.1 == p.err_dir)
+        {
+            Some(n) => n.2 = n.2.replacen(" rad:", &format!(", {target:.0e} rad:"), 1),
+            None => notes.push((
+                p.evals_per_ray,
+                p.err_dir,
+                format!("  <= {target:.0e} rad: {}", point_name(p)),
+            )),
+        }
+    }
     Chart {
         title: format!(
             "{case}: exit-direction error vs cost ({})",

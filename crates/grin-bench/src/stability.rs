@@ -427,6 +427,30 @@ pub fn columns(quick: bool) -> Vec<Column> {
     v
 }
 
+/// The GPU's columns (the full matrix only): the render kernel marching each case's
+/// field as `grin render --backend gpu` bakes it, with a fixed step, tight f32 error
+/// control and the default.
+pub fn gpu_columns() -> Vec<Column> {
+    let gpu = |integrator, policy, param| Column {
+        method: Method {
+            integrator,
+            policy,
+            exit: ExitMethod::Hermite,
+            precision: Precision::Gpu,
+        },
+        param,
+    };
+    vec![
+        gpu(IntegratorKind::Rk4, Policy::Fixed, 1.0 / 16.0),
+        gpu(IntegratorKind::Adaptive, Policy::Adaptive, 1e-9),
+        gpu(
+            IntegratorKind::Adaptive,
+            Policy::Auto,
+            grin_scene::DEFAULT_AUTO_ACCURACY,
+        ),
+    ]
+}
+
 /// A cell's class.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -463,22 +487,27 @@ fn has_nan(r: &RayResult) -> bool {
     r.position.is_nan() || r.direction.is_nan() || r.opl.is_nan() || r.length.is_nan()
 }
 
-/// Run one cell.
-pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
+/// The cell's tracer settings on `field` (the case's, or the GPU's bake of it): `auto`
+/// resolved on the case's own rays as pilots.
+fn cell_settings(
+    case: &StabilityCase,
+    col: &Column,
+    field: &dyn IndexField,
+) -> grin_trace::TraceSettings {
     let mut settings = col.method.settings(col.param, case.scale);
     settings.max_steps = case.max_steps;
     if col.method.policy == Policy::Auto {
         let pilots: Vec<(DVec3, DVec3)> = case.rays.iter().map(|&(o, d, _)| (o, d)).collect();
-        let choice = choose_auto(
-            case.field.as_ref(),
-            &settings,
-            col.method.precision,
-            &pilots,
-        );
-        if let Some(c) = choice {
+        if let Some(c) = choose_auto(field, &settings, col.method.precision, &pilots) {
             settings = c.settings;
         }
     }
+    settings
+}
+
+/// Run one cell on the CPU.
+pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
+    let settings = cell_settings(case, col, case.field.as_ref());
     let start = Instant::now();
     let results: Vec<RayResult> = case
         .rays
@@ -486,12 +515,40 @@ pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
         .map(|&(o, d, _)| trace(case.field.as_ref(), &settings, col.method.precision, o, d))
         .collect();
     let seconds = start.elapsed().as_secs_f64();
+    classify(case, col, &results, seconds, case.warning.is_some())
+}
+
+/// Run one cell on the GPU, through `gpu` holding the case's field as the GPU bakes it;
+/// `warned`: the case's or that bake's warning applies.
+pub fn run_gpu_cell(
+    gpu: &mut grin_gpu::GpuRayTracer,
+    baked: &Arc<grin_field::baked::BakedField>,
+    case: &StabilityCase,
+    col: &Column,
+    warned: bool,
+) -> anyhow::Result<Cell> {
+    gpu.set_field(Arc::clone(baked))?;
+    let settings = cell_settings(case, col, baked.as_ref());
+    let rays: Vec<(DVec3, DVec3)> = case.rays.iter().map(|&(o, d, _)| (o, d)).collect();
+    let (out, seconds) = gpu.trace(&settings, &rays, 1)?;
+    let results: Vec<RayResult> = out.iter().map(crate::accuracy::gpu_result).collect();
+    Ok(classify(case, col, &results, seconds, warned))
+}
+
+/// Classify a cell from its rays' results.
+fn classify(
+    case: &StabilityCase,
+    col: &Column,
+    results: &[RayResult],
+    seconds: f64,
+    warned: bool,
+) -> Cell {
     let mut cell = Cell {
         case: case.name,
         method: col.label(),
         outcome: Outcome::Converged,
         silent: false,
-        warned: case.warning.is_some(),
+        warned,
         err_dir: 0.0,
         err_pos: 0.0,
         statuses: results
@@ -558,31 +615,73 @@ pub struct Matrix {
     pub refused: Vec<(&'static str, Option<String>)>,
     pub columns: Vec<String>,
     pub cells: Vec<Cell>,
+    /// The GPU columns' adapter, or why there are none (`None`: not asked for).
+    pub gpu: Option<String>,
+    /// Cases whose GPU bake reports its error budget unmet: (name, the warning).
+    pub gpu_warnings: Vec<(&'static str, String)>,
     pub seconds: f64,
 }
 
 /// Longest a single cell may take before the run reports it (a hang would be a defect).
 pub const CELL_TIME_LIMIT: Duration = Duration::from_secs(60);
 
-/// Run every case against every column.
-pub fn run(quick: bool, progress: &(dyn Fn(u64, u64) + Sync)) -> anyhow::Result<Matrix> {
+/// Run every case against every column; with `gpu` (and not `quick`) the GPU's columns
+/// too, each case's field baked as `grin render --backend gpu` bakes it.
+pub fn run(quick: bool, gpu: bool, progress: &(dyn Fn(u64, u64) + Sync)) -> anyhow::Result<Matrix> {
     let start = Instant::now();
     let cases = cases()?;
-    let cols = columns(quick);
+    let mut cols = columns(quick);
+    let gpu_cols = if gpu && !quick {
+        gpu_columns()
+    } else {
+        Vec::new()
+    };
     let jobs: Vec<(usize, usize)> = (0..cases.len())
         .flat_map(|c| (0..cols.len()).map(move |k| (c, k)))
         .collect();
-    let total = jobs.len() as u64;
+    let total = (jobs.len() + cases.len() * gpu_cols.len()) as u64;
     let done = std::sync::atomic::AtomicU64::new(0);
-    let cells: Vec<Cell> = jobs
+    let tick = || {
+        let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress(d, total);
+    };
+    let mut cells: Vec<Cell> = jobs
         .par_iter()
         .map(|&(c, k)| {
             let cell = run_cell(&cases[c], &cols[k]);
-            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(d, total);
+            tick();
             cell
         })
         .collect();
+    let mut gpu_note = None;
+    let mut gpu_warnings = Vec::new();
+    if !gpu_cols.is_empty() {
+        match grin_gpu::GpuContext::new_headless() {
+            Err(e) => gpu_note = Some(format!("no GPU columns: no adapter ({e})")),
+            Ok(ctx) => {
+                gpu_note = Some(format!("GPU columns on {}", ctx.adapter_name()));
+                let mut tracer = None;
+                for case in &cases {
+                    let (baked, warning) = gpu_field(case)?;
+                    if let Some(w) = &warning {
+                        gpu_warnings.push((case.name, w.clone()));
+                    }
+                    let gpu = match &mut tracer {
+                        Some(t) => t,
+                        None => {
+                            tracer.insert(grin_gpu::GpuRayTracer::new(&ctx, Arc::clone(&baked))?)
+                        }
+                    };
+                    let warned = case.warning.is_some() || warning.is_some();
+                    for col in &gpu_cols {
+                        cells.push(run_gpu_cell(gpu, &baked, case, col, warned)?);
+                        tick();
+                    }
+                }
+                cols.extend(gpu_cols);
+            }
+        }
+    }
     Ok(Matrix {
         cases: cases
             .iter()
@@ -591,8 +690,25 @@ pub fn run(quick: bool, progress: &(dyn Fn(u64, u64) + Sync)) -> anyhow::Result<
         columns: cols.iter().map(Column::label).collect(),
         cells,
         refused: refused_at_load(),
+        gpu: gpu_note,
+        gpu_warnings,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The case's field as the GPU marches it: its own grid when it is baked, else baked as
+/// `grin render --backend gpu` bakes it (`bake_for_gpu_auto`), with that bake's warning.
+fn gpu_field(
+    case: &StabilityCase,
+) -> anyhow::Result<(Arc<grin_field::baked::BakedField>, Option<String>)> {
+    if let Some(b) = case.field.as_baked() {
+        return Ok((Arc::new(b.clone()), None));
+    }
+    let (baked, report) = grin_field::bake::device::bake_for_gpu_auto(case.field.as_ref())?;
+    Ok((
+        Arc::new(baked),
+        grin_field::bake::device::bake_warning(&report),
+    ))
 }
 
 /// A spike of n <= 0 (n dips to -2 in a ball of radius ~0.02, between the load check's
@@ -664,6 +780,15 @@ pub fn markdown(m: &Matrix, command: &str) -> String {
                     "- **{case}**: LOADED (a defect: grin must refuse this field)"
                 );
             }
+        }
+    }
+    if let Some(note) = &m.gpu {
+        let _ = writeln!(
+            s,
+            "\n{note}: the `gpu` rows run the render kernel's own march on each case's field as `grin render --backend gpu` bakes it (the baked jump: its own grid), so their errors include that bake's."
+        );
+        for (case, w) in &m.gpu_warnings {
+            let _ = writeln!(s, "- GPU bake of **{case}** warns: {w}.");
         }
     }
     let _ = writeln!(s);

@@ -83,6 +83,14 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// How far n may be from what this field stands for (a bake's measured max |n
+    /// error| against its source; 0 for fields that are their own definition). A
+    /// refraction at the bounds amplifies it by tan of the refracted angle: the tracer
+    /// adds that to a ray's error estimate (grazing rays through a bake of a lens).
+    fn n_uncertainty(&self) -> f64 {
+        0.0
+    }
+
     /// The grid itself when this field is a baked one (a `.grinf` file): the GPU
     /// uploads it as it is instead of baking the field again.
     fn as_baked(&self) -> Option<&crate::baked::BakedField> {

@@ -183,6 +183,7 @@ pub fn upload_field(
     params.grid_dims = dims;
     params.macro_dims = mdims;
     params.macro_cell_voxels = grid.cell as u32;
+    params.n_uncertainty = grin_field::IndexField::n_uncertainty(baked) as f32;
     if baked.outside() == Outside::Ambient {
         params.flags |= FLAG_OUTSIDE_AMBIENT;
     }

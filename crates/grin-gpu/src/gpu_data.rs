@@ -169,7 +169,10 @@ pub struct FrameParams {
     pub sky_zenith: [f32; 3],
     pub focus_distance: f32,
     pub sky_ground: [f32; 3],
-    pub _pad7: f32,
+    /// The baked field's max |n error| against its source (`IndexField::n_uncertainty`):
+    /// refractions at the bounds add it, amplified at grazing angles, to the error
+    /// estimate.
+    pub n_uncertainty: f32,
     /// The background plate's camera (the scene's, fixed when a viewer moves its own):
     /// unit forward, right and up, tan(fov_y / 2) and width / height.
     pub plate_forward: [f32; 3],
@@ -366,7 +369,7 @@ mod tests {
             sky_zenith,
             focus_distance,
             sky_ground,
-            _pad7,
+            n_uncertainty,
             plate_forward,
             plate_tan_half_fov_y,
             plate_right,

@@ -158,6 +158,7 @@ pub(crate) fn copy_uploaded(p: &mut FrameParams, uploaded: &FrameParams) {
     p.macro_dims = uploaded.macro_dims;
     p.macro_cell_voxels = uploaded.macro_cell_voxels;
     p.macro_threshold = uploaded.macro_threshold;
+    p.n_uncertainty = uploaded.n_uncertainty;
     p.medium_objects_first = uploaded.medium_objects_first;
     p.medium_objects_count = uploaded.medium_objects_count;
 }

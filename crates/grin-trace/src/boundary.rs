@@ -51,6 +51,36 @@ pub fn refract(d: DVec3, normal: DVec3, n1: f64, n2: f64) -> Interface {
     }
 }
 
+/// Direction error (rad) a refraction at the bounds adds when the field's n there is
+/// uncertain by `dn` (`IndexField::n_uncertainty`): the refracted angle moves by
+/// dn tan(theta_t) / n_field (either side's index), so a grazing crossing amplifies an
+/// index error that is harmless at normal incidence. Infinite where `dn` could change
+/// transmission into total reflection or back. `d` the incident unit direction, `n1` ->
+/// `n2` the crossing, `n_field` the field's side.
+pub fn refraction_uncertainty(
+    d: DVec3,
+    normal: DVec3,
+    n1: f64,
+    n2: f64,
+    n_field: f64,
+    dn: f64,
+) -> f64 {
+    if dn.is_nan() || dn <= 0.0 {
+        return 0.0;
+    }
+    let cos_i = d.dot(normal).abs().min(1.0);
+    let sin2_t = (n1 / n2).powi(2) * (1.0 - cos_i * cos_i);
+    // d(sin^2 theta_t) / dn is 2 sin^2 theta_t / n for either index.
+    if (1.0 - sin2_t).abs() <= 2.0 * sin2_t * dn / n_field {
+        return f64::INFINITY;
+    }
+    if sin2_t >= 1.0 {
+        return 0.0;
+    }
+    let tan_t = (sin2_t / (1.0 - sin2_t)).sqrt();
+    dn * tan_t / n_field
+}
+
 /// The point of the bounds' surface nearest to `p` (radially for the sphere, along the
 /// nearest face's normal for the box).
 pub fn project_to_surface(bounds: &Bounds, p: DVec3) -> DVec3 {
@@ -243,4 +273,36 @@ pub fn exit_tolerance<R: Real>(bounds: &Bounds) -> f64 {
         Bounds::Box { min, max } => min.abs().max(max.abs()).max_element(),
     };
     (EXIT_TOL_REL * bounds.radius()).max(EXIT_TOL_EPS * R::EPS.to_f64() * coordinates)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refraction_uncertainty_grows_as_tan_theta_and_is_unsure_near_critical() {
+        let nrm = DVec3::Z;
+        let at = |deg: f64| DVec3::new(deg.to_radians().sin(), 0.0, -deg.to_radians().cos());
+        // Index matched (1 -> 1.0001), dn = 1e-4: normal incidence adds nothing, 60 deg
+        // adds dn tan 60, 89.2 deg (impact 0.9999 R) ~70 dn.
+        assert_eq!(
+            refraction_uncertainty(at(0.0), nrm, 1.0, 1.0001, 1.0001, 1e-4),
+            0.0
+        );
+        let e60 = refraction_uncertainty(at(60.0), nrm, 1.0, 1.0001, 1.0001, 1e-4);
+        assert!(
+            (e60 / (1e-4 * 60f64.to_radians().tan()) - 1.0).abs() < 1e-3,
+            "{e60}"
+        );
+        let e89 = refraction_uncertainty(at(89.2), nrm, 1.0, 1.0001, 1.0001, 1e-4);
+        assert!(e89 > 3e-3 && e89.is_finite(), "{e89}");
+        // Within dn of total reflection the outcome itself is uncertain.
+        let c = refraction_uncertainty(at(89.9), nrm, 1.0001, 1.0, 1.0001, 1e-4);
+        assert!(c.is_infinite());
+        // No uncertainty, nothing added.
+        assert_eq!(
+            refraction_uncertainty(at(89.9), nrm, 1.0, 1.0001, 1.0001, 0.0),
+            0.0
+        );
+    }
 }

@@ -14,6 +14,7 @@ pub use grin_render::settings::{MIN_STEP_FRACTION, TraceError, TraceSettings};
 
 use crate::boundary::{
     Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface, refract,
+    refraction_uncertainty,
 };
 use crate::estimate::{DEGRADED_RAD, ErrorEstimate};
 use crate::integrate::{self, RayState, is_finite_v};
@@ -182,6 +183,13 @@ pub fn trace_ray_jittered<R: Real>(
     let bounds = field.bounds();
     let n_amb = field.ambient_index();
 
+    // Direction error the crossings of the bounds add (the field's n uncertainty,
+    // amplified at grazing angles): the entry's here, the exit's in `leave`.
+    let mut surface = Surface {
+        n_amb,
+        dn: field.n_uncertainty(),
+        error: 0.0,
+    };
     // Entry (the field sampled where the ray enters is the march's first sample).
     let (start, d_in, s_entry) = if bounds.signed_distance(origin) < 0.0 {
         (origin, d, None)
@@ -202,13 +210,19 @@ pub fn trace_ray_jittered<R: Real>(
             res.position = p;
             return res;
         }
+        surface.error += refraction_uncertainty(d, bounds.normal(p), n_amb, n_in, n_in, surface.dn);
         match refract(d, bounds.normal(p), n_amb, n_in) {
             Interface::Transmitted { dir, reflectance } => {
                 res.transmittance *= 1.0 - reflectance;
                 (p, dir, Some(entry))
             }
             Interface::Reflected { dir } => {
-                res.status = RayStatus::Exited;
+                res.error_estimate = surface.error;
+                res.status = if surface.error > DEGRADED_RAD {
+                    RayStatus::Degraded
+                } else {
+                    RayStatus::Exited
+                };
                 res.position = p;
                 res.direction = dir;
                 return res;
@@ -299,7 +313,15 @@ pub fn trace_ray_jittered<R: Real>(
             res.evals += 1;
             estimate.break_sequence();
             if exits {
-                match leave(&bounds, &mut res, &mut state, &s0, n_amb, p1, &mut estimate) {
+                match leave(
+                    &bounds,
+                    &mut res,
+                    &mut state,
+                    &s0,
+                    p1,
+                    &mut estimate,
+                    &mut surface,
+                ) {
                     Some(done) => return done,
                     None => continue,
                 }
@@ -370,11 +392,27 @@ pub fn trace_ray_jittered<R: Real>(
         s0 = s1;
         if outside {
             let p = state.r.to_dvec3();
-            if let Some(done) = leave(&bounds, &mut res, &mut state, &s0, n_amb, p, &mut estimate) {
+            if let Some(done) = leave(
+                &bounds,
+                &mut res,
+                &mut state,
+                &s0,
+                p,
+                &mut estimate,
+                &mut surface,
+            ) {
                 return done;
             }
         }
     }
+}
+
+/// The medium's surface as a ray crosses it: the ambient index, the field's n
+/// uncertainty there, and the direction error the crossings so far added.
+struct Surface {
+    n_amb: f64,
+    dn: f64,
+    error: f64,
 }
 
 /// At the surface point `p` with the inside state `state`: refract out (returns the
@@ -385,12 +423,16 @@ fn leave<R: Real>(
     res: &mut RayResult,
     state: &mut RayState<R>,
     s: &FieldSample<R>,
-    n_amb: f64,
     p: DVec3,
     estimate: &mut ErrorEstimate,
+    surface: &mut Surface,
 ) -> Option<RayResult> {
     let n_in = s.n.to_f64();
+    let n_amb = surface.n_amb;
     let d_in = state.t.to_dvec3().normalize_or_zero();
+    // A total reflection the index error could have turned into a transmission (or the
+    // reverse) makes the rest of the ray uncertain too: it is kept in `surface.error`.
+    surface.error += refraction_uncertainty(d_in, bounds.normal(p), n_in, n_amb, n_in, surface.dn);
     match refract(d_in, bounds.normal(p), n_in, n_amb) {
         Interface::Transmitted { dir, reflectance } => {
             res.transmittance *= 1.0 - reflectance;
@@ -399,7 +441,7 @@ fn leave<R: Real>(
                 n_in,
                 bounds.normal(p),
                 s.n_grad_n().to_dvec3(),
-            );
+            ) + surface.error;
             res.status = if res.error_estimate > DEGRADED_RAD {
                 RayStatus::Degraded
             } else {

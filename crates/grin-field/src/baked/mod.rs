@@ -655,6 +655,11 @@ impl IndexField for BakedField {
         Some(self)
     }
 
+    fn n_uncertainty(&self) -> f64 {
+        let e = self.provenance.max_err_n;
+        if e.is_finite() && e > 0.0 { e } else { 0.0 }
+    }
+
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let g = (p - self.geometry.origin) * self.inv_spacing;
         if self.outside == Outside::Ambient && self.beyond_grid(g) {

@@ -20,6 +20,11 @@ pub struct Args {
     /// Print every cell as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// No GPU rows (by default the full matrix adds the render kernel's march of each
+    /// case as `grin render --backend gpu` bakes it; without an adapter they are skipped
+    /// with a warning).
+    #[arg(long)]
+    pub no_gpu: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -31,13 +36,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.set_length(total);
         bar.set_position(done);
     };
-    let m = stability::run(args.quick, &progress)?;
+    let m = stability::run(args.quick, !args.no_gpu, &progress)?;
     bar.finish_and_clear();
-    let command = if args.quick {
-        "grin bench stability --quick"
-    } else {
-        "grin bench stability"
+    let command = match (args.quick, args.no_gpu) {
+        (true, _) => "grin bench stability --quick",
+        (false, true) => "grin bench stability --no-gpu",
+        (false, false) => "grin bench stability",
     };
+    if let Some(note) = m.gpu.as_deref().filter(|n| n.starts_with("no GPU")) {
+        eprintln!("warning: {note}");
+    }
     let files = report::write_stability(&m, &args.output, command)?;
     let count = |o: Outcome| m.cells.iter().filter(|c| c.outcome == o).count();
     let silent = m.cells.iter().filter(|c| c.silent).count();
@@ -49,6 +57,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "degraded": count(Outcome::Degraded),
             "failed": count(Outcome::Failed),
             "silent": silent,
+            "gpu": m.gpu,
+            "gpu_warnings": m.gpu_warnings,
             "output": args.output.display().to_string(),
             "files": files,
         });
