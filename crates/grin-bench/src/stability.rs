@@ -755,7 +755,7 @@ pub fn markdown(m: &Matrix, command: &str) -> String {
     let _ = writeln!(s, "# grin bench stability\n");
     let _ = writeln!(
         s,
-        "`{command}` — {} cells in {:.1} s. `ok` converged; `~e` degraded with worst error e (rad or of the scale); `FAIL s` a ray ended `s` against the truth; **(silent)** a ray reported `exited` with a wrong answer and nothing warned of it; (warned) grin said so before tracing. A ray that ends with the status `degraded` (its low-order integrator's own error estimate above 3 mrad) is measured like an exited one but never silent.\n",
+        "`{command}` — {} cells in {:.1} s. `ok` converged; `~e` degraded with worst error e (rad or of the scale); `FAIL s` a ray ended `s` against the truth; **(silent)** a ray reported `exited` with a wrong answer and nothing warned of it; (warned) grin said so before tracing. A ray that ends with the status `degraded` (its error estimate above 3 mrad: a low-order integrator's own, or a bake's n error amplified at a grazing crossing) is measured like an exited one but never silent.\n",
         m.cells.len(),
         m.seconds
     );

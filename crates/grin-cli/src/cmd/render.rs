@@ -587,7 +587,7 @@ fn render_one(
     let degraded = summary.status_counts["degraded"];
     if degraded > 0 {
         let w = format!(
-            "{degraded} pixels left the medium `degraded`: the low-order integrator's own error              estimate is above {} rad there (aov.status 5); a higher-order integrator, shorter              steps or step = {{ auto = ... }} resolve them",
+            "{degraded} pixels left the medium `degraded`: their error estimate is above {} rad there (aov.status 5): a low-order integrator's own (a higher-order integrator, shorter steps or step = {{ auto = ... }} resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
             grin_trace::estimate::DEGRADED_RAD
         );
         eprintln!("grin: warning: {w}");
