@@ -209,18 +209,7 @@ impl<'a> GpuRenderer<'a> {
                 usage: wgpu::BufferUsages::STORAGE,
             });
             let env_tex = env_texture(ctx, &env);
-            let out_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pixels"),
-                size: out_bytes,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let readback = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pixels readback"),
-                size: out_bytes,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let (out_buffer, readback) = output_buffers(device, "pixels", out_bytes);
             let deferred = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("deferred pixels"),
                 size: (out_bytes / std::mem::size_of::<PixelOut>() as u64) * 4,
@@ -468,6 +457,28 @@ impl<'a> GpuRenderer<'a> {
         })?;
         read_buffer(ctx, &self.readback, bytes)
     }
+}
+
+/// A storage buffer of `bytes` a kernel writes (`label`) and the mappable buffer it is
+/// copied into for reading back (`label readback`).
+pub(crate) fn output_buffers(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: u64,
+) -> (wgpu::Buffer, wgpu::Buffer) {
+    let out = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(&format!("{label} readback")),
+        size: bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    (out, readback)
 }
 
 /// Map `buffer` (MAP_READ), copy out its first `bytes` as `T`s (pixels), unmap.

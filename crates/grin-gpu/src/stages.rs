@@ -15,7 +15,7 @@ use crate::field::{FieldTextures, upload_field};
 use crate::gpu_data::{FrameParams, PASS_ALL};
 use crate::pack::{env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
-use crate::render::read_buffer;
+use crate::render::{output_buffers, read_buffer};
 use crate::{GpuContext, GpuError, shaders};
 
 /// The stages of shaders/stages.wgsl.
@@ -329,18 +329,7 @@ impl<'a> StageKit<'a> {
                 contents: bytemuck::cast_slice(input),
                 usage: wgpu::BufferUsages::STORAGE,
             });
-            let out_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("stage out"),
-                size: out_bytes,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            let readback = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("stage readback"),
-                size: out_bytes,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let (out_buffer, readback) = output_buffers(device, "stage out", out_bytes);
             let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("stage io"),
                 layout: &self.io_layout,
