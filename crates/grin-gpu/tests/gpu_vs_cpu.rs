@@ -544,8 +544,19 @@ fn adaptive_steps_at_a_tolerance_below_f32_roundoff_do_not_stall() {
     let dir = scenes_dir();
     let baked = harness::baked(&scene, &dir, 64);
     let (cpu, gpu) = harness::render_both(&ctx, &scene, &dir, baked);
-    let stopped = |f: &Frame| f.pixels.iter().filter(|p| p.status >= 3.0).count();
-    let in_lens = gpu.pixels.iter().filter(|p| p.status == 1.0).count();
+    // Stopped: max_steps (3) or error (4); through the lens: exited (1) or degraded (5:
+    // rim pixels whose grazing crossings amplify the bake's n error).
+    let stopped = |f: &Frame| {
+        f.pixels
+            .iter()
+            .filter(|p| p.status == 3.0 || p.status == 4.0)
+            .count()
+    };
+    let in_lens = gpu
+        .pixels
+        .iter()
+        .filter(|p| p.status == 1.0 || p.status == 5.0)
+        .count();
     assert!(in_lens > 900, "{in_lens} pixels cross the lens");
     let (sc, sg) = (cpu.mean_steps(), gpu.mean_steps());
     eprintln!("mean steps per pixel: CPU (f64) {sc:.2}, GPU (f32) {sg:.2}");
