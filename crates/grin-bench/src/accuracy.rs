@@ -336,9 +336,50 @@ pub struct Order {
     pub precision: &'static str,
     /// The integrator's formal order.
     pub formal: u32,
+    /// The order the method can show on this field: its formal order, or less where the
+    /// field is not smooth enough for it ([`crate::cases::Case::order_limit`]).
+    pub expected: u32,
     /// Least-squares slope over the points used (None: fewer than 3 in range).
     pub measured: Option<f64>,
     pub points_used: usize,
+    /// The steps a ray of the runs fitted (finest last), so a reader sees the range.
+    pub steps: String,
+    pub verdict: OrderVerdict,
+}
+
+/// How a measured order compares with the expected one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OrderVerdict {
+    /// Within [`ORDER_TOLERANCE`] of the expected order.
+    AsExpected,
+    /// Faster: the leading error term cancels (superconvergence) or the fit is still
+    /// above the asymptotic range when the error reaches the floor.
+    Faster,
+    /// Slower by more than the tolerance.
+    Slower,
+    /// Fewer than 3 runs between the floor and `ORDER_MAX_ERR`.
+    TooFewPoints,
+}
+
+impl OrderVerdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::AsExpected => "as expected",
+            Self::Faster => "faster",
+            Self::Slower => "slower",
+            Self::TooFewPoints => "too few points",
+        }
+    }
+
+    fn of(measured: Option<f64>, expected: u32) -> Self {
+        match measured {
+            None => Self::TooFewPoints,
+            Some(m) if (m - f64::from(expected)).abs() <= ORDER_TOLERANCE => Self::AsExpected,
+            Some(m) if m > f64::from(expected) => Self::Faster,
+            Some(_) => Self::Slower,
+        }
+    }
 }
 
 /// Errors below this (rad) are at the reference's or the precision's floor and above
@@ -346,6 +387,12 @@ pub struct Order {
 pub const ORDER_MIN_ERR_F64: f64 = 1e-10;
 pub const ORDER_MIN_ERR_F32: f64 = 1e-5;
 pub const ORDER_MAX_ERR: f64 = 1e-2;
+/// An order is fitted over the finest this many runs inside the error window (two
+/// halvings of the step): the asymptotic range, where the leading error term dominates.
+/// A fit over the whole window mixes in the coarse, pre-asymptotic runs.
+pub const ORDER_FIT_POINTS: usize = 3;
+/// How far a measured order may be from the expected one and count as it.
+pub const ORDER_TOLERANCE: f64 = 0.3;
 
 /// Convergence orders of every integrator with fixed steps, on each smooth case.
 pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
@@ -372,39 +419,65 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
                     if pts.is_empty() {
                         continue;
                     }
-                    // The step is the one taken, not the one asked for: every policy
-                    // caps steps at the field's feature size, so R/2 .. R/8 can be the
-                    // same run on the plume. 1 / steps a ray is proportional to the mean
-                    // step (the rays' paths are the same in every run); runs that took
-                    // the same steps count once.
-                    let mut used: Vec<&&Point> = Vec::new();
-                    for p in pts
+                    let formal = grin_trace::integrate::order(integrator);
+                    let expected = case.order_limit.map_or(formal, |l| formal.min(l));
+                    let runs: Vec<(f64, f64)> = pts
                         .iter()
-                        .filter(|p| !p.failed() && p.err_dir > floor && p.err_dir < ORDER_MAX_ERR)
-                    {
-                        if !used.iter().any(|q| q.steps_per_ray == p.steps_per_ray) {
-                            used.push(p);
-                        }
-                    }
-                    let measured = (used.len() >= 3).then(|| {
-                        let hs: Vec<f64> = used.iter().map(|p| 1.0 / p.steps_per_ray).collect();
-                        let es: Vec<f64> = used.iter().map(|p| p.err_dir).collect();
-                        log_slope(&hs, &es)
-                    });
+                        .map(|p| {
+                            let err = if p.failed() { f64::INFINITY } else { p.err_dir };
+                            (p.steps_per_ray, err)
+                        })
+                        .collect();
+                    let (measured, used) = fit_order(&runs, floor);
+                    let steps = used
+                        .iter()
+                        .map(|p| format!("{:.0}", p.0))
+                        .collect::<Vec<_>>()
+                        .join(" ");
                     out.push(Order {
                         case: case.name.clone(),
                         integrator: crate::methods::integrator_label(integrator),
                         exit: crate::methods::exit_name(exit),
                         precision: precision.name(),
-                        formal: grin_trace::integrate::order(integrator),
+                        formal,
+                        expected,
                         measured,
                         points_used: used.len(),
+                        steps,
+                        verdict: OrderVerdict::of(measured, expected),
                     });
                 }
             }
         }
     }
     out
+}
+
+/// The order of one method's fixed-step runs, each given as (steps a ray, exit-direction
+/// error; infinite when it failed): the slope over the finest [`ORDER_FIT_POINTS`] runs
+/// with `floor < error < ORDER_MAX_ERR`, and those runs (coarsest first). The step is the
+/// one taken, not the one asked for: every policy caps steps at the field's feature size,
+/// so R/2 .. R/8 can be the same run on the plume. 1 / steps a ray is proportional to the
+/// mean step (the rays' paths are the same in every run); runs that took the same steps
+/// count once.
+pub fn fit_order(runs: &[(f64, f64)], floor: f64) -> (Option<f64>, Vec<(f64, f64)>) {
+    let mut used: Vec<(f64, f64)> = Vec::new();
+    for &(steps, err) in runs
+        .iter()
+        .filter(|(_, e)| *e > floor && *e < ORDER_MAX_ERR)
+    {
+        if !used.iter().any(|q| q.0 == steps) {
+            used.push((steps, err));
+        }
+    }
+    used.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let finest = used.split_off(used.len().saturating_sub(ORDER_FIT_POINTS));
+    let measured = (finest.len() >= 3).then(|| {
+        let hs: Vec<f64> = finest.iter().map(|p| 1.0 / p.0).collect();
+        let es: Vec<f64> = finest.iter().map(|p| p.1).collect();
+        log_slope(&hs, &es)
+    });
+    (measured, finest)
 }
 
 /// Least-squares slope of log(y) against log(x).

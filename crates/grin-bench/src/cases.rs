@@ -58,6 +58,12 @@ pub struct Case {
     /// The field is smooth (C2 at least) inside and has no error floor of its own (not
     /// baked): convergence orders are measured on it.
     pub smooth: bool,
+    /// The highest convergence order the field itself allows, where it is less than a
+    /// method's own: an index that is C^k, its (k+1)-th derivative jumping across surfaces
+    /// the rays cross a fixed number of times, gives every step that straddles one a local
+    /// error of O(h^(k+1)), so no method converges faster than order k+1 (Perlin noise,
+    /// quintic fade: C2, so 3). None: smooth everywhere (C-infinity).
+    pub order_limit: Option<u32>,
     /// Length scale errors are divided by (the bounds' radius).
     pub scale: f64,
     /// `field` itself where it is a baked grid: the GPU column traces it.
@@ -126,6 +132,7 @@ pub fn luneburg(count: usize) -> anyhow::Result<Case> {
         pilots,
         exact: Some(exact),
         smooth: true,
+        order_limit: None,
         scale: r,
         baked: None,
     })
@@ -151,6 +158,7 @@ pub fn fish_eye(count: usize) -> anyhow::Result<Case> {
         pilots: fish_eye_rays(PILOT_RAYS),
         exact: Some(exact),
         smooth: true,
+        order_limit: None,
         scale: a,
         baked: None,
     })
@@ -231,6 +239,7 @@ pub fn grin_rod(count: usize) -> anyhow::Result<Case> {
             .collect(),
         exact: Some(exact),
         smooth: true,
+        order_limit: None,
         scale: DVec3::new(0.5, 0.5, 1.0).length(),
         baked: None,
     })
@@ -310,6 +319,7 @@ fn numeric_case(
         pilots,
         exact: None,
         smooth: true,
+        order_limit: None,
         scale,
         baked: None,
     }
@@ -342,7 +352,12 @@ pub fn noise(count: usize) -> anyhow::Result<Case> {
     )?;
     let (rays, _) = parallel_beam(count, 1.0);
     let pilots = parallel_beam(PILOT_RAYS, 1.0).0;
-    Ok(numeric_case("noise", field, rays, pilots))
+    let mut case = numeric_case("noise", field, rays, pilots);
+    // Improved Perlin noise interpolates with the quintic fade 6t^5 - 15t^4 + 10t^3: the
+    // index is C2 and its third derivative jumps at every lattice plane (and at the
+    // taper's edge, a C2 quintic smoothstep too).
+    case.order_limit = Some(3);
+    Ok(case)
 }
 
 /// The plume case's index sampled onto an OpenVDB grid (voxels of 0.04, delta_n / 1e-3
@@ -429,6 +444,7 @@ pub fn baked(
         exact: base.exact.clone(),
         // The bake's own error is a floor under every method: no order is measured on it.
         smooth: false,
+        order_limit: base.order_limit,
         scale: base.scale,
     })
 }

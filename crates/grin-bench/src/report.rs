@@ -8,7 +8,10 @@ use std::path::Path;
 use grin_output::{Staged, commit, stage_writer};
 use grin_scene::ExitMethod;
 
-use crate::accuracy::{AccuracyRun, DECADES, Point, cheapest_at, pareto};
+use crate::accuracy::{
+    AccuracyRun, DECADES, ORDER_FIT_POINTS, ORDER_MAX_ERR, ORDER_MIN_ERR_F32, ORDER_MIN_ERR_F64,
+    ORDER_TOLERANCE, OrderVerdict, Point, cheapest_at, pareto,
+};
 use crate::chart::{Chart, Curve, LineKind, png, svg};
 use crate::methods::{Policy, Precision};
 
@@ -466,6 +469,16 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
         s,
         "\n## Measured convergence orders (fixed steps, smooth cases)\n"
     );
+    let count = |v: OrderVerdict| run.orders.iter().filter(|o| o.verdict == v).count();
+    let fitted = run.orders.len() - count(OrderVerdict::TooFewPoints);
+    let _ = writeln!(
+        s,
+        "The slope of log error against log step over the finest {ORDER_FIT_POINTS} runs with {ORDER_MIN_ERR_F64:.0e} < error < {ORDER_MAX_ERR:.0e} rad (f32: from {ORDER_MIN_ERR_F32:.0e}); expected: the formal order, or the field's own limit where lower. Of {fitted} fitted: {} within {ORDER_TOLERANCE} of the expected order, {} faster, {} slower; {} rows with fewer than 3 runs in the window.\n",
+        count(OrderVerdict::AsExpected),
+        count(OrderVerdict::Faster),
+        count(OrderVerdict::Slower),
+        count(OrderVerdict::TooFewPoints),
+    );
     let orders = run.orders.iter().map(|o| {
         vec![
             o.case.to_string(),
@@ -473,8 +486,10 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             o.exit.to_string(),
             o.precision.to_string(),
             o.formal.to_string(),
+            o.expected.to_string(),
             opt(o.measured, |x| format!("{x:.2}")),
-            o.points_used.to_string(),
+            o.verdict.name().to_string(),
+            o.steps.clone(),
         ]
     });
     table(
@@ -485,8 +500,10 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             "exit",
             "precision",
             "formal",
+            "expected",
             "measured",
-            "points",
+            "verdict",
+            "steps a ray fitted",
         ],
         orders,
     );

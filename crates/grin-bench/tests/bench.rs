@@ -555,3 +555,43 @@ fn grazing_rays_through_a_bake_say_degraded_on_both_backends() {
         );
     }
 }
+
+/// Orders are fitted over the finest runs above the floor: an error h^4 (1 + 1000 h^2),
+/// the second term dominating at coarse steps, fits 4 there; over the whole window it
+/// would not. Runs at the floor, failed runs and repeated step counts are left out.
+#[test]
+fn orders_are_fitted_in_the_asymptotic_range() {
+    use grin_bench::accuracy::{ORDER_MIN_ERR_F64, fit_order};
+    let err = |steps: f64| {
+        let h = 1.0 / steps;
+        h.powi(4) * (1.0 + 1e3 * h * h)
+    };
+    let mut runs: Vec<(f64, f64)> = [2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0]
+        .iter()
+        .map(|&s| (s, err(s)))
+        .collect();
+    runs.push((8.0, err(8.0))); // the same steps again (a capped step)
+    runs.push((512.0, 1e-13)); // at the floor
+    runs.push((1024.0, f64::INFINITY)); // failed
+    let (measured, used) = fit_order(&runs, ORDER_MIN_ERR_F64);
+    let m = measured.expect("enough runs");
+    assert!((m - 4.0).abs() < 0.3, "finest-run order {m:.2}");
+    assert_eq!(
+        used.iter().map(|r| r.0).collect::<Vec<_>>(),
+        [64.0, 128.0, 256.0]
+    );
+    let window: Vec<(f64, f64)> = runs[..8]
+        .iter()
+        .copied()
+        .filter(|r| r.1 < 1e-2 && r.1 > ORDER_MIN_ERR_F64)
+        .collect();
+    let hs: Vec<f64> = window.iter().map(|r| 1.0 / r.0).collect();
+    let es: Vec<f64> = window.iter().map(|r| r.1).collect();
+    let whole = log_slope(&hs, &es);
+    assert!(
+        whole > 4.5,
+        "the whole window's fit {whole:.2} should be pre-asymptotic"
+    );
+    let (none, used) = fit_order(&runs[8..], ORDER_MIN_ERR_F64);
+    assert!(none.is_none() && used.len() == 1, "{used:?}");
+}
