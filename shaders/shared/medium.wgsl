@@ -348,9 +348,11 @@ fn first_crossing(seg: Segment) -> f32 {
     return 0.5 * (lo + hi);
 }
 
-// trace::EXIT_NEWTON_ITERATIONS and boundary::EXCURSION_ITERATIONS.
+// trace::EXIT_NEWTON_ITERATIONS and boundary::EXCURSION_ITERATIONS,
+// EXCURSION_SLACK_TOLS.
 const EXIT_NEWTON_ITERATIONS: u32 = 3u;
 const EXCURSION_ITERATIONS: u32 = 40u;
+const EXCURSION_SLACK_TOLS: f32 = 8.0;
 const INV_PHI: f32 = 0.618034;
 
 struct Excursion {
@@ -358,11 +360,32 @@ struct Excursion {
     tau: f32,
 }
 
+// Segment::bend: how far the cubic can bend off the chord between two of its points
+// len apart, M len^2 / 8 with M = max |r''| (linear in t: its larger end value).
+fn segment_bend(seg: Segment, len: f32) -> f32 {
+    if !(seg.h > 0.0) {
+        return 0.0;
+    }
+    let d = seg.r1 - seg.r0;
+    let a0 = length(6.0 * d - 4.0 * seg.h * seg.t0 - 2.0 * seg.h * seg.t1);
+    let a1 = length(-6.0 * d + 2.0 * seg.h * seg.t0 + 4.0 * seg.h * seg.t1);
+    let u = len / seg.h;
+    return max(a0, a1) / 8.0 * u * u;
+}
+
 // For a step whose ends are both inside: where its dense output goes farthest outside,
 // if it leaves and comes back between them (Segment::excursion): a scan, then golden
-// section around the largest sample.
-fn segment_excursion(seg: Segment) -> Excursion {
+// section around the largest sample; either stops with "none" once the samples and the
+// cubic's bend prove the segment (or the bracket) inside by `slack` (the bounds' signed
+// distance is convex and 1-Lipschitz). A ray running along the surface then spends no
+// loop iterations here: lavapipe caps them per invocation.
+fn segment_excursion(seg: Segment, slack: f32) -> Excursion {
     if !(seg.h > 0.0) {
+        return Excursion(false, 0.0);
+    }
+    let f0 = bounds_signed_distance(seg.r0);
+    let f1 = bounds_signed_distance(seg.r1);
+    if max(f0, f1) + segment_bend(seg, seg.h) + slack < 0.0 {
         return Excursion(false, 0.0);
     }
     var best_k = 1u;
@@ -378,10 +401,15 @@ fn segment_excursion(seg: Segment) -> Excursion {
             best_v = v;
         }
     }
+    if max(best_v, max(f0, f1)) + segment_bend(seg, seg.h / f32(HERMITE_SCAN)) + slack < 0.0 {
+        return Excursion(false, 0.0);
+    }
     var a = seg.h * f32(best_k - 1u) / f32(HERMITE_SCAN);
     var b = seg.h * f32(min(best_k + 1u, HERMITE_SCAN)) / f32(HERMITE_SCAN);
     var c = b - (b - a) * INV_PHI;
     var d = a + (b - a) * INV_PHI;
+    var fa = bounds_signed_distance(segment_point(seg, a));
+    var fb = bounds_signed_distance(segment_point(seg, b));
     var fc = bounds_signed_distance(segment_point(seg, c));
     var fd = bounds_signed_distance(segment_point(seg, d));
     for (var i = 0u; i < EXCURSION_ITERATIONS; i++) {
@@ -391,14 +419,19 @@ fn segment_excursion(seg: Segment) -> Excursion {
         if fd > 0.0 {
             return Excursion(true, d);
         }
+        if max(max(fa, fb), max(fc, fd)) + segment_bend(seg, b - a) + slack < 0.0 {
+            return Excursion(false, 0.0);
+        }
         if fc > fd {
             b = d;
+            fb = fd;
             d = c;
             fd = fc;
             c = b - (b - a) * INV_PHI;
             fc = bounds_signed_distance(segment_point(seg, c));
         } else {
             a = c;
+            fa = fc;
             c = d;
             fc = fd;
             d = a + (b - a) * INV_PHI;
@@ -431,7 +464,7 @@ fn excursion_step(s: RayState, s0: FieldSample, taken: Taken) -> ExcursionStep {
     if bounds_signed_distance(s.r) < -reach && bounds_signed_distance(r1) < -reach {
         return none;
     }
-    let e = segment_excursion(segment_of_step(s, taken));
+    let e = segment_excursion(segment_of_step(s, taken), EXCURSION_SLACK_TOLS * exit_tolerance());
     if !e.found {
         return none;
     }

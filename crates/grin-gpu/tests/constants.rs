@@ -105,6 +105,7 @@ fn mirrored_constants_have_the_same_values() {
         ("ENTRY_NUDGE_EPS", trace::ENTRY_NUDGE_EPS),
         ("EXIT_NEWTON_ITERATIONS", u(trace::EXIT_NEWTON_ITERATIONS)),
         ("EXCURSION_ITERATIONS", u(boundary::EXCURSION_ITERATIONS)),
+        ("EXCURSION_SLACK_TOLS", boundary::EXCURSION_SLACK_TOLS),
         (
             "LENGTH_SCALE_STEP_FRACTION",
             step::LENGTH_SCALE_STEP_FRACTION,

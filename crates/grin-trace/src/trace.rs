@@ -13,8 +13,8 @@ use grin_scene::ExitMethod;
 pub use grin_render::settings::{MIN_STEP_FRACTION, TraceError, TraceSettings};
 
 use crate::boundary::{
-    Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface, refract,
-    refraction_uncertainty,
+    EXCURSION_SLACK_TOLS, Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface,
+    refract, refraction_uncertainty,
 };
 use crate::estimate::{DEGRADED_RAD, ErrorEstimate};
 use crate::integrate::{self, RayState, is_finite_v};
@@ -524,7 +524,8 @@ pub fn excursion_step<R: Real>(
     if !(reach.is_finite() && r1.is_finite()) || (sd(r0) < -reach && sd(r1) < -reach) {
         return None;
     }
-    let tau = segment_of_step(s, taken).excursion(sd)?;
+    let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<R>(bounds);
+    let tau = segment_of_step(s, taken).excursion(sd, slack)?;
     let hm = R::from_f64(tau);
     let step = integrate::step(settings.integrator, field, s, s0.n_grad_n(), hm);
     (sd(step.state.r.to_dvec3()) > 0.0).then_some(Taken {
