@@ -132,8 +132,9 @@ fn gpu_ray_table_matches_the_cpu_f32_twin() {
 /// iterations in all (`LP_MAX_TGSI_LOOP_ITERATIONS`). The tricubic sample's 4x4x4 loops
 /// spent ~20 a sample and the Dormand-Prince stages 27 a step, so rays of more than ~2300
 /// tricubic samples or ~1900 dopri steps ended `error` on the GPU (the bench's GPU column
-/// found it: every run below R/256 on a tricubic grid). Both are written out now; what is
-/// left is ~3 iterations a step (~21,800 steps a ray on lavapipe; no limit on a GPU).
+/// found it: every run below R/256 on a tricubic grid). The tricubic sum is written out
+/// now and the stages run in one loop of 6: ~3 iterations a step are left, 9 with dopri
+/// (~21,800 steps a ray on lavapipe, ~7,000 dopri steps; no limit on a GPU).
 #[test]
 fn long_rays_are_not_cut_short_by_lavapipes_loop_limit() {
     let Some(ctx) = harness::context("long_rays_are_not_cut_short_by_lavapipes_loop_limit") else {
