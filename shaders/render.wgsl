@@ -60,7 +60,7 @@ fn render_pixel(px: u32, row: u32) -> bool {
         // Per-pixel jitter of the camera ray's first step in the medium (settable;
         // drawn after the sub-pixel position so the stream is the CPU's when it is off).
         var jitter = 1.0;
-        if field_flag(FLAG_JITTER) {
+        if (FLAGS & FLAG_JITTER) != 0u {
             jitter = max(rng_next_f32(&rng), MIN_JITTER_FRACTION);
         }
         var ray = camera_ray(px, py, sx, sy);

@@ -13,10 +13,6 @@ struct FieldSample {
     delta_n: f32,
 }
 
-fn field_flag(bit: u32) -> bool {
-    return (FLAGS & bit) != 0u;
-}
-
 fn ambient_index() -> f32 {
     return params.ambient_n;
 }
@@ -127,12 +123,12 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
 
 fn sample_field(p: vec3<f32>) -> FieldSample {
     let g = grid_from_world_point(p);
-    if field_flag(FLAG_OUTSIDE_AMBIENT) && beyond_grid(g) {
+    if (FLAGS & FLAG_OUTSIDE_AMBIENT) != 0u && beyond_grid(g) {
         return FieldSample(ambient_index(), vec3<f32>(0.0), 0.0);
     }
     let gc = clamp(g, vec3<f32>(0.0), grid_max());
     var v: vec4<f32>;
-    if field_flag(FLAG_TRICUBIC) {
+    if (FLAGS & FLAG_TRICUBIC) != 0u {
         v = tricubic(gc);
     } else {
         v = trilinear(gc);
@@ -210,7 +206,7 @@ fn macro_span(g: vec3<f32>, dg: vec3<f32>) -> f32 {
 fn may_fly(p: vec3<f32>) -> bool {
     let g = grid_from_world_point(p);
     if beyond_grid(g) {
-        return field_flag(FLAG_OUTSIDE_AMBIENT);
+        return (FLAGS & FLAG_OUTSIDE_AMBIENT) != 0u;
     }
     return macro_homogeneous(macro_cell(g));
 }
@@ -221,7 +217,7 @@ fn homogeneous_span(p: vec3<f32>, dir: vec3<f32>) -> f32 {
     let dg = dir * params.grid_inv_spacing;
     var span = -1.0;
     if beyond_grid(g) {
-        if !field_flag(FLAG_OUTSIDE_AMBIENT) {
+        if (FLAGS & FLAG_OUTSIDE_AMBIENT) == 0u {
             return -1.0;
         }
         let lo = params.grid_origin;

@@ -485,7 +485,7 @@ struct ExitOut {
 // reaching it, the evaluations spent.
 fn exit_medium(s: RayState, s0: FieldSample, taken: Taken, tol: f32) -> ExitOut {
     let d0 = s0.grad_n * s0.n;
-    if field_flag(FLAG_EXIT_HERMITE) {
+    if (FLAGS & FLAG_EXIT_HERMITE) != 0u {
         let seg = segment_of_step(s, taken);
         // Newton steps on the integrator's own state keep its order (trace::exit_medium).
         var tau = first_crossing(seg);
@@ -560,7 +560,7 @@ fn accumulate(stats: ptr<function, MarchStats>, a: RayState, sa: FieldSample, b:
 // objects that reach into the bounds are tested (params.medium_objects; none: no test at
 // all); the CPU tests every object, and the others cannot meet a chord inside the bounds.
 fn chord_hit(seg: Segment) -> Hit {
-    if !field_flag(FLAG_MEDIUM_OBJECTS) {
+    if (FLAGS & FLAG_MEDIUM_OBJECTS) == 0u {
         return no_hit();
     }
     let chord = seg.r1 - seg.r0;
@@ -667,10 +667,10 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             let position = state.r;
             let direction = normalize_or_zero(state.t);
             var span = -1.0;
-            if field_flag(FLAG_MACRO_CELLS) && may_fly(position) {
+            if (FLAGS & FLAG_MACRO_CELLS) != 0u && may_fly(position) {
                 span = homogeneous_span(position, direction);
             }
-            let fly = field_flag(FLAG_MACRO_CELLS) && span > min_flight;
+            let fly = (FLAGS & FLAG_MACRO_CELLS) != 0u && span > min_flight;
             var exits = false;
             var fly_len = 0.0;
             if fly {

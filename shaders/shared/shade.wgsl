@@ -56,7 +56,7 @@ struct Event {
 }
 
 fn has_medium() -> bool {
-    return field_flag(FLAG_HAS_MEDIUM);
+    return (FLAGS & FLAG_HAS_MEDIUM) != 0u;
 }
 
 // Index of the space at p: the medium's n inside the bounds, else ambient. -1 inside
@@ -77,7 +77,7 @@ fn index_at(p: vec3<f32>) -> f32 {
 // Nearest event along a straight ray from o outside the medium.
 fn next_event_outside(o: vec3<f32>, d: vec3<f32>) -> Event {
     var hit = no_hit();
-    if field_flag(FLAG_HAS_OBJECTS) {
+    if (FLAGS & FLAG_HAS_OBJECTS) != 0u {
         hit = intersect_scene(o, d, SURFACE_EPS, INF);
     }
     if has_medium() {
@@ -184,7 +184,7 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
         }
         // A surface (never reached without objects: the flag lets the compiler drop
         // the surface code, which lavapipe would otherwise run under a mask).
-        if !field_flag(FLAG_HAS_OBJECTS) {
+        if (FLAGS & FLAG_HAS_OBJECTS) == 0u {
             break;
         }
         primary = false;
@@ -345,7 +345,7 @@ fn bent_shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec4<f32>
 
 fn shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec3<f32> {
     // (render.rs does not split a frame whose shadow rays bend: they march.)
-    if field_flag(FLAG_BEND_SHADOWS) && has_medium() && !defer_medium() {
+    if (FLAGS & FLAG_BEND_SHADOWS) != 0u && has_medium() && !defer_medium() {
         let t = bent_shadow_transmittance(p, l, dist);
         if t.w > 0.5 {
             return t.xyz;

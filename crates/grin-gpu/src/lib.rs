@@ -33,6 +33,7 @@ mod pack;
 mod pipelines;
 pub mod render;
 pub mod shaders;
+mod specialize;
 pub mod stages;
 
 pub use device::{GpuContext, describe_adapter};

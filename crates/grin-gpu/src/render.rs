@@ -16,7 +16,7 @@ use crate::field::{
 use crate::gpu_data::*;
 use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
-use crate::{GpuContext, GpuError, shaders};
+use crate::{GpuContext, GpuError, specialize};
 
 /// Pixels per dispatch: big enough to keep every core of lavapipe busy, small enough
 /// that progress updates and cancellation stay responsive (~0.1-1 s per band).
@@ -140,11 +140,7 @@ impl<'a> GpuRenderer<'a> {
         // Compiled once per device and set of pipeline constants (ctx keeps them).
         let key = format!("split={split} {:?}", pipeline_constants(&params, PASS_ALL));
         let (pipeline, medium_pipeline) = ctx.render_pipelines(&key, || {
-            ctx.scoped("compiling the render pipelines", || {
-                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("render.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(shaders::RENDER_WGSL.into()),
-                });
+            let compiled = ctx.scoped("compiling the render pipelines", || {
                 let layout_entries = render_layout_entries();
                 let bind_layout =
                     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -156,36 +152,49 @@ impl<'a> GpuRenderer<'a> {
                     bind_group_layouts: &[Some(&bind_layout)],
                     immediate_size: 0,
                 });
+                // Each pass gets its own kernel with the constants folded in and the
+                // branches they rule out removed (crate::specialize: Mesa inlines before
+                // it removes dead code, so this is most of lavapipe's compile time).
                 let make = |pass: u32, entry: &str| {
-                    let constants = pipeline_constants(&params, pass);
-                    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    let module =
+                        specialize::render_kernel(entry, &pipeline_constants(&params, pass))?;
+                    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                         label: Some(entry),
-                        layout: Some(&layout),
-                        module: &module,
-                        entry_point: Some(entry),
-                        compilation_options: wgpu::PipelineCompilationOptions {
-                            constants: &constants,
-                            zero_initialize_workgroup_memory: false,
+                        source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
+                    });
+                    Ok::<_, String>(device.create_compute_pipeline(
+                        &wgpu::ComputePipelineDescriptor {
+                            label: Some(entry),
+                            layout: Some(&layout),
+                            module: &module,
+                            entry_point: Some(entry),
+                            compilation_options: wgpu::PipelineCompilationOptions {
+                                constants: &[],
+                                zero_initialize_workgroup_memory: false,
+                            },
+                            cache: None,
                         },
-                        cache: None,
-                    })
+                    ))
                 };
-                let (pipeline, medium_pipeline) = if split {
+                if split {
                     // The two passes' pipelines compile at once (lavapipe compiles each with
-                    // LLVM on the calling thread: ~1-1.5 s apiece on this VM).
+                    // LLVM on the calling thread).
                     std::thread::scope(|scope| {
                         let medium = scope.spawn(|| make(PASS_MEDIUM, "render_deferred"));
-                        let first = make(PASS_FIRST, "render_main");
+                        let first = make(PASS_FIRST, "render_main")?;
                         let medium = match medium.join() {
-                            Ok(p) => p,
-                            Err(_) => make(PASS_MEDIUM, "render_deferred"),
+                            Ok(p) => p?,
+                            Err(_) => make(PASS_MEDIUM, "render_deferred")?,
                         };
-                        (first, Some(medium))
+                        Ok((first, Some(medium)))
                     })
                 } else {
-                    (make(PASS_ALL, "render_main"), None)
-                };
-                (pipeline, medium_pipeline)
+                    Ok((make(PASS_ALL, "render_main")?, None))
+                }
+            })?;
+            compiled.map_err(|message| GpuError::Wgpu {
+                during: "specialising the render kernel".into(),
+                message,
             })
         })?;
         ctx.scoped("creating the render pipeline", || {
