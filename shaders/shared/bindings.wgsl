@@ -1,6 +1,9 @@
 // The render kernel's resources. Bound by crates/grin-gpu/src/render.rs.
 
-@group(0) @binding(0) var<uniform> params: FrameParams;
+// A read-only storage buffer, not a uniform one: lavapipe compiles a new variant of a
+// kernel for each new value of a uniform its branches read (it inlines them), which here
+// is every band and every frame (first_row, first_sample).
+@group(0) @binding(0) var<storage, read> params: FrameParams;
 @group(0) @binding(1) var<storage, read> objects: array<GpuObject>;
 @group(0) @binding(2) var<storage, read> lights: array<GpuLight>;
 // (delta_n, dn/dx, dn/dy, dn/dz) per grid node (or their B-spline coefficients),

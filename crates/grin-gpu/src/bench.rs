@@ -40,7 +40,7 @@ impl GpuRenderer<'_> {
                 let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("bench params"),
                     size: std::mem::size_of::<FrameParams>() as u64,
-                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 });
                 let field_view = self

@@ -28,7 +28,7 @@ pub(crate) fn render_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     };
     let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
     vec![
-        buffer(0, wgpu::BufferBindingType::Uniform),
+        buffer(0, storage(true)),
         buffer(1, storage(true)),
         buffer(2, storage(true)),
         texture(3, wgpu::TextureViewDimension::D3),

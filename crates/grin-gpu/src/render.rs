@@ -204,7 +204,7 @@ impl<'a> GpuRenderer<'a> {
             let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("frame params"),
                 size: std::mem::size_of::<FrameParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             let objects_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -372,6 +372,27 @@ mod tests {
         );
     }
 
+    /// Lavapipe compiles a new variant of a kernel for every new value of a uniform its
+    /// branches read; per-band and per-frame values in a uniform buffer meant a compile
+    /// per dispatch (docs/view.md). The render kernel reads no uniform buffer.
+    #[test]
+    fn the_render_kernel_reads_no_uniform_buffer() {
+        let (module, _) = render_module().expect("render.wgsl parses");
+        let params = module
+            .global_variables
+            .iter()
+            .find(|(_, v)| v.name.as_deref() == Some("params"))
+            .expect("the kernel has its frame parameters");
+        assert!(matches!(params.1.space, naga::AddressSpace::Storage { .. }));
+        for (_, v) in module.global_variables.iter() {
+            assert!(
+                v.space != naga::AddressSpace::Uniform,
+                "{:?} is a uniform",
+                v.name
+            );
+        }
+    }
+
     #[test]
     fn a_switch_on_a_constant_keeps_the_case_taken_and_its_fall_through() {
         let cases = vec![

@@ -187,7 +187,7 @@ impl<'a> StageKit<'a> {
             let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("stage params"),
                 size: std::mem::size_of::<FrameParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             StageKit {
