@@ -156,8 +156,11 @@ impl<'a> GpuRenderer<'a> {
                 // branches they rule out removed (crate::specialize: Mesa inlines before
                 // it removes dead code, so this is most of lavapipe's compile time).
                 let make = |pass: u32, entry: &str| {
-                    let module =
-                        specialize::render_kernel(entry, &pipeline_constants(&params, pass))?;
+                    let module = specialize::specialise(
+                        specialize::Kernel::Render,
+                        entry,
+                        &pipeline_constants(&params, pass),
+                    )?;
                     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                         label: Some(entry),
                         source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),

@@ -15,20 +15,44 @@ use std::sync::OnceLock;
 
 use naga::{Block, Expression, Literal, Module, Statement, SwitchValue};
 
-/// The render kernel parsed and validated once per process.
-fn render_module() -> Result<&'static (Module, naga::valid::ModuleInfo), String> {
-    static PARSED: OnceLock<Result<(Module, naga::valid::ModuleInfo), String>> = OnceLock::new();
-    PARSED
-        .get_or_init(|| {
-            let module = naga::front::wgsl::parse_str(crate::shaders::RENDER_WGSL)
-                .map_err(|e| format!("render.wgsl: {}", e.message()))?;
-            let info = validator()
-                .validate(&module)
-                .map_err(|e| format!("render.wgsl: {e}"))?;
-            Ok((module, info))
-        })
-        .as_ref()
-        .map_err(Clone::clone)
+/// A kernel source the pipelines are specialised from.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Kernel {
+    /// shaders/render.wgsl: `render_main`, `render_deferred`.
+    Render,
+    /// shaders/stages.wgsl: the marcher's stages, one entry point each.
+    Stages,
+}
+
+impl Kernel {
+    fn name(self) -> &'static str {
+        match self {
+            Kernel::Render => "render.wgsl",
+            Kernel::Stages => "stages.wgsl",
+        }
+    }
+}
+
+type Parsed = Result<(Module, naga::valid::ModuleInfo), String>;
+
+/// `kernel` parsed and validated once per process.
+fn parsed(kernel: Kernel) -> Result<&'static (Module, naga::valid::ModuleInfo), String> {
+    static RENDER: OnceLock<Parsed> = OnceLock::new();
+    static STAGES: OnceLock<Parsed> = OnceLock::new();
+    let (slot, source) = match kernel {
+        Kernel::Render => (&RENDER, crate::shaders::RENDER_WGSL),
+        Kernel::Stages => (&STAGES, crate::shaders::STAGES_WGSL),
+    };
+    slot.get_or_init(|| {
+        let module = naga::front::wgsl::parse_str(source)
+            .map_err(|e| format!("{}: {}", kernel.name(), e.message()))?;
+        let info = validator()
+            .validate(&module)
+            .map_err(|e| format!("{}: {e}", kernel.name()))?;
+        Ok((module, info))
+    })
+    .as_ref()
+    .map_err(Clone::clone)
 }
 
 fn validator() -> naga::valid::Validator {
@@ -38,11 +62,16 @@ fn validator() -> naga::valid::Validator {
     )
 }
 
-/// The render kernel for compute entry point `entry` with `constants` (name, value) folded
-/// in and every branch they rule out removed. Errors name the step that failed; they
-/// mean a bug in grin's shaders or here, never in the scene.
-pub(crate) fn render_kernel(entry: &str, constants: &[(&str, f64)]) -> Result<Module, String> {
-    let (module, info) = render_module()?;
+/// `kernel`'s compute entry point `entry` with `constants` (name, value) folded in and
+/// every branch they rule out removed. Errors name the step that failed; they mean a bug
+/// in grin's shaders or here, never in the scene.
+pub(crate) fn specialise(
+    kernel: Kernel,
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> Result<Module, String> {
+    let (module, info) = parsed(kernel)?;
+    let name = kernel.name();
     let mut values = naga::back::PipelineConstants::default();
     for &(name, value) in constants {
         values.insert(name.to_owned(), value);
@@ -53,7 +82,7 @@ pub(crate) fn render_kernel(entry: &str, constants: &[(&str, f64)]) -> Result<Mo
         Some((naga::ShaderStage::Compute, entry)),
         &values,
     )
-    .map_err(|e| format!("render.wgsl ({entry}): pipeline constants: {e}"))?;
+    .map_err(|e| format!("{name} ({entry}): pipeline constants: {e}"))?;
     let mut out = folded.into_owned();
     let mut known = Known::of(&out);
     // Callees come before their callers in the arena, so a function that returns a
@@ -76,7 +105,7 @@ pub(crate) fn render_kernel(entry: &str, constants: &[(&str, f64)]) -> Result<Mo
     naga::compact::compact(&mut out, naga::compact::KeepUnused::No);
     validator()
         .validate(&out)
-        .map_err(|e| format!("render.wgsl ({entry}) specialised: {e:?}"))?;
+        .map_err(|e| format!("{name} ({entry}) specialised: {e:?}"))?;
     Ok(out)
 }
 
@@ -305,7 +334,7 @@ mod tests {
             ("SKY_MAP", 0.0),
             ("SKY_PLATE", 0.0),
         ];
-        render_kernel(entry, &constants).expect("the kernel specialises and validates")
+        specialise(Kernel::Render, entry, &constants).expect("the kernel specialises and validates")
     }
 
     fn has_function(module: &Module, name: &str) -> bool {
@@ -340,7 +369,7 @@ mod tests {
         );
         assert!(has_function(&tricubic, "tricubic"));
         // The full kernel, for scale: the cut leaves far fewer functions.
-        let (full, _) = render_module().expect("render.wgsl parses");
+        let (full, _) = parsed(Kernel::Render).expect("render.wgsl parses");
         assert!(tricubic.functions.len() < full.functions.len());
         assert!(has_function(full, "dopri_step") && has_function(full, "tricubic"));
     }
@@ -352,7 +381,8 @@ mod tests {
             INTEGRATOR_RK4,
             FLAG_HAS_MEDIUM | FLAG_TRICUBIC,
         );
-        let first_pass = render_kernel(
+        let first_pass = specialise(
+            Kernel::Render,
             "render_main",
             &[
                 ("PASS", 1.0),
@@ -377,7 +407,7 @@ mod tests {
     /// per dispatch (docs/view.md). The render kernel reads no uniform buffer.
     #[test]
     fn the_render_kernel_reads_no_uniform_buffer() {
-        let (module, _) = render_module().expect("render.wgsl parses");
+        let (module, _) = parsed(Kernel::Render).expect("render.wgsl parses");
         let params = module
             .global_variables
             .iter()

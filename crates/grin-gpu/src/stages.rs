@@ -16,7 +16,7 @@ use crate::gpu_data::{FrameParams, PASS_ALL};
 use crate::pack::{env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::render::{output_buffers, read_buffer};
-use crate::{GpuContext, GpuError, shaders};
+use crate::{GpuContext, GpuError, specialize};
 
 /// The stages of shaders/stages.wgsl.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -120,14 +120,13 @@ pub fn run_stage(
     kit.dispatch(&pipeline, input).map(|(out, _)| out)
 }
 
-/// What every stage dispatch shares: the shader module and layouts, the frame parameters
+/// What every stage dispatch shares: the layouts, the frame parameters
 /// (in a buffer rewritten per dispatch), and the current scene's field, objects and sky
 /// on the device ([`StageKit::set_scene`] swaps them; pipelines stay valid).
 pub(crate) struct StageKit<'a> {
     ctx: &'a GpuContext,
     /// The scene's parameters with the field's part filled in by its upload.
     pub(crate) params: FrameParams,
-    module: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
     frame_layout: wgpu::BindGroupLayout,
     io_layout: wgpu::BindGroupLayout,
@@ -151,10 +150,6 @@ impl<'a> StageKit<'a> {
     ) -> Result<Self, GpuError> {
         let mut kit = ctx.scoped("preparing the marcher stages", || {
             let device = &ctx.device;
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("stages.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(shaders::STAGES_WGSL.into()),
-            });
             // Group 0: the render kernel's params, objects, field texture, macro cells
             // and environment map, the only resources of it the stages read.
             let frame_entries: Vec<_> = render_layout_entries()
@@ -193,7 +188,6 @@ impl<'a> StageKit<'a> {
             StageKit {
                 ctx,
                 params: FrameParams::zeroed(),
-                module,
                 layout,
                 frame_layout,
                 io_layout,
@@ -278,20 +272,31 @@ impl<'a> StageKit<'a> {
         params: &FrameParams,
     ) -> Result<wgpu::ComputePipeline, GpuError> {
         let constants = pipeline_constants(params, PASS_ALL);
+        let entry = stage.entry_point();
+        // Each pipeline gets the stage kernel with its constants folded in
+        // (crate::specialize), as the render pipelines do.
+        let module = specialize::specialise(specialize::Kernel::Stages, entry, &constants)
+            .map_err(|message| GpuError::Wgpu {
+                during: "specialising a marcher stage".into(),
+                message,
+            })?;
         self.ctx.scoped("compiling a marcher stage", || {
-            self.ctx
-                .device
-                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(stage.entry_point()),
-                    layout: Some(&self.layout),
-                    module: &self.module,
-                    entry_point: Some(stage.entry_point()),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        zero_initialize_workgroup_memory: false,
-                    },
-                    cache: None,
-                })
+            let device = &self.ctx.device;
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&self.layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[],
+                    zero_initialize_workgroup_memory: false,
+                },
+                cache: None,
+            })
         })
     }
 
