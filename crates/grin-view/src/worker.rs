@@ -140,10 +140,15 @@ fn run(
     // Seconds per pixel-sample of the last frames (for the moving resolution).
     let mut cost: Option<f64> = None;
     let mut failed = false;
+    // A moving request gets one preview frame: the next view comes with the next request
+    // (its internal size follows the cost measured meanwhile, which would otherwise ask
+    // for another frame of the same view).
+    let mut previewed = false;
     loop {
         // The newest request; block when there is nothing left to refine.
         let idle = failed
             || match &current {
+                Some(r) if r.moving => previewed,
                 Some(r) => {
                     let (w, h, _) = internal_size(r, cost);
                     !session.needs_frame(&r.settings, w, h)
@@ -152,7 +157,10 @@ fn run(
             };
         if idle {
             match rx.recv() {
-                Ok(r) => current = Some(r),
+                Ok(r) => {
+                    current = Some(r);
+                    previewed = false;
+                }
                 Err(_) => return,
             }
         }
@@ -161,6 +169,7 @@ fn run(
                 Ok(r) => {
                     let reload = r.reload || current.as_ref().is_some_and(|c| c.reload);
                     current = Some(Request { reload, ..r });
+                    previewed = false;
                 }
                 Err(TryRecvError::Empty) => break,
                 Err(TryRecvError::Disconnected) => return,
@@ -196,6 +205,7 @@ fn run(
                 if tx.send(Reply::Frame(Box::new(reply))).is_err() {
                     return;
                 }
+                previewed = req.moving;
             }
             Err(RenderFailure::Cancelled) => {}
             Err(RenderFailure::Error(e)) => {
