@@ -286,6 +286,9 @@ impl App {
                         if self.opts.orbit_deg != 0.0 {
                             self.settings.camera.orbit_degrees(self.opts.orbit_deg);
                             self.last_move = Some(now);
+                            // The next view goes out now, so the render thread works
+                            // while this frame is drawn (the headless size is fixed).
+                            self.request_view(self.image_px);
                         }
                     }
                 }
