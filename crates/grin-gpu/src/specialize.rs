@@ -1,4 +1,5 @@
-//! Per-pipeline specialisation of the render kernel, before the driver sees it.
+//! Per-pipeline specialisation of the GPU kernels (render and the marcher's stages),
+//! before the driver sees them.
 //!
 //! The kernel chooses its integrator, step policy, interpolation and features with
 //! pipeline-overridable constants (shaders/shared/types.wgsl). A driver may drop the
@@ -73,8 +74,8 @@ pub(crate) fn specialise(
     let (module, info) = parsed(kernel)?;
     let name = kernel.name();
     let mut values = naga::back::PipelineConstants::default();
-    for &(name, value) in constants {
-        values.insert(name.to_owned(), value);
+    for &(key, value) in constants {
+        values.insert(key.to_owned(), value);
     }
     let (folded, _) = naga::back::pipeline_constants::process_overrides(
         module,
