@@ -156,28 +156,13 @@ impl<'a> GpuRenderer<'a> {
                 // branches they rule out removed (crate::specialize: Mesa inlines before
                 // it removes dead code, so this is most of lavapipe's compile time).
                 let make = |pass: u32, entry: &str| {
-                    let module = specialize::specialise(
+                    specialize::compute_pipeline(
+                        device,
+                        &layout,
                         specialize::Kernel::Render,
                         entry,
                         &pipeline_constants(&params, pass),
-                    )?;
-                    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                        label: Some(entry),
-                        source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
-                    });
-                    Ok::<_, String>(device.create_compute_pipeline(
-                        &wgpu::ComputePipelineDescriptor {
-                            label: Some(entry),
-                            layout: Some(&layout),
-                            module: &module,
-                            entry_point: Some(entry),
-                            compilation_options: wgpu::PipelineCompilationOptions {
-                                constants: &[],
-                                zero_initialize_workgroup_memory: false,
-                            },
-                            cache: None,
-                        },
-                    ))
+                    )
                 };
                 if split {
                     // The two passes' pipelines compile at once (lavapipe compiles each with

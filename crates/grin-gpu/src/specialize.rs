@@ -110,6 +110,36 @@ pub(crate) fn specialise(
     Ok(out)
 }
 
+/// The compute pipeline of `kernel`'s entry point `entry` on `device`, from the kernel
+/// specialised for `constants` ([`specialise`]; nothing left for wgpu to override).
+pub(crate) fn compute_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    kernel: Kernel,
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> Result<wgpu::ComputePipeline, String> {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(entry),
+        source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(specialise(
+            kernel, entry, constants,
+        )?)),
+    });
+    Ok(
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(layout),
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[],
+                zero_initialize_workgroup_memory: false,
+            },
+            cache: None,
+        }),
+    )
+}
+
 /// What is known to be constant: the literal value of each module-scope constant (after
 /// `process_overrides` every former override is one), and the functions without
 /// arguments that return a constant.

@@ -275,28 +275,18 @@ impl<'a> StageKit<'a> {
         let entry = stage.entry_point();
         // Each pipeline gets the stage kernel with its constants folded in
         // (crate::specialize), as the render pipelines do.
-        let module = specialize::specialise(specialize::Kernel::Stages, entry, &constants)
-            .map_err(|message| GpuError::Wgpu {
-                during: "specialising a marcher stage".into(),
-                message,
-            })?;
-        self.ctx.scoped("compiling a marcher stage", || {
-            let device = &self.ctx.device;
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(entry),
-                source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&self.layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[],
-                    zero_initialize_workgroup_memory: false,
-                },
-                cache: None,
-            })
+        let compiled = self.ctx.scoped("compiling a marcher stage", || {
+            specialize::compute_pipeline(
+                &self.ctx.device,
+                &self.layout,
+                specialize::Kernel::Stages,
+                entry,
+                &constants,
+            )
+        })?;
+        compiled.map_err(|message| GpuError::Wgpu {
+            during: "specialising a marcher stage".into(),
+            message,
         })
     }
 
