@@ -143,9 +143,14 @@ pub fn upload_field(
     let geometry = baked.geometry();
     let dims = dims_u32(geometry.dims, "baked grid")?;
     check_dims(ctx, "baked grid", dims)?;
-    let texels: Vec<[f32; 4]> = match (baked.interp(), baked.spline_coefficients()) {
-        (Interp::Tricubic, Some(c)) => c.to_vec(),
-        _ => baked.voxels().to_f32(),
+    // The spline coefficients are uploaded as they are (no copy); node samples as f32.
+    let samples;
+    let texels: &[[f32; 4]] = match (baked.interp(), baked.spline_coefficients()) {
+        (Interp::Tricubic, Some(c)) => c,
+        _ => {
+            samples = baked.voxels().to_f32();
+            &samples
+        }
     };
     let bytes = texels.len() as u64 * FIELD_TEXEL_BYTES;
     let max_buffer = ctx.limits().max_buffer_size;
@@ -163,7 +168,7 @@ pub fn upload_field(
         dims,
         wgpu::TextureFormat::Rgba32Float,
         FIELD_TEXEL_BYTES as u32,
-        bytemuck::cast_slice(&texels),
+        bytemuck::cast_slice(texels),
     )?;
     let grid = baked.macro_grid();
     let mdims = dims_u32(grid.dims, "macro-cell grid")?;

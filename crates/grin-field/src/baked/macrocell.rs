@@ -2,6 +2,7 @@
 //! fly straight through blocks where the field is homogeneous (the paper's "infinite step").
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Voxels per macro cell along each axis.
 pub const MACRO_CELL_VOXELS: usize = 8;
@@ -41,22 +42,26 @@ impl MacroGrid {
             let hi = ((c + 1) * cell + reach).min(n - 1);
             lo..=hi
         };
-        let mut max_grad = vec![0.0f32; dims[0] * dims[1] * dims[2]];
-        for ck in 0..dims[2] {
-            for cj in 0..dims[1] {
-                for ci in 0..dims[0] {
-                    let mut m = 0.0f32;
-                    for k in range(ck, node_dims[2]) {
-                        for j in range(cj, node_dims[1]) {
-                            for i in range(ci, node_dims[0]) {
-                                m = m.max(node_grad(i, j, k));
+        // One z layer of cells per task (cells overlap by `reach` nodes: each reads its own).
+        let max_grad: Vec<f32> = (0..dims[2])
+            .into_par_iter()
+            .flat_map_iter(|ck| {
+                let node_grad = &node_grad;
+                (0..dims[1]).flat_map(move |cj| {
+                    (0..dims[0]).map(move |ci| {
+                        let mut m = 0.0f32;
+                        for k in range(ck, node_dims[2]) {
+                            for j in range(cj, node_dims[1]) {
+                                for i in range(ci, node_dims[0]) {
+                                    m = m.max(node_grad(i, j, k));
+                                }
                             }
                         }
-                    }
-                    max_grad[ci + dims[0] * (cj + dims[1] * ck)] = m;
-                }
-            }
-        }
+                        m
+                    })
+                })
+            })
+            .collect();
         MacroGrid {
             cell,
             dims,

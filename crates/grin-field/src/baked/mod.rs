@@ -369,6 +369,29 @@ impl BakedField {
         Ok(field)
     }
 
+    /// A copy of this field sampled with `interp`: the nodes are copied and only what
+    /// `interp` samples is built (`clone().with_interp(..)` would copy this field's spline
+    /// coefficients and sampling copies too, only to replace them).
+    pub fn to_interp(&self, interp: Interp) -> Self {
+        let mut field = BakedField {
+            voxels: self.voxels.clone(),
+            interp,
+            provenance: self.provenance.clone(),
+            coeffs: None,
+            macro_grid: MacroGrid {
+                cell: 1,
+                dims: [1; 3],
+                max_grad: vec![0.0],
+                threshold: 0.0,
+            },
+            bricks: Bricks::new(self.geometry.dims),
+            sampled: Voxels::F32(Vec::new()),
+            ..*self
+        };
+        field.prepare();
+        field
+    }
+
     /// The same field sampled with `interp`.
     pub fn with_interp(mut self, interp: Interp) -> Self {
         if interp != self.interp {
@@ -600,54 +623,42 @@ fn trilinear_in(
 }
 
 /// Prefilter every channel along x, y, z into cubic B-spline coefficients.
+///
+/// Each axis is filtered a block of nodes at a time ([`bspline::prefilter_blocks`]): x lines
+/// node by node, y lines a row of x at a time within each z slab, z lines a piece of the
+/// x-y plane at a time, the pieces on rayon's threads.
 fn prefilter(voxels: &Voxels, dims: [usize; 3]) -> Vec<[f32; 4]> {
     let [nx, ny, nz] = dims;
     let mut data: Vec<[f64; 4]> = (0..voxels.len())
+        .into_par_iter()
         .map(|i| voxels.get(i).map(f64::from))
         .collect();
-    // x lines are contiguous.
-    data.par_chunks_mut(nx)
-        .for_each(|line| filter_strided(line, 1, nx));
-    // y lines: within each z slab, stride nx.
-    data.par_chunks_mut(nx * ny).for_each(|slab| {
-        for i in 0..nx {
-            filter_strided(&mut slab[i..], nx, ny);
-        }
+    data.par_chunks_mut(nx).for_each(|line| {
+        let mut nodes: Vec<&mut [[f64; 4]]> = line.chunks_mut(1).collect();
+        bspline::prefilter_blocks(&mut nodes);
     });
-    // z lines: stride nx * ny; split the x-y plane across threads by gathering lines.
+    data.par_chunks_mut(nx * ny).for_each(|slab| {
+        let mut rows: Vec<&mut [[f64; 4]]> = slab.chunks_mut(nx).collect();
+        bspline::prefilter_blocks(&mut rows);
+    });
+    // z: the plane cut into pieces of columns; piece p of every plane is one block list.
     let plane = nx * ny;
-    let lines: Vec<Vec<[f64; 4]>> = (0..plane)
+    let piece = plane
+        .div_ceil(4 * rayon::current_num_threads().max(1))
+        .max(64);
+    let mut pieces: Vec<Vec<&mut [[f64; 4]]>> = Vec::new();
+    for layer in data.chunks_mut(plane) {
+        for (p, part) in layer.chunks_mut(piece).enumerate() {
+            if p == pieces.len() {
+                pieces.push(Vec::with_capacity(nz));
+            }
+            pieces[p].push(part);
+        }
+    }
+    pieces
         .into_par_iter()
-        .map(|o| {
-            let mut line: Vec<[f64; 4]> = (0..nz).map(|k| data[o + plane * k]).collect();
-            filter_strided(&mut line, 1, nz);
-            line
-        })
-        .collect();
-    for (o, line) in lines.into_iter().enumerate() {
-        for (k, v) in line.into_iter().enumerate() {
-            data[o + plane * k] = v;
-        }
-    }
-    data.into_iter().map(|v| v.map(|x| x as f32)).collect()
-}
-
-/// Prefilter the 4 channels of the `n` values at `line[0], line[stride], ...`.
-#[expect(
-    clippy::needless_range_loop,
-    reason = "c indexes the channel inside strided voxels"
-)]
-fn filter_strided(line: &mut [[f64; 4]], stride: usize, n: usize) {
-    let mut buf = vec![0.0; n];
-    for c in 0..4 {
-        for (k, b) in buf.iter_mut().enumerate() {
-            *b = line[k * stride][c];
-        }
-        bspline::prefilter_line(&mut buf);
-        for (k, b) in buf.iter().enumerate() {
-            line[k * stride][c] = *b;
-        }
-    }
+        .for_each(|mut planes| bspline::prefilter_blocks(&mut planes));
+    data.into_par_iter().map(|v| v.map(|x| x as f32)).collect()
 }
 
 impl IndexField for BakedField {

@@ -313,3 +313,33 @@ fn may_fly_only_where_a_flight_exists() {
     assert!(!ball.may_fly());
     assert!(with(unit_box()).may_fly());
 }
+
+#[test]
+fn to_interp_builds_the_field_with_interp_builds() {
+    let bump = |p: DVec3| {
+        let e = (-(p - DVec3::splat(0.4)).length_squared() / 0.05).exp();
+        [0.02 * e, 0.3 * e, -0.1 * e, 0.05 * e]
+    };
+    let (g, v) = grid_of([11, 9, 10], DVec3::ZERO, 0.11, bump);
+    let f = BakedField::new(
+        g,
+        Voxels::F32(v),
+        Interp::Tricubic,
+        Outside::Ambient,
+        unit_box(),
+        1.0,
+        BakeProvenance::default(),
+    )
+    .expect("valid grid");
+    for interp in [Interp::Trilinear, Interp::Tricubic] {
+        let a = f.to_interp(interp);
+        let b = f.clone().with_interp(interp);
+        assert_eq!(a.interp(), interp);
+        assert_eq!(a.spline_coefficients(), b.spline_coefficients());
+        assert_eq!(a.macro_grid().max_grad, b.macro_grid().max_grad);
+        for p in [DVec3::new(0.31, 0.52, 0.47), DVec3::new(0.05, 0.9, 0.2)] {
+            let (sa, sb) = (a.sample(p), b.sample(p));
+            assert_eq!((sa.n, sa.grad_n), (sb.n, sb.grad_n), "{interp:?} at {p}");
+        }
+    }
+}
