@@ -62,6 +62,7 @@ pub(crate) struct App {
     adapter: Option<String>,
     display_adapter: String,
     setup_seconds: Option<f64>,
+    device_seconds: Option<f64>,
     first_frame_seconds: Option<f64>,
     settings: ViewSettings,
     /// The scene file's own settings (to rebase the user's edits on reload).
@@ -118,6 +119,7 @@ impl App {
             adapter: None,
             display_adapter: String::new(),
             setup_seconds: None,
+            device_seconds: None,
             first_frame_seconds: None,
             file_settings: ViewSettings::from_scene(scene),
             animated: ViewSettings::animated(scene),
@@ -225,9 +227,11 @@ impl App {
                 Reply::Started {
                     adapter,
                     setup_seconds,
+                    device_seconds,
                 } => {
                     self.adapter = Some(adapter);
                     self.setup_seconds = Some(setup_seconds);
+                    self.device_seconds = Some(device_seconds);
                 }
                 Reply::Fatal(e) => {
                     self.fatal = Some(e);
@@ -334,6 +338,7 @@ impl App {
             rays_per_second: crate::MinMedMax::of(&self.stats.rays_per_second).median,
             ui_fps: self.stats.ui_frames as f64 / ui_secs.max(1e-9),
             setup_seconds: self.setup_seconds.unwrap_or(0.0),
+            device_seconds: self.device_seconds.unwrap_or(0.0),
             first_frame_seconds: self.first_frame_seconds.unwrap_or(0.0),
             samples: f.rendered.samples,
             converged: f.rendered.converged,

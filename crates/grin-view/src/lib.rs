@@ -92,6 +92,9 @@ pub struct ViewSummary {
     pub ui_fps: f64,
     /// Device, scene, field bake and pipelines of the render thread.
     pub setup_seconds: f64,
+    /// The part of `setup_seconds` spent creating the GPU device (adapter, device, the
+    /// pipeline cache read).
+    pub device_seconds: f64,
     /// From the start to the first frame shown.
     pub first_frame_seconds: f64,
     pub samples: u32,

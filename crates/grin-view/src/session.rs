@@ -13,8 +13,8 @@
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -43,11 +43,25 @@ struct FieldEntry {
     field: Arc<dyn IndexField>,
     /// `None`: the field is a baked file the renderer marches as it is.
     grid: Option<Arc<BakedField>>,
-    /// The grid marched while the camera moves: the same nodes trilinear where `grid` is
-    /// tricubic (8 texel reads a sample instead of 64), else `grid` itself.
-    preview: Option<Arc<BakedField>>,
+    /// The trilinear twin of a tricubic `grid`, built when the camera first moves.
+    preview: OnceLock<Arc<BakedField>>,
     warnings: Vec<String>,
     cache: Option<CacheUse>,
+}
+
+impl FieldEntry {
+    /// The grid marched while the camera moves: the same nodes trilinear where `grid` is
+    /// tricubic (8 texel reads a sample instead of 64), else `grid` itself.
+    fn preview_grid(&self) -> Option<Arc<BakedField>> {
+        let grid = self.grid.as_ref()?;
+        Some(match grid.interp() {
+            Interp::Tricubic => self
+                .preview
+                .get_or_init(|| Arc::new(grid.to_interp(Interp::Trilinear)))
+                .clone(),
+            Interp::Trilinear => grid.clone(),
+        })
+    }
 }
 
 /// What one [`Session::render`] produced.
@@ -311,7 +325,7 @@ impl<'a> Session<'a> {
         } else {
             let entry = self.field_for(&applied, settings.playing, settings.interpolation)?;
             let (field, grid) = match entry {
-                Some(e) if preview => (Some(e.field.clone()), e.preview.clone()),
+                Some(e) if preview => (Some(e.field.clone()), e.preview_grid()),
                 Some(e) => (Some(e.field.clone()), e.grid.clone()),
                 None => (None, None),
             };
@@ -463,7 +477,7 @@ impl<'a> Session<'a> {
                 key,
                 field,
                 grid: None,
-                preview: None,
+                preview: OnceLock::new(),
                 warnings: Vec::new(),
                 cache: None,
             }));
@@ -502,15 +516,11 @@ impl<'a> Session<'a> {
             Some(Interpolation::Tricubic) => grid.with_interp(Interp::Tricubic),
         };
         let grid = Arc::new(grid);
-        let preview = match grid.interp() {
-            Interp::Tricubic => Arc::new((*grid).clone().with_interp(Interp::Trilinear)),
-            Interp::Trilinear => grid.clone(),
-        };
         Ok(Some(FieldEntry {
             key,
             field,
             grid: Some(grid),
-            preview: Some(preview),
+            preview: OnceLock::new(),
             warnings,
             cache,
         }))

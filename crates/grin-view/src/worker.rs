@@ -38,6 +38,8 @@ pub enum Reply {
     Started {
         adapter: String,
         setup_seconds: f64,
+        /// The part of `setup_seconds` spent creating the GPU device.
+        device_seconds: f64,
     },
     /// The device or the scene could not be set up: the viewer ends with this error.
     Fatal(String),
@@ -118,7 +120,10 @@ fn run(
     cancel: Arc<AtomicBool>,
 ) {
     let start = std::time::Instant::now();
-    let ctx = match GpuContext::new_headless() {
+    // The driver's pipeline cache sits beside the bake cache (and is off with it).
+    let ctx = GpuContext::new_headless_in(cache.as_ref().map(BakeCache::pipeline_dir).as_deref());
+    let device_seconds = start.elapsed().as_secs_f64();
+    let ctx = match ctx {
         Ok(c) => c,
         Err(e) => {
             let _ = tx.send(Reply::Fatal(format!("no GPU device for the viewer: {e}")));
@@ -135,6 +140,7 @@ fn run(
     let _ = tx.send(Reply::Started {
         adapter: ctx.adapter_name(),
         setup_seconds: start.elapsed().as_secs_f64(),
+        device_seconds,
     });
     let mut current: Option<Request> = None;
     // Seconds per pixel-sample of the last frames (for the moving resolution).

@@ -34,7 +34,8 @@ pub struct Args {
         allow_hyphen_values = true
     )]
     pub orbit: f64,
-    /// Bake the field anew instead of reading the user's bake cache.
+    /// Bake the field anew instead of reading the user's bake cache (the driver's
+    /// pipeline cache is not used either).
     #[arg(long)]
     pub no_cache: bool,
     /// Print the summary as JSON.
@@ -87,8 +88,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.rays_per_second * 1e-6
     );
     outln!(
-        "setup {:.2} s (bake cache: {}), first frame at {:.2} s; {} spp{}",
+        "setup {:.2} s (device {:.2} s, bake cache: {}), first frame at {:.2} s; {} spp{}",
         s.setup_seconds,
+        s.device_seconds,
         s.bake_cache.map_or("none", |c| match c {
             grin_gpu::cache::CacheUse::Hit => "hit",
             grin_gpu::cache::CacheUse::Stored => "stored",
