@@ -64,6 +64,12 @@ impl BakeCache {
         &self.dir
     }
 
+    /// Where the driver's pipeline caches are kept beside the bakes
+    /// ([`crate::pipeline_cache`]).
+    pub fn pipeline_dir(&self) -> PathBuf {
+        self.dir.join("pipelines")
+    }
+
     /// The key of the GPU bake of `medium` (files resolved against `scene_dir`): 64 hex
     /// digits. Errors when a file the medium names cannot be read.
     pub fn key(medium: &MediumSpec, scene_dir: &Path) -> Result<String, GpuError> {

@@ -4,6 +4,7 @@
 use std::sync::{Arc, Mutex};
 
 use crate::GpuError;
+use crate::pipeline_cache::DiskPipelineCache;
 
 /// An adapter, its device and queue, plus the first uncaptured error or device loss.
 #[derive(Debug)]
@@ -18,6 +19,8 @@ pub struct GpuContext {
     /// built again with the same constants (the next frame of a sequence, the viewer
     /// switching back) reuses them instead of compiling (seconds on lavapipe).
     pipelines: Mutex<std::collections::HashMap<String, RenderPipelines>>,
+    /// The driver's pipeline cache, kept on disk, where the adapter supports one.
+    pipeline_cache: Option<DiskPipelineCache>,
 }
 
 /// The render kernel's pipelines: the whole-frame (or first) pass and, when the frame is
@@ -33,7 +36,15 @@ impl GpuContext {
     /// A headless device. `WGPU_BACKEND` (e.g. `vulkan`) restricts the backends,
     /// `WGPU_ADAPTER_NAME` picks the first adapter whose name contains it
     /// (case-insensitive); otherwise wgpu's default adapter (high performance preferred).
+    /// The driver's pipeline cache is kept in the user's cache directory
+    /// ([`crate::pipeline_cache::user_default_dir`]) where the adapter supports one.
     pub fn new_headless() -> Result<Self, GpuError> {
+        Self::new_headless_in(crate::pipeline_cache::user_default_dir().as_deref())
+    }
+
+    /// [`Self::new_headless`] with the pipeline cache kept in `pipeline_dir` (`None`: no
+    /// pipeline cache, every pipeline compiled from scratch).
+    pub fn new_headless_in(pipeline_dir: Option<&std::path::Path>) -> Result<Self, GpuError> {
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = backends;
@@ -78,9 +89,13 @@ impl GpuContext {
         // Ask for the adapter's own limits: big 3D textures and storage buffers are the
         // point of this crate, and we check every size against them before creating.
         let limits = adapter.limits();
+        let cache_features = match pipeline_dir {
+            Some(_) => adapter.features() & wgpu::Features::PIPELINE_CACHE,
+            None => wgpu::Features::empty(),
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("grin"),
-            required_features: wgpu::Features::empty(),
+            required_features: cache_features,
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -103,6 +118,9 @@ impl GpuContext {
                 slot.get_or_insert_with(|| format!("device lost ({reason:?}): {message}"));
             }
         });
+        let pipeline_cache = pipeline_dir
+            .filter(|_| !cache_features.is_empty())
+            .and_then(|dir| DiskPipelineCache::open(&device, &info, dir));
         Ok(GpuContext {
             adapter,
             device,
@@ -110,6 +128,7 @@ impl GpuContext {
             info,
             fault,
             pipelines: Mutex::new(std::collections::HashMap::new()),
+            pipeline_cache,
         })
     }
 
@@ -126,10 +145,30 @@ impl GpuContext {
             return Ok(p.clone());
         }
         let p = compile()?;
+        self.persist_pipeline_cache();
         if let Ok(mut map) = self.pipelines.lock() {
             map.insert(key.to_owned(), p.clone());
         }
         Ok(p)
+    }
+
+    /// The driver's pipeline cache, to pass when creating a pipeline.
+    pub(crate) fn pipeline_cache(&self) -> Option<&wgpu::PipelineCache> {
+        self.pipeline_cache.as_ref().map(DiskPipelineCache::cache)
+    }
+
+    /// The pipeline cache's file and the bytes it held at start, where there is one.
+    pub fn pipeline_cache_file(&self) -> Option<(&std::path::Path, usize)> {
+        self.pipeline_cache
+            .as_ref()
+            .map(|c| (c.path(), c.loaded_bytes))
+    }
+
+    /// Write the pipeline cache to disk after a compile (when it grew).
+    pub(crate) fn persist_pipeline_cache(&self) {
+        if let Some(c) = &self.pipeline_cache {
+            c.persist();
+        }
     }
 
     /// Render pipelines compiled on this device so far.

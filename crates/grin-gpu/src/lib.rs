@@ -30,6 +30,7 @@ pub mod field;
 pub mod gpu_data;
 pub mod march;
 mod pack;
+pub mod pipeline_cache;
 mod pipelines;
 pub mod render;
 pub mod shaders;

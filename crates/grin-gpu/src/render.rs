@@ -158,6 +158,7 @@ impl<'a> GpuRenderer<'a> {
                 let make = |pass: u32, entry: &str| {
                     specialize::compute_pipeline(
                         device,
+                        ctx.pipeline_cache(),
                         &layout,
                         specialize::Kernel::Render,
                         entry,

@@ -111,9 +111,11 @@ pub(crate) fn specialise(
 }
 
 /// The compute pipeline of `kernel`'s entry point `entry` on `device`, from the kernel
-/// specialised for `constants` ([`specialise`]; nothing left for wgpu to override).
+/// specialised for `constants` ([`specialise`]; nothing left for wgpu to override),
+/// through the driver's pipeline `cache` when there is one.
 pub(crate) fn compute_pipeline(
     device: &wgpu::Device,
+    cache: Option<&wgpu::PipelineCache>,
     layout: &wgpu::PipelineLayout,
     kernel: Kernel,
     entry: &str,
@@ -135,7 +137,7 @@ pub(crate) fn compute_pipeline(
                 constants: &[],
                 zero_initialize_workgroup_memory: false,
             },
-            cache: None,
+            cache,
         }),
     )
 }

@@ -278,16 +278,19 @@ impl<'a> StageKit<'a> {
         let compiled = self.ctx.scoped("compiling a marcher stage", || {
             specialize::compute_pipeline(
                 &self.ctx.device,
+                self.ctx.pipeline_cache(),
                 &self.layout,
                 specialize::Kernel::Stages,
                 entry,
                 &constants,
             )
         })?;
-        compiled.map_err(|message| GpuError::Wgpu {
+        let pipeline = compiled.map_err(|message| GpuError::Wgpu {
             during: "specialising a marcher stage".into(),
             message,
-        })
+        })?;
+        self.ctx.persist_pipeline_cache();
+        Ok(pipeline)
     }
 
     /// Write `params` for the next dispatches (their constants must be the pipeline's).

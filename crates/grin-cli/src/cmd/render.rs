@@ -53,7 +53,7 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// Bake the GPU's field grid anew instead of reading it from the user's bake cache
-    /// (and do not store it there).
+    /// (and do not store it there); the driver's pipeline cache is not used either.
     #[arg(long)]
     pub no_cache: bool,
     /// Render frames A..B (inclusive) of the scene's sequence: the medium's path may hold a
@@ -149,6 +149,16 @@ struct Comparison {
     difference_png: Option<PathBuf>,
 }
 
+/// The GPU device of a render: the driver's pipeline cache beside the user's bake cache,
+/// neither with `--no-cache`.
+fn gpu_context(no_cache: bool) -> anyhow::Result<grin_gpu::GpuContext> {
+    let dir = (!no_cache)
+        .then(grin_gpu::cache::BakeCache::user_default)
+        .flatten()
+        .map(|c| c.pipeline_dir());
+    Ok(grin_gpu::GpuContext::new_headless_in(dir.as_deref())?)
+}
+
 /// Where the EXR goes and the PNG preview beside it (`None` when the EXR goes to a
 /// stream: `-`, a device or a FIFO). Checked before any rendering.
 fn check_output(path: &Path) -> anyhow::Result<Option<PathBuf>> {
@@ -241,7 +251,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
         .with_context(|| format!("{}", args.scene.display()))?;
     let ctx = match args.backend {
-        Backend::Gpu => Some(grin_gpu::GpuContext::new_headless()?),
+        Backend::Gpu => Some(gpu_context(args.no_cache)?),
         Backend::Cpu => None,
     };
     let mut summaries = Vec::new();
@@ -429,7 +439,7 @@ fn render_one(
     let owned_ctx;
     let gpu = match (gpu, &bos_scenes, args.backend) {
         (None, Some(_), Backend::Gpu) => {
-            owned_ctx = grin_gpu::GpuContext::new_headless()?;
+            owned_ctx = gpu_context(args.no_cache)?;
             Some(&owned_ctx)
         }
         _ => gpu,
@@ -632,7 +642,7 @@ fn render_frame(
             let ctx = match gpu {
                 Some(c) => c,
                 None => {
-                    owned = grin_gpu::GpuContext::new_headless()?;
+                    owned = gpu_context(args.no_cache)?;
                     &owned
                 }
             };
