@@ -1228,10 +1228,83 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
     assert_eq!(v["meets_budget"], false, "{v}");
     assert_eq!(v["source_limited"], true, "{v}");
     assert!(capped.exists());
+    assert_eq!(v["memory_capped"], true, "{v}");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("not met by the grids tried at and past the source's own voxel size")
             && err.contains("--max-memory above"),
+        "{err}"
+    );
+}
+
+/// A blob a few voxels across with sharp edges (as a coarse smoke cache has): no grid up
+/// to 4x finer than its voxels reproduces the source's interpolation within the budget.
+/// The bake keeps the best grid, and the warning says the search ended 4x past the voxel
+/// size (not at the memory cap) and which `--resolution` goes finer.
+#[test]
+fn a_sharp_blob_the_budget_cannot_resolve_says_how_to_go_finer() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let script = dir.path().join("make.py");
+    std::fs::write(
+        &script,
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+g = vdb.FloatGrid()
+g.name = "density"
+a = np.zeros((4, 4, 4), dtype=np.float32)
+a[1:3, 1:3, 1:3] = 1.0
+a[1, 1, 1] = 0.5
+g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
+g.transform = vdb.createLinearTransform(voxelSize=0.05)
+vdb.write(sys.argv[1], grids=[g])
+"#,
+    )
+    .expect("script");
+    let file = dir.path().join("blob.vdb");
+    let made = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(&file)
+        .output()
+        .expect("python3-openvdb");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let scene = vdb_scene(
+        dir.path(),
+        &file,
+        "density",
+        "{ linear = { k = 1e-4 } }",
+        "",
+        1.0,
+    );
+    let out_file = dir.path().join("blob.grinf");
+    let out = run(&[
+        "bake",
+        scene.to_str().expect("utf8"),
+        "-o",
+        out_file.to_str().expect("utf8"),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
+    assert_eq!(v["meets_budget"], false, "{v}");
+    assert_eq!(v["source_limited"], true, "{v}");
+    assert_eq!(v["memory_capped"], false, "{v}");
+    assert!(out_file.exists());
+    let res = v["resolution"].as_u64().expect("resolution");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("the search stops 4x finer than the source's voxels")
+            && err.contains(&format!("(2x: {})", 2 * (res - 1) + 1))
+            && !err.contains("--max-memory"),
         "{err}"
     );
 }

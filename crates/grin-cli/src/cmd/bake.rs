@@ -204,18 +204,32 @@ fn bake_one(
         result.with_context(|| format!("{}: bake failed", args.scene.display()))?;
     grin_field::grinf::save(&baked, output)?;
     if report.source_limited {
+        // What would reduce the error: the search stops at 4x the source's voxel density
+        // (a finer grid resolves only the interpolation between the same voxels), or at
+        // the memory cap.
+        let less = if report.memory_capped {
+            format!(
+                "--max-memory above {} bytes for a finer tricubic grid, or --resolution N",
+                opts.max_memory
+            )
+        } else {
+            format!(
+                "the search stops 4x finer than the source's voxels; --resolution N for a \
+                 finer grid (2x: {})",
+                2 * (report.resolution - 1) + 1
+            )
+        };
         eprintln!(
             "grin: warning: {}: the budget {:.1e} is not met by the grids tried at and past \
              the source's own voxel size (best: relative error {:.2e}, {} nodes on the \
              longest axis, {}): what is left is that interpolation against grin's \
              Catmull-Rom between the same voxels, not missing data; the bake is kept. Less: \
-             --max-memory above {} bytes for a finer tricubic grid, or --resolution N",
+             {less}",
             args.scene.display(),
             report.budget,
             report.relative_error,
             report.resolution,
             report.interp.name(),
-            opts.max_memory
         );
     }
     let summary = summary_json(output, &field.describe(), &report);
@@ -311,6 +325,7 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
         "budget": r.budget,
         "meets_budget": r.meets_budget,
         "source_limited": r.source_limited,
+        "memory_capped": r.memory_capped,
         "trials": r.trials.iter().map(|t| serde_json::json!({
             "resolution": t.resolution,
             "dims": t.dims,

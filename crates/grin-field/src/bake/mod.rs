@@ -192,6 +192,9 @@ pub struct BakeReport {
     /// between the same data, not missing data. The bake is kept (the most accurate one
     /// tried); a larger memory cap or a fixed `--resolution` reduce it.
     pub source_limited: bool,
+    /// The automatic search stopped at a grid over the memory cap (else it ran out of
+    /// candidates, or met the budget).
+    pub memory_capped: bool,
     pub trials: Vec<Trial>,
     pub seconds: f64,
     /// Source evaluations spent on grid nodes (all trials).
@@ -254,6 +257,7 @@ pub fn bake(
         candidates.extend([2, 4].map(|f| (f * (r - 1) + 1, Interp::Tricubic)));
     }
     let mut best: Option<(BakedField, ErrorStats, f64, f64, usize)> = None;
+    let mut memory_capped = false;
     for (ci, &(res, interp)) in candidates.iter().enumerate() {
         let geometry = grid_geometry(crop_lo, crop_hi, res, grid_margin(interp));
         let storage_guess = opts.storage.unwrap_or(Storage::I16);
@@ -269,6 +273,7 @@ pub fn bake(
                     cap: opts.max_memory,
                 });
             }
+            memory_capped = true;
             break;
         }
         let stage = format!(
@@ -301,6 +306,7 @@ pub fn bake(
                     cap: opts.max_memory,
                 });
             }
+            memory_capped = true;
             break;
         }
         let voxels = match storage {
@@ -383,6 +389,7 @@ pub fn bake(
         budget: opts.error_budget,
         meets_budget: rel <= opts.error_budget,
         source_limited,
+        memory_capped,
         trials,
         seconds: start.elapsed().as_secs_f64(),
         source_evals: evals.load(Ordering::Relaxed),
