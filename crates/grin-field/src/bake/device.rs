@@ -65,7 +65,17 @@ pub fn bake_for_gpu_interp(
 /// is baked and kept if its measured error confirms it. Over budget at the full
 /// resolution, that bake is used and [`bake_warning`] of the report says so. Two bakes
 /// at most (the automatic search of `grin bake` would try every coarser candidate first).
+///
+/// A source with its own sample spacing (a VDB grid) is baked by `grin bake`'s automatic
+/// search instead ([`bake_grid_source_for_gpu`]): from coarse grids up to its voxel size,
+/// then tricubic at it and 2x and 4x finer, so a blob a dozen voxels wide is not baked on
+/// 128 nodes, and a cache whose budget needs 4x its voxels gets them.
 pub fn bake_for_gpu_auto(field: &dyn IndexField) -> Result<(BakedField, BakeReport), BakeError> {
+    if field.source_spacing().is_some()
+        && let Some(baked) = bake_grid_source_for_gpu(field)?
+    {
+        return Ok(baked);
+    }
     let full = bake_for_gpu_with_report(field, DEFAULT_GPU_BAKE_RESOLUTION)?;
     let goal = DEFAULT_ERROR_BUDGET * BUDGET_SAFETY;
     let rel = full.1.relative_error;
@@ -132,6 +142,26 @@ pub fn bake_for_gpu_auto(field: &dyn IndexField) -> Result<(BakedField, BakeRepo
     } else {
         full
     })
+}
+
+/// The GPU bake of a source with its own spacing: `grin bake`'s automatic search with f32
+/// voxels and the GPU's memory cap ([`GPU_BAKE_MAX_BYTES`]). `None` when the search ends
+/// at the memory cap before the source's voxel size without meeting the budget (the
+/// caller bakes as for any field, with its warning).
+fn bake_grid_source_for_gpu(
+    field: &dyn IndexField,
+) -> Result<Option<(BakedField, BakeReport)>, BakeError> {
+    let opts = BakeOptions {
+        storage: Some(crate::baked::Storage::F32),
+        max_memory: GPU_BAKE_MAX_BYTES,
+        cubic_past_source: true,
+        ..BakeOptions::default()
+    };
+    match bake(field, &opts, &|_, _, _| {}) {
+        Ok(baked) => Ok(Some(baked)),
+        Err(BakeError::BudgetNotMet { .. }) => Ok(None),
+        Err(e) => Err(e),
+    }
 }
 
 /// A one-line warning when a GPU bake's measured error is over the default budget
