@@ -39,6 +39,9 @@ fn exit_tolerance() -> f32 {
 // trace::ENTRY_NUDGE_EPS: a grazing entry point that rounds to outside the bounds is
 // moved inside by this many units of roundoff (else the first step "exits" at once).
 const ENTRY_NUDGE_EPS: f32 = 4.0;
+// trace::ENTRY_NUDGE_MIN_COS: below this cosine of the refracted ray to the inward normal
+// the nudge goes along the normal (along the ray it would run far along the surface).
+const ENTRY_NUDGE_MIN_COS: f32 = 0.01;
 
 const END_EXITED: u32 = 0u;
 const END_OBJECT: u32 = 1u;
@@ -591,6 +594,34 @@ fn absorbed(stats: ptr<function, MarchStats>, seg: Segment, hit: Hit, transmitta
     return MarchEnd(END_OBJECT, STATUS_ABSORBED, hit.point, chord / len, transmittance, hit);
 }
 
+// trace::nudge_inside: an entry point that rounds to outside the bounds moves inwards a
+// few units of roundoff, along the refracted ray (its own line: a move along the normal
+// shifts the ray sideways, ~1e-6 of the bounds' size in f32, and bends its exit by as
+// much). The march then starts `skip` further along the ray, and the caller adds the
+// field's pull over that length to the ray's direction (one Euler step of dT/ds = grad n).
+// Along the normal, with no skip, only where the ray all but grazes the surface.
+struct Nudged {
+    point: vec3<f32>,
+    skip: f32,
+}
+
+fn nudge_inside(start: vec3<f32>, d_in: vec3<f32>) -> Nudged {
+    if bounds_signed_distance(start) < 0.0 {
+        return Nudged(start, 0.0);
+    }
+    let nudge = ENTRY_NUDGE_EPS * F32_EPSILON * (bounds_radius() + max(max(abs(start.x), abs(start.y)), abs(start.z)));
+    let normal = bounds_normal(start);
+    let cos_in = -dot(d_in, normal);
+    if cos_in > ENTRY_NUDGE_MIN_COS {
+        let skip = nudge / cos_in;
+        let along = start + d_in * skip;
+        if bounds_signed_distance(along) < 0.0 {
+            return Nudged(along, skip);
+        }
+    }
+    return Nudged(start - normal * nudge, 0.0);
+}
+
 // Trace from `origin` (outside: find the entry and refract; inside: start marching)
 // along unit `dir` until the ray leaves the medium, meets an object, or stops.
 // `jitter` in (0, 1] scales the first integration step (1: none).
@@ -610,10 +641,6 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             return march_end(END_MISSED, STATUS_MISSED, origin, d, 1.0);
         }
         start = origin + d * max(b.s_in, 0.0);
-        if bounds_signed_distance(start) >= 0.0 {
-            let nudge = ENTRY_NUDGE_EPS * F32_EPSILON * (bounds_radius() + max(max(abs(start.x), abs(start.y)), abs(start.z)));
-            start = start - bounds_normal(start) * nudge;
-        }
     }
     // Direction error the crossings of the bounds add (trace_ray's surface_error).
     var surface_err = 0.0;
@@ -621,6 +648,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     var s0 = sample_field(start);
     (*stats).evals += 1u;
     var d_in = d;
+    var skip = 0.0;
     if outside {
         if !sample_ok(s0) {
             return march_end(END_STOPPED, STATUS_ERROR, start, d, transmittance);
@@ -632,8 +660,11 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         }
         transmittance *= 1.0 - i.reflectance;
         d_in = i.dir;
+        let nudged = nudge_inside(start, d_in);
+        start = nudged.point;
+        skip = nudged.skip;
     }
-    var state = RayState(start, d_in * s0.n);
+    var state = RayState(start, d_in * s0.n + s0.grad_n * skip);
     var ctrl = step_controller_new(jitter);
     var est = estimate_new();
     let len_scale = ctrl.len_scale;

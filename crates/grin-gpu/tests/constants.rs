@@ -103,6 +103,7 @@ fn mirrored_constants_have_the_same_values() {
         ("MIN_SPAN_REL", trace::MIN_SPAN_REL),
         ("MIN_FLIGHT_VOXELS", trace::MIN_FLIGHT_VOXELS),
         ("ENTRY_NUDGE_EPS", trace::ENTRY_NUDGE_EPS),
+        ("ENTRY_NUDGE_MIN_COS", trace::ENTRY_NUDGE_MIN_COS),
         ("EXIT_NEWTON_ITERATIONS", u(trace::EXIT_NEWTON_ITERATIONS)),
         ("EXCURSION_ITERATIONS", u(boundary::EXCURSION_ITERATIONS)),
         ("EXCURSION_SLACK_TOLS", boundary::EXCURSION_SLACK_TOLS),

@@ -39,6 +39,9 @@ pub const EXIT_NEWTON_ITERATIONS: u32 = 3;
 /// Units of roundoff (times the coordinates' size) an entry point that rounds to outside
 /// the bounds is moved inside.
 pub const ENTRY_NUDGE_EPS: f64 = 4.0;
+/// Below this cosine of the refracted ray to the inward normal, the entry nudge goes along
+/// the normal (along the ray it would run far along the surface).
+pub const ENTRY_NUDGE_MIN_COS: f64 = 0.01;
 
 fn len_scale_of(bounds: &Bounds) -> f64 {
     bounds.radius()
@@ -121,6 +124,31 @@ pub struct RayResult {
 pub enum Control {
     Continue,
     Stop,
+}
+
+/// The entry point `start` rounded to R and, when that lands outside the bounds (the
+/// first step would then "exit" where the ray entered), moved inside by a few units of R's
+/// roundoff: along the refracted ray `d_in` (its own line; a move along the normal
+/// shifts the ray sideways and bends its exit by as much), returning the length skipped,
+/// over which the caller adds the field's pull to the direction; along the normal, with no
+/// skip, where the ray all but grazes the surface. WGSL twin: `nudge_inside`.
+fn nudge_inside<R: Real>(bounds: &Bounds, start: DVec3, d_in: DVec3) -> (R::V3, f64) {
+    let r = R::V3::from_dvec3(start);
+    if bounds.signed_distance(r.to_dvec3()) < 0.0 {
+        return (r, 0.0);
+    }
+    let nudge =
+        ENTRY_NUDGE_EPS * R::EPS.to_f64() * (len_scale_of(bounds) + start.abs().max_element());
+    let normal = bounds.normal(start);
+    let cos_in = -d_in.dot(normal);
+    if cos_in > ENTRY_NUDGE_MIN_COS {
+        let skip = nudge / cos_in;
+        let along = R::V3::from_dvec3(start + d_in * skip);
+        if bounds.signed_distance(along.to_dvec3()) < 0.0 {
+            return (along, skip);
+        }
+    }
+    (R::V3::from_dvec3(start - normal * nudge), 0.0)
 }
 
 /// Trace one ray from `origin` along `dir` (any length) through `field`, integrating in
@@ -230,15 +258,11 @@ pub fn trace_ray_jittered<R: Real>(
         }
     };
 
-    // Rounded to R (f32), a grazing entry point can land just outside the bounds, and
-    // the first step would "exit" where the ray entered: move it inside by a few units of
-    // R's roundoff along the normal.
-    let mut r = R::V3::from_dvec3(start);
-    if s_entry.is_some() && bounds.signed_distance(r.to_dvec3()) >= 0.0 {
-        let nudge =
-            ENTRY_NUDGE_EPS * R::EPS.to_f64() * (len_scale_of(&bounds) + start.abs().max_element());
-        r = R::V3::from_dvec3(start - bounds.normal(start) * nudge);
-    }
+    let (mut r, skip) = if s_entry.is_some() {
+        nudge_inside::<R>(&bounds, start, d_in)
+    } else {
+        (R::V3::from_dvec3(start), 0.0)
+    };
     let mut s0 = match s_entry {
         Some(s) => s,
         None => {
@@ -246,9 +270,10 @@ pub fn trace_ray_jittered<R: Real>(
             R::sample_field(field, r)
         }
     };
+    // The field's pull over the skipped length (one Euler step of dT/ds = grad n).
     let mut state = RayState {
         r,
-        t: R::V3::from_dvec3(d_in) * s0.n,
+        t: R::V3::from_dvec3(d_in) * s0.n + s0.grad_n * R::from_f64(skip),
     };
     // Roundoff of the state updates not yet added in (compensated summation, reset at
     // every jump of the state: straight flights, surface hits, reflections).
