@@ -47,9 +47,12 @@ struct TwoSum {
     lost: vec3<f32>,
 }
 
+// Both partial sums are multiplied by `params.roundoff_one` (1, unknown to the compiler):
+// Mesa's NIR folds (a + b) - a to b in float operations not marked exact (WGSL cannot mark
+// them), which compiled the compensation away on lavapipe.
 fn two_sum(a: vec3<f32>, b: vec3<f32>) -> TwoSum {
-    let sum = a + b;
-    let b_virtual = sum - a;
+    let sum = (a + b) * params.roundoff_one;
+    let b_virtual = (sum - a) * params.roundoff_one;
     return TwoSum(sum, (a - (sum - b_virtual)) + (b - b_virtual));
 }
 

@@ -60,6 +60,11 @@ struct FrameParams {
     plate_aspect: f32,
     plate_up: vec3<f32>,
     ortho_half_height: f32,
+    // Always 1: see two_sum (integrate.wgsl).
+    roundoff_one: f32,
+    _pad1: f32,
+    _pad2: f32,
+    _pad3: f32,
 }
 
 struct GpuObject {

@@ -181,8 +181,17 @@ pub struct FrameParams {
     pub plate_aspect: f32,
     pub plate_up: [f32; 3],
     pub ortho_half_height: f32,
+    /// Always 1 (`pack::frame_params` sets it): a 1 the shader compiler cannot
+    /// see, by which `two_sum` multiplies so that its roundoff survives. Mesa's NIR
+    /// (lavapipe) folds `(a + b) - a` to `b` in float operations not marked exact, and
+    /// WGSL cannot mark them: the compensated summation of the ray state was compiled
+    /// away, and GPU rays drifted from their CPU twin by ~3e-8 rad a step.
+    pub roundoff_one: f32,
+    pub _pad1: f32,
+    pub _pad2: f32,
+    pub _pad3: f32,
 }
-const _: () = assert!(std::mem::size_of::<FrameParams>() == 23 * 16);
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 24 * 16);
 
 /// One scene object. Keep in sync with `GpuObject` in shaders/shared/types.wgsl.
 #[repr(C)]
@@ -376,6 +385,10 @@ mod tests {
             plate_aspect,
             plate_up,
             ortho_half_height,
+            roundoff_one,
+            _pad1,
+            _pad2,
+            _pad3,
         );
         same_layout!(
             GpuObject,

@@ -20,6 +20,7 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     let s = &scene.settings;
     let cam = &scene.camera;
     let mut params = FrameParams::zeroed();
+    params.roundoff_one = 1.0;
     params.cam_origin = f3(cam.origin);
     params.tan_half_fov_y = cam.tan_half_fov_y as f32;
     params.cam_forward = f3(cam.forward);

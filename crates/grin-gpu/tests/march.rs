@@ -183,8 +183,8 @@ fn long_rays_are_not_cut_short_by_lavapipes_loop_limit() {
 /// (computed on the GPU from a start 3 R away) lands just outside the sphere about half
 /// the time: the nudge inside keeps them on their own line. Moved along the normal (by
 /// ~1e-6 R in f32), they were shifted sideways: GPU worst 3.0e-6 rad from the f64 trace
-/// over the same grid; now 1.1e-6 (the twin: 3e-7; what is left is the GPU's drift a step,
-/// docs/accuracy.md).
+/// over the same grid, 1.1e-6 with the nudge along the ray, 4.8e-7 once lavapipe stopped
+/// compiling the compensated summation away (`FrameParams::roundoff_one`); the twin 2.9e-7.
 #[test]
 fn entry_nudges_keep_rays_on_their_own_line() {
     let Some(ctx) = harness::context("entry_nudges_keep_rays_on_their_own_line") else {
