@@ -23,6 +23,24 @@ fn run(args: &[&str]) -> Output {
     grin().args(args).output().expect("run grin")
 }
 
+/// Write the OpenVDB python `script` to `dir/make.py` and run it with `arg` as its one
+/// argument (where it writes): how these tests make VDB files with another tool than
+/// grin's own writer. Fails the test with python's stderr when the script fails.
+fn run_openvdb_python(dir: &Path, script: &str, arg: &Path) {
+    let path = dir.join("make.py");
+    std::fs::write(&path, script).expect("script");
+    let made = Command::new("/usr/bin/python3")
+        .arg(&path)
+        .arg(arg)
+        .output()
+        .expect("python3-openvdb (installed by scripts/setup.sh)");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+}
+
 /// The command failed with one clear stderr line containing `needle`, and wrote nothing.
 fn fails_cleanly(out: &Output, needle: &str, output_file: Option<&Path>) {
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -759,9 +777,8 @@ fn an_installed_grin_still_isolates_a_crashing_vdb() {
 #[test]
 fn a_vdb_sequence_renders_frame_by_frame() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let script = dir.path().join("make.py");
-    std::fs::write(
-        &script,
+    run_openvdb_python(
+        dir.path(),
         r#"
 import sys
 import numpy as np
@@ -784,17 +801,7 @@ for frame in range(1, 5):
     d.transform = vdb.createLinearTransform(voxelSize=0.04)
     vdb.write(f"{out}/blob_{frame:04d}.vdb", grids=[d, t])
 "#,
-    )
-    .expect("script");
-    let made = Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .expect("python3-openvdb (installed by scripts/setup.sh)");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
+        dir.path(),
     );
     let scene = |path: &str, name: &str| {
         let text = format!(
@@ -937,9 +944,8 @@ jitter = false
 fn a_z_up_cache_placed_with_up_z_traces_as_the_y_up_one() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
-    let script = d.join("make.py");
-    std::fs::write(
-        &script,
+    run_openvdb_python(
+        d,
         r#"
 import sys
 import numpy as np
@@ -969,17 +975,7 @@ def write(path, values, origin):
 write(f"{out}/yup.vdb", yup, (-0.5, 0.0, -0.5))
 write(f"{out}/zup.vdb", zup, (-0.5, -0.5, 0.0))
 "#,
-    )
-    .expect("script");
-    let made = Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(d)
-        .output()
-        .expect("python3-openvdb (installed by scripts/setup.sh)");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
+        d,
     );
 
     let scene = |name: &str, file: &str, bounds: &str, place: &str| {
@@ -1244,9 +1240,9 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
 #[test]
 fn a_sharp_blob_the_budget_cannot_resolve_says_how_to_go_finer() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let script = dir.path().join("make.py");
-    std::fs::write(
-        &script,
+    let file = dir.path().join("blob.vdb");
+    run_openvdb_python(
+        dir.path(),
         r#"
 import sys
 import numpy as np
@@ -1260,18 +1256,7 @@ g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
 g.transform = vdb.createLinearTransform(voxelSize=0.05)
 vdb.write(sys.argv[1], grids=[g])
 "#,
-    )
-    .expect("script");
-    let file = dir.path().join("blob.vdb");
-    let made = Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(&file)
-        .output()
-        .expect("python3-openvdb");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
+        &file,
     );
     let scene = vdb_scene(
         dir.path(),
@@ -1316,9 +1301,9 @@ vdb.write(sys.argv[1], grids=[g])
 #[test]
 fn a_cache_active_over_its_whole_domain_is_read_where_the_data_is() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let script = dir.path().join("make.py");
-    std::fs::write(
-        &script,
+    let file = dir.path().join("domain.vdb");
+    run_openvdb_python(
+        dir.path(),
         r#"
 import sys
 import numpy as np
@@ -1330,18 +1315,7 @@ g.copyFromArray(np.ones((10, 10, 10), dtype=np.float32), ijk=(90, 100, 80), tole
 g.transform = vdb.createLinearTransform(voxelSize=0.01)
 vdb.write(sys.argv[1], grids=[g])
 "#,
-    )
-    .expect("script");
-    let file = dir.path().join("domain.vdb");
-    let made = Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(&file)
-        .output()
-        .expect("python3-openvdb");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
+        &file,
     );
     let vdb = vdb_sys::VdbFile::open(&file).expect("open");
     let info = vdb.grid("temperature").expect("grid");
@@ -1376,9 +1350,8 @@ vdb.write(sys.argv[1], grids=[g])
 fn a_sequence_whose_grid_changes_is_refused_naming_the_frame() {
     let dir = tempfile::tempdir().expect("tempdir");
     let tools = tempfile::tempdir().expect("tempdir");
-    let script = tools.path().join("make.py");
-    std::fs::write(
-        &script,
+    run_openvdb_python(
+        tools.path(),
         r#"
 import sys
 import numpy as np
@@ -1396,17 +1369,7 @@ for frame, name, kind in [(1, "delta_n", "f"), (2, "dn", "f"), (3, "delta_n", "v
     g.transform = vdb.createLinearTransform(voxelSize=0.05)
     vdb.write(f"{out}/s_{frame:04d}.vdb", grids=[g])
 "#,
-    )
-    .expect("script");
-    let made = Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .expect("python3-openvdb");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
+        dir.path(),
     );
     let scene = dir.path().join("seq.toml");
     std::fs::write(
