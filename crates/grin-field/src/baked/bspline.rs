@@ -8,7 +8,10 @@ const POLE: f64 = -0.267_949_192_431_122_7;
 /// Overall gain of the two recursive filters, (1 - z)(1 - 1/z) = 6.
 const GAIN: f64 = 6.0;
 
-/// In-place prefilter of one line with mirror boundaries (c[-k] = c[k]).
+/// In-place prefilter of one line with mirror boundaries (c[-k] = c[k]): the plain
+/// statement of the filter, the reference the tests hold [`prefilter_blocks`] to (bakes
+/// use that one).
+#[cfg(test)]
 pub fn prefilter_line(c: &mut [f64]) {
     let n = c.len();
     if n < 2 {
@@ -54,9 +57,10 @@ pub fn prefilter_line(c: &mut [f64]) {
 
 /// In-place prefilter along one axis of many lines at once: `blocks[k][j]` is node `k` of
 /// line `j` (every block the same length), each of the `C` channels filtered as
-/// [`prefilter_line`] does, in the same order of operations (bit-identical results). Each
-/// step of the recursion runs over whole blocks, so lines whose nodes lie a row or a plane
-/// apart in memory are filtered with contiguous loops instead of strided gathers.
+/// `prefilter_line` (the tests' reference) does, in the same order of operations
+/// (bit-identical results). Each step of the recursion runs over whole blocks, so lines
+/// whose nodes lie a row or a plane apart in memory are filtered with contiguous loops
+/// instead of strided gathers.
 pub fn prefilter_blocks<const C: usize>(blocks: &mut [&mut [[f64; C]]]) {
     let n = blocks.len();
     if n < 2 {

@@ -27,6 +27,17 @@ pub struct MacroGrid {
 }
 
 impl MacroGrid {
+    /// One cell, never homogeneous: what a field holds until `BakedField::prepare` builds
+    /// its grid.
+    pub(crate) fn unbuilt() -> Self {
+        MacroGrid {
+            cell: 1,
+            dims: [1; 3],
+            max_grad: vec![0.0],
+            threshold: 0.0,
+        }
+    }
+
     /// Build from per-node |grad| bounds `node_grad(i, j, k)` of a grid with `node_dims`;
     /// `reach` is how many nodes beyond a cell the interpolation reads (1 trilinear, 2 tricubic).
     pub fn build(

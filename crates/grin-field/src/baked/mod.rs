@@ -354,12 +354,7 @@ impl BakedField {
             n_range: (ambient + f64::from(lo), ambient + f64::from(hi)),
             max_grad: f64::from(g2.sqrt()),
             coeffs: None,
-            macro_grid: MacroGrid {
-                cell: 1,
-                dims: [1; 3],
-                max_grad: vec![0.0],
-                threshold: 0.0,
-            },
+            macro_grid: MacroGrid::unbuilt(),
             gmax: geometry.grid_max(),
             inv_spacing: geometry.spacing.recip(),
             bricks: Bricks::new(geometry.dims),
@@ -378,12 +373,7 @@ impl BakedField {
             interp,
             provenance: self.provenance.clone(),
             coeffs: None,
-            macro_grid: MacroGrid {
-                cell: 1,
-                dims: [1; 3],
-                max_grad: vec![0.0],
-                threshold: 0.0,
-            },
+            macro_grid: MacroGrid::unbuilt(),
             bricks: Bricks::new(self.geometry.dims),
             sampled: Voxels::F32(Vec::new()),
             ..*self
