@@ -32,6 +32,22 @@ pub fn describe_adapter(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
 }
 
+/// The process's one wgpu instance (of the backends the first caller asked for), kept
+/// until the process ends. Dropping the last instance lets the Vulkan loader unload the
+/// driver, and with NVIDIA's (580.159, H200) a process that made and dropped a context
+/// and then started a child process died of SIGSEGV: under cuda-gdb, in the thread
+/// spawning the child, at an address in no loaded library (the driver's were gone from
+/// the list), called from libc (tests/gpu.rs and tests/optics.rs, which probe for an
+/// adapter and then run `grin`). With the instance kept, both pass there.
+fn process_instance(backends: wgpu::Backends) -> &'static wgpu::Instance {
+    static INSTANCE: std::sync::OnceLock<wgpu::Instance> = std::sync::OnceLock::new();
+    INSTANCE.get_or_init(|| {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends;
+        wgpu::Instance::new(desc)
+    })
+}
+
 impl GpuContext {
     /// A headless device. `WGPU_BACKEND` (e.g. `vulkan`) restricts the backends,
     /// `WGPU_ADAPTER_NAME` picks the first adapter whose name contains it
@@ -46,9 +62,7 @@ impl GpuContext {
     /// pipeline cache, every pipeline compiled from scratch).
     pub fn new_headless_in(pipeline_dir: Option<&std::path::Path>) -> Result<Self, GpuError> {
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = backends;
-        let instance = wgpu::Instance::new(desc);
+        let instance = process_instance(backends);
         let adapters = pollster::block_on(instance.enumerate_adapters(backends));
         let seen = if adapters.is_empty() {
             "none".to_owned()
