@@ -14,7 +14,8 @@ const TEXTURE_BENCH_SAMPLES: u32 = 256;
 impl GpuRenderer<'_> {
     /// The adapter's raw rate of field samples (trilinear, 8 textureLoads each) on this
     /// renderer's field texture, measured by shaders/texture_bench.wgsl: coherent rays
-    /// across the grid, no integrator or scene work. Best of `repeats` dispatches.
+    /// across the grid, no integrator or scene work. Best of `repeats` dispatches, each
+    /// timed on the device where it writes timestamps, else by the wall clock.
     pub fn field_sample_rate(&self, repeats: u32) -> Result<f64, GpuError> {
         let ctx = self.ctx;
         let device = &ctx.device;
@@ -79,7 +80,7 @@ impl GpuRenderer<'_> {
                 {
                     let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some("bench_main"),
-                        timestamp_writes: None,
+                        timestamp_writes: self.timer.as_ref().map(|t| t.writes(0)),
                     });
                     pass.set_pipeline(&pipeline);
                     pass.set_bind_group(0, &bind_group, &[]);
@@ -89,10 +90,18 @@ impl GpuRenderer<'_> {
                         1,
                     );
                 }
+                if let Some(timer) = &self.timer {
+                    timer.resolve(&mut encoder, 1);
+                }
                 ctx.queue.submit([encoder.finish()]);
             })?;
             ctx.wait()?;
-            best = best.min(start.elapsed().as_secs_f64());
+            let wall = start.elapsed().as_secs_f64();
+            let seconds = match &self.timer {
+                Some(timer) => timer.band_seconds(ctx, 1)?,
+                None => wall,
+            };
+            best = best.min(seconds);
         }
         let samples = f64::from(width) * f64::from(rows) * f64::from(TEXTURE_BENCH_SAMPLES);
         Ok(samples / best)

@@ -107,9 +107,12 @@ impl GpuContext {
             Some(_) => adapter.features() & wgpu::Features::PIPELINE_CACHE,
             None => wgpu::Features::empty(),
         };
+        // Timestamps around the render passes, where the adapter has them: the device's
+        // own time per frame ([`crate::GpuRenderer::last_device_seconds`]).
+        let timestamp_features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("grin"),
-            required_features: cache_features,
+            required_features: cache_features | timestamp_features,
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -144,6 +147,13 @@ impl GpuContext {
             pipelines: Mutex::new(std::collections::HashMap::new()),
             pipeline_cache,
         })
+    }
+
+    /// Whether the device writes timestamps around compute passes.
+    pub fn has_timestamps(&self) -> bool {
+        self.device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
     }
 
     /// The pipelines under `key`, compiled by `compile` the first time (and kept only

@@ -18,9 +18,39 @@ use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_ar
 use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::{GpuContext, GpuError, specialize};
 
-/// Pixels per dispatch: big enough to keep every core of lavapipe busy, small enough
-/// that progress updates and cancellation stay responsive (~0.1-1 s per band).
-const PIXELS_PER_BAND: u32 = 32 * 1024;
+/// Pixels per dispatch on a CPU adapter (lavapipe): big enough to keep every core busy,
+/// small enough that progress updates and cancellation stay responsive (~0.1-1 s a band).
+const PIXELS_PER_BAND_CPU: u32 = 32 * 1024;
+/// Pixels per dispatch on a GPU. On an H200 (`GRIN_BAND_PIXELS=N grin bench speed
+/// --gpu-only --size 1920x1080`), paper (a)'s frame took 7.0 ms on the device in bands of
+/// 32 Ki pixels (64 round trips, each band an eighth of the chip's resident threads),
+/// 2.0 ms at 256 Ki, 1.7 at 512 Ki and 1.2 at 2 Mi (the frame in one band); the wall
+/// clock (62-65 ms) was the read-back of 64 bytes a pixel at every size but 32 Ki (86).
+/// 2 Mi pixels is 128 MiB of pixel buffer, wgpu's default binding limit.
+const PIXELS_PER_BAND_GPU: u32 = 2 * 1024 * 1024;
+
+/// Pixels per band on `ctx`'s adapter at `spp` samples a pixel, within its buffer limits.
+/// A GPU band shrinks with the samples (2 Mi / spp pixels, at least the CPU's band), so
+/// no dispatch runs much longer than a one-sample frame's (a display GPU's watchdog).
+/// `GRIN_BAND_PIXELS` (a positive integer) overrides the adapter's default, for tuning.
+fn pixels_per_band(ctx: &GpuContext, spp: u32) -> u32 {
+    let default = if ctx.info.device_type == wgpu::DeviceType::Cpu {
+        PIXELS_PER_BAND_CPU
+    } else {
+        (PIXELS_PER_BAND_GPU / spp.max(1)).max(PIXELS_PER_BAND_CPU)
+    };
+    let wanted = std::env::var("GRIN_BAND_PIXELS")
+        .ok()
+        .and_then(|v| v.trim().parse::<u32>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(default);
+    let limits = ctx.limits();
+    let fits = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+        / std::mem::size_of::<PixelOut>() as u64;
+    wanted.min(u32::try_from(fits).unwrap_or(u32::MAX)).max(1)
+}
 
 /// Workgroup size of `render_main` and `bench_main` (keep in sync with the shaders).
 pub(crate) const WORKGROUP: u32 = 8;
@@ -28,7 +58,84 @@ pub(crate) const WORKGROUP: u32 = 8;
 /// Timing of the last [`GpuRenderer::render`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RenderTiming {
+    /// Wall-clock seconds of the whole frame: uploads, dispatches, waits, read-back.
     pub seconds: f64,
+    /// Seconds the device spent in the render passes (timestamps), where it has them.
+    pub device_seconds: Option<f64>,
+}
+
+/// Timestamps at the start and end of each of a band's two passes (first / whole frame,
+/// medium), resolved and read back after the band: the device's own time per frame.
+#[derive(Debug)]
+pub(crate) struct PassTimer {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    /// Nanoseconds per timestamp tick.
+    period_ns: f64,
+    /// Device seconds summed over the bands of the last frame (f64 bits).
+    last: std::sync::atomic::AtomicU64,
+}
+
+/// Timestamps a band writes: begin/end of the first pass, begin/end of the medium pass.
+const TIMESTAMPS: u32 = 4;
+
+impl PassTimer {
+    fn new(ctx: &GpuContext) -> Option<Self> {
+        if !ctx.has_timestamps() {
+            return None;
+        }
+        let bytes = u64::from(TIMESTAMPS) * 8;
+        let queries = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("render pass timestamps"),
+            ty: wgpu::QueryType::Timestamp,
+            count: TIMESTAMPS,
+        });
+        let resolved = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("render pass timestamps"),
+            size: bytes,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("render pass timestamps readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Some(PassTimer {
+            queries,
+            resolved,
+            readback,
+            period_ns: f64::from(ctx.queue.get_timestamp_period()),
+            last: std::sync::atomic::AtomicU64::new(0),
+        })
+    }
+
+    /// The timestamp writes of pass `pass` (0: first or whole frame, 1: medium).
+    pub(crate) fn writes(&self, pass: u32) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(2 * pass),
+            end_of_pass_write_index: Some(2 * pass + 1),
+        }
+    }
+
+    /// Resolve the band's timestamps into the read-back buffer (`passes` of them written).
+    pub(crate) fn resolve(&self, encoder: &mut wgpu::CommandEncoder, passes: u32) {
+        encoder.resolve_query_set(&self.queries, 0..2 * passes, &self.resolved, 0);
+        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, u64::from(passes) * 16);
+    }
+
+    /// Device seconds of the band just read back (its `passes` passes).
+    pub(crate) fn band_seconds(&self, ctx: &GpuContext, passes: u32) -> Result<f64, GpuError> {
+        let ticks: Vec<u64> = read_buffer(ctx, &self.readback, u64::from(passes) * 16)?;
+        let total: u64 = ticks
+            .chunks_exact(2)
+            .map(|t| t[1].saturating_sub(t[0]))
+            .sum();
+        Ok(total as f64 * self.period_ns * 1e-9)
+    }
 }
 
 /// The scene and field on the device, ready to render.
@@ -57,6 +164,8 @@ pub struct GpuRenderer<'a> {
     /// What the caller should tell the user about the field: a bake here over the error
     /// budget, a baked file too big for the device and baked again.
     pub(crate) warnings: Vec<String>,
+    /// The device's time in the render passes, where it writes timestamps.
+    pub(crate) timer: Option<PassTimer>,
 }
 
 impl<'a> GpuRenderer<'a> {
@@ -109,7 +218,7 @@ impl<'a> GpuRenderer<'a> {
 
         let device = &ctx.device;
         let limits = ctx.limits();
-        let rows_per_band = (PIXELS_PER_BAND / s.width.max(1)).clamp(1, s.height.max(1));
+        let rows_per_band = (pixels_per_band(ctx, s.spp) / s.width.max(1)).clamp(1, s.height.max(1));
         let out_bytes =
             u64::from(s.width) * u64::from(rows_per_band) * std::mem::size_of::<PixelOut>() as u64;
         if out_bytes > limits.max_storage_buffer_binding_size {
@@ -296,6 +405,7 @@ impl<'a> GpuRenderer<'a> {
                     & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_MEDIUM_OBJECTS),
                 field,
                 warnings,
+                timer: PassTimer::new(ctx),
             }
         })
     }
@@ -330,7 +440,7 @@ impl<'a> GpuRenderer<'a> {
         {
             return Ok(false);
         }
-        let rows = (PIXELS_PER_BAND / p.width.max(1))
+        let rows = (pixels_per_band(self.ctx, p.spp) / p.width.max(1))
             .min(self.band_capacity / p.width.max(1))
             .min(p.height.max(1));
         if rows == 0 {
@@ -373,21 +483,38 @@ impl<'a> GpuRenderer<'a> {
         )
         .map_err(|e| GpuError::Memory(e.to_string()))?;
         let mut row = 0;
+        let mut device_seconds = 0.0;
         while row < height {
             if cancel.load(Ordering::Relaxed) {
                 return Err(GpuError::Cancelled);
             }
             let rows = self.rows_per_band.min(height - row);
-            let band = self.render_band(row, rows)?;
-            pixels.extend(band.into_iter().map(PixelOut::to_cpu));
+            // Converted straight from the mapped read-back buffer: no copy of the band.
+            let seconds = self.render_band(row, rows, &mut |band: &[PixelOut]| {
+                pixels.extend(band.iter().map(|p| p.to_cpu()));
+            })?;
+            device_seconds += seconds.unwrap_or(0.0);
             row += rows;
             progress(rows);
+        }
+        if let Some(timer) = &self.timer {
+            timer
+                .last
+                .store(device_seconds.to_bits(), Ordering::Relaxed);
         }
         Ok(Frame {
             width,
             height,
             pixels,
         })
+    }
+
+    /// Seconds the device spent in the render passes of the last [`Self::render`]
+    /// (timestamps written around each pass; `None` where the adapter has none).
+    pub fn last_device_seconds(&self) -> Option<f64> {
+        self.timer
+            .as_ref()
+            .map(|t| f64::from_bits(t.last.load(Ordering::Relaxed)))
     }
 
     /// Render and time the whole frame (for benchmarks).
@@ -398,17 +525,27 @@ impl<'a> GpuRenderer<'a> {
             frame,
             RenderTiming {
                 seconds: start.elapsed().as_secs_f64(),
+                device_seconds: self.last_device_seconds(),
             },
         ))
     }
 
-    fn render_band(&self, first_row: u32, rows: u32) -> Result<Vec<PixelOut>, GpuError> {
+    /// Render rows `first_row .. first_row + rows`, hand their pixels to `take` (while
+    /// the read-back buffer is mapped), and return, where the device writes timestamps,
+    /// the seconds it spent in the band's passes.
+    fn render_band(
+        &self,
+        first_row: u32,
+        rows: u32,
+        take: &mut dyn FnMut(&[PixelOut]),
+    ) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
         let width = self.params.width;
         let mut params = self.params;
         params.first_row = first_row;
         params.row_count = rows;
         let bytes = u64::from(width) * u64::from(rows) * std::mem::size_of::<PixelOut>() as u64;
+        let passes = if self.medium_pipeline.is_some() { 2 } else { 1 };
         ctx.scoped("dispatching the render kernel", || {
             ctx.queue
                 .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
@@ -427,7 +564,7 @@ impl<'a> GpuRenderer<'a> {
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("render_main"),
-                    timestamp_writes: None,
+                    timestamp_writes: self.timer.as_ref().map(|t| t.writes(0)),
                 });
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.bind_group, &[]);
@@ -444,16 +581,23 @@ impl<'a> GpuRenderer<'a> {
                 );
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("render_deferred"),
-                    timestamp_writes: None,
+                    timestamp_writes: self.timer.as_ref().map(|t| t.writes(1)),
                 });
                 pass.set_pipeline(medium);
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.dispatch_workgroups_indirect(&self.deferred_dispatch, 0);
             }
             encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
+            if let Some(timer) = &self.timer {
+                timer.resolve(&mut encoder, passes);
+            }
             ctx.queue.submit([encoder.finish()]);
         })?;
-        read_buffer(ctx, &self.readback, bytes)
+        read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
+        match &self.timer {
+            Some(timer) => Ok(Some(timer.band_seconds(ctx, passes)?)),
+            None => Ok(None),
+        }
     }
 }
 
@@ -485,6 +629,16 @@ pub(crate) fn read_buffer<T: bytemuck::Pod>(
     buffer: &wgpu::Buffer,
     bytes: u64,
 ) -> Result<Vec<T>, GpuError> {
+    read_buffer_with(ctx, buffer, bytes, |items: &[T]| items.to_vec())
+}
+
+/// Map `buffer` (MAP_READ), hand its first `bytes` as `T`s to `take`, unmap.
+pub(crate) fn read_buffer_with<T: bytemuck::Pod, R>(
+    ctx: &GpuContext,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+    take: impl FnOnce(&[T]) -> R,
+) -> Result<R, GpuError> {
     let slice = buffer.slice(0..bytes);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -504,7 +658,7 @@ pub(crate) fn read_buffer<T: bytemuck::Pod>(
         let view = slice
             .get_mapped_range()
             .map_err(|e| GpuError::DeviceLost(format!("reading pixels back: {e}")))?;
-        bytemuck::cast_slice::<u8, T>(&view).to_vec()
+        take(bytemuck::cast_slice::<u8, T>(&view))
     };
     buffer.unmap();
     Ok(out)

@@ -59,6 +59,12 @@ pub struct Args {
     /// Skip the CPU backend.
     #[arg(long)]
     pub gpu_only: bool,
+    /// Image size instead of 640x360 (160x90 with --quick), e.g. 1920x1080 on a real GPU.
+    #[arg(long, value_name = "WxH", value_parser = crate::cmd::render::parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Timed frames per backend and scene instead of 3 (1 with --quick).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub frames: Option<u32>,
 }
 
 /// One backend on one scene.
@@ -68,8 +74,12 @@ struct Run {
     backend: &'static str,
     width: u32,
     height: u32,
-    /// The fastest frame (the rates below are of it).
+    /// The fastest frame, wall clock (the rates below are of it).
     ms_per_frame: f64,
+    /// GPU runs on an adapter with timestamps: the device's time in the render passes
+    /// of the fastest-on-the-device frame (no uploads, waits or read-back).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    device_ms_min: Option<f64>,
     /// Frame times over all timed frames: fastest, median, slowest.
     ms_min: f64,
     ms_median: f64,
@@ -81,6 +91,25 @@ struct Run {
     ray_steps_per_second: f64,
     /// Field evaluations per second over all rays.
     field_evals_per_second: f64,
+    /// The same two rates over the device's time (GPU runs with timestamps).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    device_ray_steps_per_second: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    device_field_evals_per_second: Option<f64>,
+}
+
+impl Run {
+    /// (ray-steps/s, field evaluations/s) over the device's time where measured, else
+    /// over the wall clock: what the raw sample rate (timed the same way) compares with.
+    fn marcher_rates(&self) -> (f64, f64) {
+        match (
+            self.device_ray_steps_per_second,
+            self.device_field_evals_per_second,
+        ) {
+            (Some(steps), Some(evals)) => (steps, evals),
+            _ => (self.ray_steps_per_second, self.field_evals_per_second),
+        }
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -101,6 +130,9 @@ struct Report {
     /// Ray-steps/s of the close-up marched with verlet (one evaluation per step) over
     /// the raw sample rate.
     verlet_ray_steps_fraction_of_raw: f64,
+    /// Whether the raw rate and the marcher's rates in the fractions are over the
+    /// device's own time (timestamps) rather than the wall clock.
+    timed_on_device: bool,
 }
 
 fn mean(frame: &Frame, f: fn(&grin_trace::image::PixelOut) -> f32) -> f64 {
@@ -126,13 +158,25 @@ fn min_median_max(times: &[f64]) -> (f64, f64, f64) {
     (t[0], median, t[n - 1])
 }
 
-fn run_of(scene: &str, backend: &'static str, frame: &Frame, spp: u32, times: &[f64]) -> Run {
+fn run_of(
+    scene: &str,
+    backend: &'static str,
+    frame: &Frame,
+    spp: u32,
+    times: &[f64],
+    device_times: &[f64],
+) -> Run {
     let (min, median, max) = min_median_max(times);
     let seconds = min;
     let rays = f64::from(frame.width) * f64::from(frame.height) * f64::from(spp);
     let steps = mean(frame, |p| p.steps);
     let evals = mean(frame, |p| p.evals);
     let s = seconds.max(1e-9);
+    let device_s = device_times
+        .iter()
+        .copied()
+        .min_by(f64::total_cmp)
+        .map(|t| t.max(1e-9));
     if times.len() > 1 && (max - min) / min.max(1e-12) > BUSY_SPREAD {
         eprintln!(
             "warning: {scene} ({backend}): frame times {:.1} / {:.1} / {:.1} ms (min / median / max) spread by more than {:.0}%: the machine was busy; rerun for figures to quote",
@@ -148,6 +192,7 @@ fn run_of(scene: &str, backend: &'static str, frame: &Frame, spp: u32, times: &[
         width: frame.width,
         height: frame.height,
         ms_per_frame: seconds * 1e3,
+        device_ms_min: device_s.map(|t| t * 1e3),
         ms_min: min * 1e3,
         ms_median: median * 1e3,
         ms_max: max * 1e3,
@@ -156,6 +201,8 @@ fn run_of(scene: &str, backend: &'static str, frame: &Frame, spp: u32, times: &[
         evals_per_ray: evals,
         ray_steps_per_second: steps * rays / s,
         field_evals_per_second: evals * rays / s,
+        device_ray_steps_per_second: device_s.map(|d| steps * rays / d),
+        device_field_evals_per_second: device_s.map(|d| evals * rays / d),
     }
 }
 
@@ -176,6 +223,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         (FULL_SIZE, FULL_BAKE, FULL_FRAMES)
     };
+    let size = args.size.unwrap_or(size);
+    let frames = args.frames.unwrap_or(frames);
     // Load and bake every scene first: input errors stop the run before any GPU work.
     let mut prepared = Vec::new();
     for (file, label) in SCENES {
@@ -266,19 +315,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         renderer.render(&|_| {}, &cancel)?; // warm-up: lavapipe compiles lazily
         progress.inc(1);
         let mut best: Option<(Frame, f64)> = None;
-        let mut times = Vec::new();
+        let (mut times, mut device_times) = (Vec::new(), Vec::new());
         for _ in 0..frames {
             let start = Instant::now();
             let frame = renderer.render(&|_| {}, &cancel)?;
             let t = start.elapsed().as_secs_f64();
             times.push(t);
+            device_times.extend(renderer.last_device_seconds());
             if best.as_ref().is_none_or(|(_, b)| t < *b) {
                 best = Some((frame, t));
             }
             progress.inc(1);
         }
         if let Some((frame, _)) = best {
-            runs.push(run_of(label, "gpu", &frame, rs.settings.spp, &times));
+            runs.push(run_of(
+                label,
+                "gpu",
+                &frame,
+                rs.settings.spp,
+                &times,
+                &device_times,
+            ));
         }
         if *label == MARCH_ONLY {
             raw_rate = renderer.field_sample_rate(3)?;
@@ -298,7 +355,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 progress.inc(1);
             }
             if let Some((frame, _)) = best {
-                runs.push(run_of(label, "cpu", &frame, rs.settings.spp, &times));
+                runs.push(run_of(label, "cpu", &frame, rs.settings.spp, &times, &[]));
             }
         }
     }
@@ -321,12 +378,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         noise_over_analytic_gpu: ratio("gpu").unwrap_or(f64::NAN),
         noise_over_analytic_cpu: ratio("cpu"),
         raw_field_samples_per_second: raw_rate,
-        ray_steps_fraction_of_raw: noise_gpu
-            .map_or(f64::NAN, |r| r.ray_steps_per_second / raw_rate),
-        field_evals_fraction_of_raw: noise_gpu
-            .map_or(f64::NAN, |r| r.field_evals_per_second / raw_rate),
+        ray_steps_fraction_of_raw: noise_gpu.map_or(f64::NAN, |r| r.marcher_rates().0 / raw_rate),
+        field_evals_fraction_of_raw: noise_gpu.map_or(f64::NAN, |r| r.marcher_rates().1 / raw_rate),
         verlet_ray_steps_fraction_of_raw: verlet_gpu
-            .map_or(f64::NAN, |r| r.ray_steps_per_second / raw_rate),
+            .map_or(f64::NAN, |r| r.marcher_rates().0 / raw_rate),
+        timed_on_device: ctx.has_timestamps(),
         runs,
     };
     if args.json {
@@ -340,11 +396,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.bake_resolution
     );
     outln!(
-        "{:<20} {:<4} {:>9} {:>22} {:>11} {:>9} {:>9} {:>12}",
+        "{:<20} {:<4} {:>9} {:>22} {:>10} {:>11} {:>9} {:>9} {:>12}",
         "scene",
         "",
         "size",
         "ms/frame min/med/max",
+        "device ms",
         "Mrays/s",
         "steps/ray",
         "evals/ray",
@@ -352,11 +409,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for r in &report.runs {
         outln!(
-            "{:<20} {:<4} {:>9} {:>22} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
+            "{:<20} {:<4} {:>9} {:>22} {:>10} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
             r.scene,
             r.backend,
             format!("{}x{}", r.width, r.height),
             format!("{:.1}/{:.1}/{:.1}", r.ms_min, r.ms_median, r.ms_max),
+            r.device_ms_min
+                .map_or_else(|| "-".to_owned(), |d| format!("{d:.2}")),
             r.rays_per_second / 1e6,
             r.steps_per_ray,
             r.evals_per_ray,
@@ -370,6 +429,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .noise_over_analytic_cpu
             .map(|c| format!(", cpu {c:.2}"))
             .unwrap_or_default()
+    );
+    outln!(
+        "rates of the fractions below timed {}",
+        if report.timed_on_device {
+            "on the device (timestamps around the passes)"
+        } else {
+            "by the wall clock (no timestamps on this adapter)"
+        }
     );
     outln!(
         "raw trilinear field samples: {:.1} M/s; marcher ((c) medium only, sharma: 3 evaluations per step): field evals {:.1}% and ray-steps {:.1}% of it; verlet (1 per step): ray-steps {:.1}% (aim >= 60%)",
