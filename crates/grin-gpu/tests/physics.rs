@@ -253,24 +253,30 @@ jitter = false
         .expect("render");
     let cpu = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("cpu");
     let mut shallow_exits = 0;
+    let mut differ = Vec::new();
     for py in 0..96 {
         for px in 0..8 {
             let idx = (py * 8 + px) as usize;
             let (g, c) = (gpu.pixels[idx], cpu.pixels[idx]);
-            assert_eq!(
-                g.status, c.status,
-                "({px}, {py}): status gpu {} cpu {}",
-                g.status, c.status
-            );
             let (gd, cd) = (
                 DVec3::from(g.exit_dir.map(f64::from)),
                 DVec3::from(c.exit_dir.map(f64::from)),
             );
             let angle = gd.angle_between(cd);
-            assert!(
-                angle < 1e-3,
-                "({px}, {py}): gpu leaves along {gd}, cpu along {cd} ({angle:.1e} rad)"
-            );
+            // At a grazing exit the refraction at the face amplifies the backends' n
+            // (f32 vs f64) by 1 / cos: their directions differ by ~5e-5 rad (lavapipe and
+            // NVIDIA alike), and the uncertainty estimate that decides `degraded` sits on
+            // its threshold for one row of dips on NVIDIA (H200: the GPU said exited, the
+            // CPU degraded). There either label is honest; elsewhere they must agree.
+            let grazing = gd.y.abs().max(cd.y.abs()) < 1e-3;
+            let both_left = [g.status, c.status].iter().all(|&s| s == 1.0 || s == 5.0);
+            let status_ok = g.status == c.status || (grazing && both_left);
+            if !status_ok || angle >= 1e-3 {
+                differ.push(format!(
+                    "({px}, {py}): status gpu {} cpu {}, exit gpu {:?} at {:?} ({} steps), cpu {:?} at {:?} ({} steps), {angle:.1e} rad apart",
+                    g.status, c.status, g.exit_dir, g.exit_pos, g.steps, c.exit_dir, c.exit_pos, c.steps
+                ));
+            }
             // A shallow dip (below-face interval shorter than a step): only found between
             // the step's ends.
             let d = rs.camera.primary_ray(px, py, 0.5, 0.5);
@@ -281,6 +287,12 @@ jitter = false
             }
         }
     }
+    assert!(
+        differ.is_empty(),
+        "{} of 768 pixels differ:\n{}",
+        differ.len(),
+        differ.join("\n")
+    );
     assert!(
         shallow_exits >= 8,
         "only {shallow_exits} shallow dips left through the face"

@@ -108,6 +108,34 @@ pub fn assert_images_agree(
     if stats.mean <= mean_tol && stats.p99 <= p99_tol {
         return;
     }
+    // The pixels that differ most, with what each backend's ray did (for a failure seen
+    // on a machine whose images do not come back).
+    let mut worst: Vec<(usize, f32)> = diff
+        .pixels
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i, p.rgb[0]))
+        .collect();
+    worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let width = expected.width as usize;
+    for &(i, d) in worst.iter().take(8) {
+        let (c, g) = (&expected.pixels[i], &actual.pixels[i]);
+        eprintln!(
+            "  ({}, {}) differs by {d:.3}: cpu rgb {:?} status {} steps {} exit {:?} at {:?}; gpu rgb {:?} status {} steps {} exit {:?} at {:?}",
+            i % width,
+            i / width,
+            c.rgb,
+            c.status,
+            c.steps,
+            c.exit_dir,
+            c.exit_pos,
+            g.rgb,
+            g.status,
+            g.steps,
+            g.exit_dir,
+            g.exit_pos
+        );
+    }
     let dir = output_dir();
     for p in &mut diff.pixels {
         p.rgb = p.rgb.map(|x| x * 10.0);
