@@ -39,6 +39,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         Suite::Full
     };
+    // The charts need a font: a missing one is said now, not after minutes of runs
+    // whose results would then not be written (they are written all or nothing).
+    grin_bench::chart::ensure_font()?;
     eprintln!("building the reference cases ...");
     let mut cases = cases::suite(suite)?;
     if let Some(want) = &args.case {
