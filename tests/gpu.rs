@@ -69,6 +69,12 @@ fn render_gpu_writes_exr_png_and_summary() {
         summary["steps_per_ray"].as_f64().is_some_and(|s| s > 0.0),
         "the lens is marched: {summary}"
     );
+    // lavapipe writes timestamps too: the device's time is there, and within the frame's.
+    let (device, wall) = (
+        summary["device_seconds"].as_f64().unwrap_or(f64::NAN),
+        summary["seconds"].as_f64().unwrap_or(f64::NAN),
+    );
+    assert!(device > 0.0 && device <= wall, "{summary}");
     let frame = grin_trace::image::Frame::read_exr(&out).expect("EXR readable");
     assert_eq!((frame.width, frame.height), (64, 36));
     assert!(
@@ -79,6 +85,42 @@ fn render_gpu_writes_exr_png_and_summary() {
         out.with_extension("png").is_file(),
         "PNG preview beside the EXR"
     );
+}
+
+/// The frame is dispatched in bands of rows (32 Ki pixels on lavapipe, 2 Mi / spp on a
+/// GPU); their size (`GRIN_BAND_PIXELS`) must not change a pixel: bands of 700 pixels
+/// (7 rows of 96, the last band partial) give the same EXR as one band for the frame.
+#[test]
+fn band_size_does_not_change_the_image() {
+    if !have_gpu("band_size_does_not_change_the_image") {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tmp");
+    let render = |band: &str, name: &str| {
+        let out = dir.path().join(name);
+        let o = grin()
+            .env("GRIN_BAND_PIXELS", band)
+            .args(["render", "--backend", "gpu", "--size", "96x54", "-o"])
+            .arg(&out)
+            .arg(scenes().join("paper-c.toml"))
+            .output()
+            .expect("run grin");
+        assert!(o.status.success(), "grin render failed: {}", stderr(&o));
+        grin_trace::image::Frame::read_exr(&out).expect("EXR readable")
+    };
+    let whole = render("100000", "whole.exr");
+    let banded = render("700", "banded.exr");
+    assert!(
+        whole.pixels.iter().any(|p| p.steps > 0.0),
+        "the medium is marched"
+    );
+    let differ = whole
+        .pixels
+        .iter()
+        .zip(&banded.pixels)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(differ, 0, "pixels differ between band sizes");
 }
 
 #[test]
@@ -171,6 +213,12 @@ fn bench_speed_quick_reports_both_backends() {
                 "{run}"
             );
             assert_eq!(ms("ms_min"), ms("ms_per_frame"), "{run}");
+            // GPU runs timed on the device too (lavapipe writes timestamps): within the
+            // wall clock's fastest frame.
+            if backend == "gpu" && r["timed_on_device"] == true {
+                let device = ms("device_ms_min");
+                assert!(device > 0.0 && device <= ms("ms_min"), "{run}");
+            }
         }
     }
     assert!(

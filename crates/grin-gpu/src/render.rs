@@ -218,7 +218,8 @@ impl<'a> GpuRenderer<'a> {
 
         let device = &ctx.device;
         let limits = ctx.limits();
-        let rows_per_band = (pixels_per_band(ctx, s.spp) / s.width.max(1)).clamp(1, s.height.max(1));
+        let rows_per_band =
+            (pixels_per_band(ctx, s.spp) / s.width.max(1)).clamp(1, s.height.max(1));
         let out_bytes =
             u64::from(s.width) * u64::from(rows_per_band) * std::mem::size_of::<PixelOut>() as u64;
         if out_bytes > limits.max_storage_buffer_binding_size {

@@ -100,6 +100,10 @@ struct Summary {
     seconds: f64,
     /// Device setup, field bake and upload, pipeline creation (GPU; ~0 on the CPU).
     setup_seconds: f64,
+    /// GPU: the device's own time in the render passes (timestamps; absent where the
+    /// adapter has none). `seconds` adds dispatching and reading the pixels back.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    device_seconds: Option<f64>,
     rays_per_second: f64,
     steps_per_ray: f64,
     evals_per_ray: f64,
@@ -387,7 +391,13 @@ fn render_one(
                     );
                 }
                 let bar = progress_bar(beam_rs.settings.height);
-                let (frame, adapter, _, gpu_field, bake_cache) = render_frame(
+                let Rendered {
+                    frame,
+                    adapter,
+                    gpu_field,
+                    bake_cache,
+                    ..
+                } = render_frame(
                     args,
                     &beam_rs,
                     scene.medium.as_ref(),
@@ -419,6 +429,7 @@ fn render_one(
             spp: 1,
             seconds,
             setup_seconds: 0.0,
+            device_seconds: None,
             rays_per_second: rays / seconds.max(1e-9),
             steps_per_ray: 0.0,
             evals_per_ray: 0.0,
@@ -448,7 +459,14 @@ fn render_one(
     let bar = progress_bar(scene.render.height * passes);
     let setup_start = Instant::now();
     let mut warnings: Vec<String> = auto_warning.into_iter().collect();
-    let (frame, adapter, seconds, gpu_field, bake_cache) = render_frame(
+    let Rendered {
+        frame,
+        adapter,
+        seconds,
+        device_seconds,
+        gpu_field,
+        bake_cache,
+    } = render_frame(
         args,
         &rs,
         scene.medium.as_ref(),
@@ -460,7 +478,9 @@ fn render_one(
     let bos_images = match &bos_scenes {
         Some((with, without)) => {
             let mut quiet = Vec::new();
-            let (distorted, ..) = render_frame(
+            let Rendered {
+                frame: distorted, ..
+            } = render_frame(
                 args,
                 with,
                 scene.medium.as_ref(),
@@ -469,8 +489,9 @@ fn render_one(
                 &bar,
                 &mut quiet,
             )?;
-            let (reference, ..) =
-                render_frame(args, without, None, scene_dir, gpu, &bar, &mut quiet)?;
+            let Rendered {
+                frame: reference, ..
+            } = render_frame(args, without, None, scene_dir, gpu, &bar, &mut quiet)?;
             let red = |f: &Frame| f.pixels.iter().map(|p| f64::from(p.rgb[0])).collect();
             Some((red(&reference), red(&distorted)))
         }
@@ -572,6 +593,7 @@ fn render_one(
         spp: scene.render.spp,
         seconds,
         setup_seconds,
+        device_seconds,
         rays_per_second: rays / seconds.max(1e-9),
         steps_per_ray: mean(|p| p.steps),
         evals_per_ray: mean(|p| p.evals),
@@ -610,6 +632,17 @@ fn render_one(
 /// frame, the adapter, the render time, and on the GPU the field's size and how the bake
 /// cache served it; warnings are printed above `bar` and collected.
 #[allow(clippy::type_complexity)]
+/// One frame of [`render_frame`] and what the summary says of it.
+struct Rendered {
+    frame: Frame,
+    adapter: String,
+    seconds: f64,
+    /// The GPU's own time in the render passes, where the adapter writes timestamps.
+    device_seconds: Option<f64>,
+    gpu_field: Option<GpuField>,
+    bake_cache: Option<grin_gpu::cache::CacheUse>,
+}
+
 fn render_frame(
     args: &Args,
     rs: &RenderScene,
@@ -618,17 +651,12 @@ fn render_frame(
     gpu: Option<&grin_gpu::GpuContext>,
     bar: &ProgressBar,
     warnings: &mut Vec<String>,
-) -> anyhow::Result<(
-    Frame,
-    String,
-    f64,
-    Option<GpuField>,
-    Option<grin_gpu::cache::CacheUse>,
-)> {
+) -> anyhow::Result<Rendered> {
     let cancel = AtomicBool::new(false);
     let tick = |rows: u32| bar.inc(u64::from(rows));
     let mut gpu_field = None;
     let mut bake_cache = None;
+    let mut device_seconds = None;
     let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
         Backend::Cpu => {
             let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -671,10 +699,18 @@ fn render_frame(
             let adapter = renderer.adapter_info();
             let start = Instant::now();
             let frame = renderer.render(&tick, &cancel)?;
+            device_seconds = renderer.last_device_seconds();
             (frame, adapter, start.elapsed().as_secs_f64())
         }
     };
-    Ok((frame, adapter, seconds, gpu_field, bake_cache))
+    Ok(Rendered {
+        frame,
+        adapter,
+        seconds,
+        device_seconds,
+        gpu_field,
+        bake_cache,
+    })
 }
 
 /// The scene whose beauty renders are the BOS images when they need more than the pixel
