@@ -209,8 +209,8 @@ fn bake_of_the_example_vdb_scene_succeeds() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
     assert!(v.is_object(), "{v}");
 
-    // --max-memory also caps the dense copy of the VDB grid: refused while reading, with
-    // the cap named, and no output file.
+    // --max-memory also caps what is read of the VDB grid (its data box, a voxel a byte of
+    // the cap): refused before reading, with the cap named, and no output file.
     let sub = dir.path().join("capped");
     std::fs::create_dir(&sub).expect("subdir");
     let capped = sub.join("capped.grinf");
@@ -222,7 +222,7 @@ fn bake_of_the_example_vdb_scene_succeeds() {
         "--max-memory",
         "1k",
     ]);
-    fails_cleanly(&out, "dense copy", Some(&capped));
+    fails_cleanly(&out, "data box", Some(&capped));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("memory cap of 1024 bytes"),
         "{}",
@@ -1342,6 +1342,57 @@ vdb.write(sys.argv[1], grids=[g])
     let b = field.index_box();
     assert_eq!((b.min, b.max), ([88, 98, 78], [101, 111, 91]));
     assert!((field.n(DVec3::new(0.945, 1.045, 0.845)) - 1.0001).abs() < 1e-12);
+}
+
+/// Two small hot blocks 300 voxels apart (as two plumes in one cache): their data box is
+/// 306^3 = 2.9e7 voxels, whose dense copy (f32 read + f64 index, 344 MB) the 32 MiB cap
+/// refuses; read a brick at a time, only the bricks that change the index are kept
+/// (under 1 MB), and both blocks are in the field with their mapped values.
+#[test]
+fn a_sparse_cache_is_kept_in_bricks_not_as_its_dense_box() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("two.vdb");
+    run_openvdb_python(
+        dir.path(),
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+g = vdb.FloatGrid()
+g.name = "temperature"
+g.copyFromArray(np.ones((6, 6, 6), dtype=np.float32), ijk=(0, 0, 0), tolerance=0)
+g.copyFromArray(2.0 * np.ones((6, 6, 6), dtype=np.float32), ijk=(300, 300, 300), tolerance=0)
+g.transform = vdb.createLinearTransform(voxelSize=0.01)
+vdb.write(sys.argv[1], grids=[g])
+"#,
+        &file,
+    );
+    let params = VdbFieldParams {
+        mapping: Mapping::Linear { k: 1e-4 },
+        units: 1.0,
+        non_finite: NonFinitePolicy::Reject,
+        bounds: Bounds::Box {
+            min: DVec3::splat(-0.1),
+            max: DVec3::splat(3.2),
+        },
+        ambient: Some(1.0),
+        max_bytes: 32 << 20,
+        placement: grin_field::vdb::IDENTITY,
+    };
+    let t = std::time::Instant::now();
+    let field = VdbField::load(&file, "temperature", &params).expect("load");
+    eprintln!(
+        "two blocks: loaded in {:.2} s, {} bytes of voxels kept",
+        t.elapsed().as_secs_f64(),
+        field.voxel_bytes()
+    );
+    assert!(field.voxel_bytes() < 1 << 20, "{} bytes", field.voxel_bytes());
+    // Voxel centres inside each block, and the background between them.
+    assert!((field.n(DVec3::splat(0.025)) - 1.0001).abs() < 1e-12);
+    assert!((field.n(DVec3::splat(3.025)) - 1.0002).abs() < 1e-12);
+    assert_eq!(field.n(DVec3::splat(1.5)), 1.0);
+    let b = field.index_box();
+    assert_eq!((b.min, b.max), ([-2, -2, -2], [307, 307, 307]));
 }
 
 /// A sequence whose grid is renamed in one frame or changes type in another is refused

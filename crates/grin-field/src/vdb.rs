@@ -29,9 +29,15 @@
 //! OpenVDB's own sampler gives ambient), and the clamp keeps every sample, and so every
 //! bake, within what the mapping produces (`interpolant_stays_in_the_mapped_range`).
 //! Smooth data away from its extreme voxels is unchanged (the orders below hold).
-//! Outside the grid's dense box the field is the mapped background value.
+//! Outside the grid's data box the field is the mapped background value.
 //!
-//! Why ~620 lines of code in one file (tests after): the mapping, the crop to the active
+//! Storage: the data box is read a brick of 16^3 voxels at a time (OpenVDB's copyToDense
+//! of the brick) and only the bricks with a voxel whose index differs from the background
+//! are kept ([`Bricks`]): memory follows the data, not its box (two blocks 300 voxels
+//! apart: 0.4 MB kept where the dense copy took 344 MB). `max_bytes` caps the bricks
+//! kept, and the box itself at one voxel a byte (reading costs time for every voxel).
+//!
+//! Why ~1220 lines of code in one file (tests after): the mapping, the crop to the active
 //! region and the interpolation of one VDB grid share their state; split, each part would
 //! need the others' internals.
 
@@ -44,10 +50,15 @@ use vdb_sys::{DenseGrid, IndexBox, VdbError, VdbFile};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
-/// Default cap on the memory of the dense copy of a grid (f32 read + f64 delta_n): 2 GiB.
+/// Default cap on the memory of a grid's voxels as loaded (the stored bricks of mapped
+/// delta_n): 2 GiB.
 pub const DEFAULT_MAX_DENSE_BYTES: u64 = 2 << 30;
-/// Bytes per voxel while loading: the f32 read plus the f64 mapped delta_n.
-pub const LOAD_BYTES_PER_VOXEL: u64 = 12;
+/// Reads the values of an index box (x fastest) into the vector: a grid's brick.
+type ReadBrick<'a> = dyn FnMut(IndexBox, &mut Vec<f32>) -> Result<(), FieldError> + 'a;
+/// Edge of a brick of the loaded voxels ([`Bricks`]), in voxels.
+const BRICK: usize = 16;
+/// Voxels in a brick.
+const BRICK_VOXELS: usize = BRICK * BRICK * BRICK;
 /// Voxels of background read around the active box, so the 4-tap stencil near the edge
 /// of the data reads real (background) values.
 pub const PAD_VOXELS: i32 = 2;
@@ -188,7 +199,7 @@ pub struct VdbFieldParams {
     /// grid's background maps to (`ambient_index = "auto"`).
     pub bounds: Bounds,
     pub ambient: Option<f64>,
-    /// Cap on the bytes the dense copy may use.
+    /// Cap on the bytes the loaded voxels (the stored bricks) may use.
     pub max_bytes: u64,
     /// Where the grid (in metres, after `units`) goes in the scene: [`placement`] of the
     /// scene's `up`, `scale`, `rotate_deg` and `translate`; [`IDENTITY`] for none.
@@ -257,9 +268,11 @@ pub struct VdbField {
     label: String,
     bounds: Bounds,
     ambient: f64,
-    /// delta_n = n - ambient at the voxels of `bbox`, x fastest; 0 outside it (the
-    /// background is the ambient, see `from_dense`).
-    delta_n: Vec<f64>,
+    /// delta_n = n - ambient at the voxels read (0 where not stored: the background is
+    /// the ambient, see `from_bricks`).
+    voxels: Bricks,
+    /// The box of the voxels that change the index, plus [`PAD_VOXELS`]: delta_n is 0
+    /// outside it.
     bbox: IndexBox,
     dims: [usize; 3],
     /// index = grid_from_world * (p, 1), p in scene metres.
@@ -332,22 +345,24 @@ impl VdbField {
         // a dense copy of it would be most of the memory a bake uses. A grid with no such
         // voxel is read over its active box (and warned about below).
         let bbox = info.data_bbox.unwrap_or(active).padded(PAD_VOXELS);
-        let bytes = bbox.voxel_count() * u128::from(LOAD_BYTES_PER_VOXEL);
-        if bytes > u128::from(params.max_bytes) {
-            return Err(field_error(VdbError::TooLarge {
-                path: shown,
-                grid: grid.to_owned(),
-                min: bbox.min,
-                max: bbox.max,
-                bytes,
-                cap: params.max_bytes,
-            }));
-        }
-        let dense = file
-            .read_scalar(grid, bbox, params.max_bytes)
-            .map_err(field_error)?;
         let label = format!("vdb {}:{grid}", path.display());
-        Self::from_dense(label, &dense, info.background, params)
+        // Read brick by brick (OpenVDB's copyToDense of each brick's box): only the bricks
+        // with a voxel off the background are kept, so memory follows the data, not its box.
+        let mut read = |part: IndexBox, out: &mut Vec<f32>| -> Result<(), FieldError> {
+            *out = file
+                .read_scalar(grid, part, params.max_bytes)
+                .map_err(field_error)?
+                .values;
+            Ok(())
+        };
+        Self::from_bricks(
+            label,
+            bbox,
+            &info.transform,
+            info.background,
+            params,
+            &mut read,
+        )
     }
 
     /// Map a dense grid (with its transform and background value) to a field.
@@ -356,6 +371,49 @@ impl VdbField {
         dense: &DenseGrid<f32>,
         background: f64,
         params: &VdbFieldParams,
+    ) -> Result<Self, FieldError> {
+        let d = dense.bbox.dims();
+        let dims = d.map(|v| usize::try_from(v).unwrap_or(usize::MAX));
+        let count = dims.iter().try_fold(1usize, |acc, &v| acc.checked_mul(v));
+        if count != Some(dense.values.len()) || dense.values.is_empty() {
+            return Err(FieldError::Other(format!(
+                "{label}: dense data has {} values for a {dims:?} box",
+                dense.values.len()
+            )));
+        }
+        let mut read = |part: IndexBox, out: &mut Vec<f32>| -> Result<(), FieldError> {
+            out.clear();
+            let run = (part.max[0] - part.min[0] + 1) as usize;
+            for k in part.min[2]..=part.max[2] {
+                for j in part.min[1]..=part.max[1] {
+                    let start = dense.offset([part.min[0], j, k]).ok_or_else(|| {
+                        FieldError::Other(format!("{label}: brick outside the dense data"))
+                    })?;
+                    out.extend_from_slice(&dense.values[start..start + run]);
+                }
+            }
+            Ok(())
+        };
+        Self::from_bricks(
+            label.clone(),
+            dense.bbox,
+            &dense.world_from_index,
+            background,
+            params,
+            &mut read,
+        )
+    }
+
+    /// Map the voxels of `read_box`, read a brick at a time by `read` (the brick's index
+    /// box -> its values, x fastest), to a field. Only bricks with a voxel whose index
+    /// differs from the background are kept, within `params.max_bytes`.
+    fn from_bricks(
+        label: String,
+        read_box: IndexBox,
+        grid_transform: &vdb_sys::Transform,
+        background: f64,
+        params: &VdbFieldParams,
+        read: &mut ReadBrick<'_>,
     ) -> Result<Self, FieldError> {
         let param_err = |param: &str, message: String| FieldError::Param {
             field: label.clone(),
@@ -372,17 +430,12 @@ impl VdbField {
                 ),
             ));
         }
-        let d = dense.bbox.dims();
-        let dims = d.map(|v| usize::try_from(v).unwrap_or(usize::MAX));
-        let count = dims.iter().try_fold(1usize, |acc, &v| acc.checked_mul(v));
-        if count != Some(dense.values.len()) || dense.values.is_empty() {
+        if read_box.voxel_count() == 0 {
             return Err(FieldError::Other(format!(
-                "{label}: dense data has {} values for a {dims:?} box",
-                dense.values.len()
+                "{label}: the grid's box is empty"
             )));
         }
-
-        let mut in_metres = dense.world_from_index.world_from_index;
+        let mut in_metres = grid_transform.world_from_index;
         for row in &mut in_metres {
             for v in row.iter_mut() {
                 *v *= params.units;
@@ -440,26 +493,81 @@ impl VdbField {
         let transform = vdb_sys::Transform {
             world_from_index: world_from_grid,
         };
-        let world_of = |off: usize| {
-            let i = off % dims[0];
-            let j = (off / dims[0]) % dims[1];
-            let k = off / (dims[0] * dims[1]);
-            let ijk = [
-                f64::from(dense.bbox.min[0]) + i as f64,
-                f64::from(dense.bbox.min[1]) + j as f64,
-                f64::from(dense.bbox.min[2]) + k as f64,
-            ];
-            transform.index_to_world(ijk)
-        };
+        let world_of = |ijk: [i32; 3]| transform.index_to_world(ijk.map(f64::from));
 
-        let non_finite = dense.values.iter().filter(|v| !v.is_finite()).count() as u64;
-        if non_finite > 0 && params.non_finite == NonFinitePolicy::Reject {
-            let first = dense
-                .values
-                .iter()
-                .position(|v| !v.is_finite())
-                .unwrap_or(0);
-            let p = world_of(first);
+        // Reading costs time for every voxel of the box (the background too), memory only
+        // for the bricks kept: a box of more voxels than the cap has bytes is refused as
+        // absurd before anything is read (2 Gi voxels, ~10 s of reading, at the default).
+        let box_voxels = read_box.voxel_count();
+        if box_voxels > u128::from(params.max_bytes) {
+            return Err(FieldError::Other(format!(
+                "{label}: the grid's data box {:?}..={:?} is {box_voxels} voxels, more than the memory cap of {} bytes allows (one voxel a byte: the box is read a brick at a time and only the bricks that change the index are kept); raise it (`grin bake --max-memory`) or crop the grid",
+                read_box.min, read_box.max, params.max_bytes
+            )));
+        }
+        let mut voxels = Bricks::new(read_box);
+        let (mut lo, mut hi) = (ambient, ambient);
+        let mut non_finite = 0u64;
+        let mut first_non_finite = None;
+        let mut values = Vec::new();
+        for b in voxels.brick_indices() {
+            let part = voxels.brick_box(b);
+            read(part, &mut values)?;
+            if values.len() as u128 != part.voxel_count() {
+                return Err(FieldError::Other(format!(
+                    "{label}: read {} values for a brick of {} voxels",
+                    values.len(),
+                    part.voxel_count()
+                )));
+            }
+            let mut brick = vec![0.0f64; BRICK_VOXELS].into_boxed_slice();
+            let mut it = values.iter();
+            for k in part.min[2]..=part.max[2] {
+                for j in part.min[1]..=part.max[1] {
+                    for i in part.min[0]..=part.max[0] {
+                        let Some(&v) = it.next() else { break };
+                        let ijk = [i, j, k];
+                        if !v.is_finite() {
+                            non_finite += 1;
+                            first_non_finite.get_or_insert(ijk);
+                            continue;
+                        }
+                        let n = mapping.n(f64::from(v), ambient).map_err(|t| {
+                            let p = world_of(ijk);
+                            param_err(
+                                "map",
+                                format!(
+                                    "grid value {v} maps to T = {t} K <= 0 at world ({:.4}, {:.4}, {:.4})",
+                                    p[0], p[1], p[2]
+                                ),
+                            )
+                        })? + shift;
+                        if n <= 0.0 || !n.is_finite() {
+                            let p = world_of(ijk);
+                            return Err(FieldError::NonPositive {
+                                field: label,
+                                n,
+                                x: p[0],
+                                y: p[1],
+                                z: p[2],
+                            });
+                        }
+                        lo = lo.min(n);
+                        hi = hi.max(n);
+                        brick[voxels.local_offset(ijk)] = n - ambient;
+                    }
+                }
+            }
+            voxels.put(b, brick);
+            if voxels.stored_bytes() > params.max_bytes {
+                return Err(FieldError::Other(format!(
+                    "{label}: the voxels that change the index (in bricks of {BRICK}^3 within the index box {:?}..={:?}) need more than the memory cap of {} bytes; raise it (`grin bake --max-memory`) or crop the grid",
+                    read_box.min, read_box.max, params.max_bytes
+                )));
+            }
+        }
+        if let (Some(ijk), NonFinitePolicy::Reject) = (first_non_finite, params.non_finite) {
+            let p = world_of(ijk);
             return Err(FieldError::Other(format!(
                 "{label}: {non_finite} NaN/Inf voxel(s) (first at world ({:.4}, {:.4}, {:.4})); \
                  fix the grid or set non_finite = \"ambient\" in the scene to replace them by \
@@ -468,57 +576,37 @@ impl VdbField {
             )));
         }
 
-        let mut delta_n = Vec::with_capacity(dense.values.len());
-        let (mut lo, mut hi) = (ambient, ambient);
-        for (off, &v) in dense.values.iter().enumerate() {
-            if !v.is_finite() {
-                delta_n.push(0.0);
-                continue;
-            }
-            let n = mapping.n(f64::from(v), ambient).map_err(|t| {
-                let p = world_of(off);
-                param_err(
-                    "map",
-                    format!(
-                        "grid value {v} maps to T = {t} K <= 0 at world ({:.4}, {:.4}, {:.4})",
-                        p[0], p[1], p[2]
-                    ),
-                )
-            })? + shift;
-            if n <= 0.0 || !n.is_finite() {
-                let p = world_of(off);
-                return Err(FieldError::NonPositive {
-                    field: label,
-                    n,
-                    x: p[0],
-                    y: p[1],
-                    z: p[2],
-                });
-            }
-            lo = lo.min(n);
-            hi = hi.max(n);
-            delta_n.push(n - ambient);
-        }
-
         check_data_placement(
             &label,
-            &delta_n,
-            dims,
-            dense.bbox.min,
+            voxels.data_box(DATA_FRACTION),
             &world_from_grid,
             &params.bounds,
         )?;
 
-        // Keep only the voxels that change the index (and PAD_VOXELS of background around
-        // them): a cache's active box is often its whole domain. Exact: what is dropped is
-        // background, which the field returns outside its box anyway.
-        let (delta_n, bbox, dims) = crop_to_change(delta_n, dense.bbox, dims);
+        // Keep the box of the voxels that change the index (and PAD_VOXELS of background
+        // around them): a cache's active box is often its whole domain. Exact: what is
+        // outside is background, which the field returns there anyway.
+        let bbox = match voxels.data_box(0.0) {
+            Some(data) => {
+                let pad = i64::from(PAD_VOXELS);
+                IndexBox {
+                    min: std::array::from_fn(|a| {
+                        (data.min[a] - pad).max(i64::from(read_box.min[a])) as i32
+                    }),
+                    max: std::array::from_fn(|a| {
+                        (data.max[a] + pad).min(i64::from(read_box.max[a])) as i32
+                    }),
+                }
+            }
+            None => read_box,
+        };
+        let dims = bbox.dims().map(|d| d as usize);
 
         let mut field = VdbField {
             label,
             bounds: params.bounds,
             ambient,
-            delta_n,
+            voxels,
             bbox,
             dims,
             grid_from_world: inverse.world_from_index,
@@ -535,6 +623,11 @@ impl VdbField {
     /// NaN/Inf voxels replaced by the ambient index (policy `ambient`).
     pub fn non_finite_replaced(&self) -> u64 {
         self.non_finite_replaced
+    }
+
+    /// Bytes of the voxels kept (the stored bricks and their table).
+    pub fn voxel_bytes(&self) -> u64 {
+        self.voxels.stored_bytes()
     }
 
     /// The dense box (index space) the field holds.
@@ -571,16 +664,14 @@ impl VdbField {
         (lo, hi)
     }
 
+    /// delta_n at index (i, j, k) relative to the box's minimum corner (0 outside it).
     fn node(&self, i: i64, j: i64, k: i64) -> f64 {
         let d = &self.dims;
-        if i < 0 || j < 0 || k < 0 {
+        if i < 0 || j < 0 || k < 0 || i >= d[0] as i64 || j >= d[1] as i64 || k >= d[2] as i64 {
             return 0.0;
         }
-        let (i, j, k) = (i as usize, j as usize, k as usize);
-        if i >= d[0] || j >= d[1] || k >= d[2] {
-            return 0.0;
-        }
-        self.delta_n[i + d[0] * (j + d[1] * k)]
+        let m = self.bbox.min.map(i64::from);
+        self.voxels.get([i + m[0], j + m[1], k + m[2]])
     }
 
     /// Gradient (world) from index-space derivatives: grad_world = A^-T grad_index.
@@ -593,18 +684,26 @@ impl VdbField {
         )
     }
 
+    /// The largest |grad n| of the voxels' central differences: over the stored bricks
+    /// and the voxels next to them (elsewhere every difference is 0).
     fn max_node_gradient(&self) -> f64 {
-        let d = self.dims;
+        let d = self.dims.map(|v| v as i64);
+        let m = self.bbox.min.map(i64::from);
         let mut max2: f64 = 0.0;
-        for k in 0..d[2] as i64 {
-            for j in 0..d[1] as i64 {
-                for i in 0..d[0] as i64 {
-                    let g = [
-                        0.5 * (self.node(i + 1, j, k) - self.node(i - 1, j, k)),
-                        0.5 * (self.node(i, j + 1, k) - self.node(i, j - 1, k)),
-                        0.5 * (self.node(i, j, k + 1) - self.node(i, j, k - 1)),
-                    ];
-                    max2 = max2.max(self.grad_to_world(g).length_squared());
+        for part in self.voxels.stored_boxes() {
+            let lo: [i64; 3] = std::array::from_fn(|a| (i64::from(part.min[a]) - 1 - m[a]).max(0));
+            let hi: [i64; 3] =
+                std::array::from_fn(|a| (i64::from(part.max[a]) + 1 - m[a]).min(d[a] - 1));
+            for k in lo[2]..=hi[2] {
+                for j in lo[1]..=hi[1] {
+                    for i in lo[0]..=hi[0] {
+                        let g = [
+                            0.5 * (self.node(i + 1, j, k) - self.node(i - 1, j, k)),
+                            0.5 * (self.node(i, j + 1, k) - self.node(i, j - 1, k)),
+                            0.5 * (self.node(i, j, k + 1) - self.node(i, j, k - 1)),
+                        ];
+                        max2 = max2.max(self.grad_to_world(g).length_squared());
+                    }
                 }
             }
         }
@@ -626,18 +725,17 @@ impl VdbField {
         if far {
             return (0.0, [0.0; 3]);
         }
-        let b = base.map(|v| v as i64);
+        let m = self.bbox.min.map(i64::from);
+        let taps = self
+            .voxels
+            .stencil(std::array::from_fn(|a| base[a] as i64 - 1 + m[a]));
         let (mut v, mut gx, mut gy, mut gz) = (0.0, 0.0, 0.0, 0.0);
         for c in 0..4 {
             for bj in 0..4 {
                 let mut row_v = 0.0;
                 let mut row_dx = 0.0;
                 for a in 0..4 {
-                    let f = self.node(
-                        b[0] + a as i64 - 1,
-                        b[1] + bj as i64 - 1,
-                        b[2] + c as i64 - 1,
-                    );
+                    let f = taps[a + 4 * (bj + 4 * c)];
                     row_v += w[0][a] * f;
                     row_dx += dw[0][a] * f;
                 }
@@ -650,37 +748,6 @@ impl VdbField {
         }
         (v, [gx, gy, gz])
     }
-}
-
-/// `delta_n` over `bbox` cut down to the voxels that are not background, plus
-/// [`PAD_VOXELS`] (within `bbox`); unchanged when nothing is cut.
-fn crop_to_change(
-    delta_n: Vec<f64>,
-    bbox: IndexBox,
-    dims: [usize; 3],
-) -> (Vec<f64>, IndexBox, [usize; 3]) {
-    let Some(data) = DataBox::find_above(&delta_n, dims, bbox.min, 0.0) else {
-        return (delta_n, bbox, dims);
-    };
-    let pad = i64::from(PAD_VOXELS);
-    let min: [i32; 3] =
-        std::array::from_fn(|a| (data.min[a] - pad).max(i64::from(bbox.min[a])) as i32);
-    let max: [i32; 3] =
-        std::array::from_fn(|a| (data.max[a] + pad).min(i64::from(bbox.max[a])) as i32);
-    if min == bbox.min && max == bbox.max {
-        return (delta_n, bbox, dims);
-    }
-    let cut = IndexBox { min, max };
-    let new_dims = cut.dims().map(|d| d as usize);
-    let off: [usize; 3] = std::array::from_fn(|a| (min[a] - bbox.min[a]) as usize);
-    let mut out = Vec::with_capacity(new_dims.iter().product());
-    for k in 0..new_dims[2] {
-        for j in 0..new_dims[1] {
-            let row = off[0] + dims[0] * (off[1] + j + dims[1] * (off[2] + k));
-            out.extend_from_slice(&delta_n[row..row + new_dims[0]]);
-        }
-    }
-    (out, cut, new_dims)
 }
 
 /// Every frame of a VDB sequence (frames `first..=last` of `scene`, whose medium's path
@@ -743,6 +810,173 @@ pub fn check_sequence(
 /// Voxels whose change from the background is at most this fraction of the largest change
 /// count as background when framing the data (faint residue is not what a user frames).
 pub const DATA_FRACTION: f64 = 1e-3;
+
+/// Voxel values (delta_n) over an index box in bricks of [`BRICK`]^3 (x fastest within a
+/// brick), only the bricks with a non-zero value stored: a cache's data box is mostly
+/// background (smoke in one corner of it, a shell), and a dense copy of the box was most
+/// of the memory a load used.
+#[derive(Debug, Clone)]
+struct Bricks {
+    /// Index of the store's first voxel.
+    origin: [i32; 3],
+    /// Voxels along each axis.
+    dims: [usize; 3],
+    /// Bricks along each axis.
+    counts: [usize; 3],
+    bricks: Vec<Option<Box<[f64]>>>,
+}
+
+impl Bricks {
+    /// An empty store (every value 0) over `bbox`.
+    fn new(bbox: IndexBox) -> Self {
+        let dims = bbox
+            .dims()
+            .map(|d| usize::try_from(d).unwrap_or(usize::MAX));
+        let counts = dims.map(|d| d.div_ceil(BRICK));
+        Bricks {
+            origin: bbox.min,
+            dims,
+            counts,
+            bricks: vec![None; counts.iter().product()],
+        }
+    }
+
+    /// Every brick's position in the brick grid, x fastest.
+    fn brick_indices(&self) -> impl Iterator<Item = [usize; 3]> + use<> {
+        let c = self.counts;
+        (0..c[2]).flat_map(move |k| (0..c[1]).flat_map(move |j| (0..c[0]).map(move |i| [i, j, k])))
+    }
+
+    /// The index box of brick `b`, clipped to the store.
+    fn brick_box(&self, b: [usize; 3]) -> IndexBox {
+        IndexBox {
+            min: std::array::from_fn(|a| self.origin[a] + (b[a] * BRICK) as i32),
+            max: std::array::from_fn(|a| {
+                self.origin[a] + ((b[a] * BRICK + BRICK).min(self.dims[a]) - 1) as i32
+            }),
+        }
+    }
+
+    fn slot(&self, b: [usize; 3]) -> usize {
+        b[0] + self.counts[0] * (b[1] + self.counts[1] * b[2])
+    }
+
+    /// Offset of index `ijk` (inside the store) within its brick.
+    fn local_offset(&self, ijk: [i32; 3]) -> usize {
+        let l: [usize; 3] = std::array::from_fn(|a| (ijk[a] - self.origin[a]) as usize % BRICK);
+        l[0] + BRICK * (l[1] + BRICK * l[2])
+    }
+
+    /// Keep brick `b`'s values unless every one is 0.
+    fn put(&mut self, b: [usize; 3], values: Box<[f64]>) {
+        if values.iter().any(|&v| v != 0.0) {
+            let slot = self.slot(b);
+            self.bricks[slot] = Some(values);
+        }
+    }
+
+    /// The value at index `ijk`: 0 outside the store or in a brick not stored.
+    fn get(&self, ijk: [i64; 3]) -> f64 {
+        let mut l = [0usize; 3];
+        for a in 0..3 {
+            let r = ijk[a] - i64::from(self.origin[a]);
+            if r < 0 || r >= self.dims[a] as i64 {
+                return 0.0;
+            }
+            l[a] = r as usize;
+        }
+        match &self.bricks[self.slot(l.map(|v| v / BRICK))] {
+            Some(v) => v[l[0] % BRICK + BRICK * (l[1] % BRICK + BRICK * (l[2] % BRICK))],
+            None => 0.0,
+        }
+    }
+
+    /// The 4x4x4 values from index `min` on (x fastest): straight from one brick when the
+    /// block lies in it (most samples), else value by value.
+    fn stencil(&self, min: [i64; 3]) -> [f64; 64] {
+        let mut out = [0.0; 64];
+        let r: [i64; 3] = std::array::from_fn(|a| min[a] - i64::from(self.origin[a]));
+        let one_brick = (0..3).all(|a| {
+            r[a] >= 0
+                && r[a] + 3 < self.dims[a] as i64
+                && r[a] as usize / BRICK == (r[a] as usize + 3) / BRICK
+        });
+        if one_brick {
+            let r = r.map(|v| v as usize);
+            if let Some(v) = &self.bricks[self.slot(r.map(|x| x / BRICK))] {
+                let l = r.map(|x| x % BRICK);
+                for c in 0..4 {
+                    for j in 0..4 {
+                        let at = l[0] + BRICK * (l[1] + j + BRICK * (l[2] + c));
+                        out[4 * (j + 4 * c)..4 * (j + 4 * c) + 4].copy_from_slice(&v[at..at + 4]);
+                    }
+                }
+            }
+            return out;
+        }
+        for c in 0..4 {
+            for j in 0..4 {
+                for i in 0..4 {
+                    out[i + 4 * (j + 4 * c)] =
+                        self.get([min[0] + i as i64, min[1] + j as i64, min[2] + c as i64]);
+                }
+            }
+        }
+        out
+    }
+
+    /// Bytes held: the stored bricks and the brick table.
+    fn stored_bytes(&self) -> u64 {
+        let stored = self.bricks.iter().filter(|b| b.is_some()).count() as u64;
+        stored * (BRICK_VOXELS * 8) as u64 + self.bricks.len() as u64 * 16
+    }
+
+    /// The index boxes of the stored bricks.
+    fn stored_boxes(&self) -> Vec<IndexBox> {
+        self.brick_indices()
+            .filter(|&b| self.bricks[self.slot(b)].is_some())
+            .map(|b| self.brick_box(b))
+            .collect()
+    }
+
+    /// `f(index, value)` for every voxel of the stored bricks.
+    fn each_stored(&self, mut f: impl FnMut([i64; 3], f64)) {
+        for part in self.stored_boxes() {
+            for k in part.min[2]..=part.max[2] {
+                for j in part.min[1]..=part.max[1] {
+                    for i in part.min[0]..=part.max[0] {
+                        let ijk = [i64::from(i), i64::from(j), i64::from(k)];
+                        f(ijk, self.get(ijk));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The box of the voxels whose |value| is above `fraction` of the largest (0: every
+    /// voxel that is not 0); `None` when every value is 0.
+    fn data_box(&self, fraction: f64) -> Option<DataBox> {
+        let mut peak = 0.0f64;
+        self.each_stored(|_, d| {
+            if d.is_finite() {
+                peak = peak.max(d.abs());
+            }
+        });
+        if peak == 0.0 {
+            return None;
+        }
+        let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+        self.each_stored(|ijk, d| {
+            if d.abs() > fraction * peak {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(ijk[a]);
+                    hi[a] = hi[a].max(ijk[a]);
+                }
+            }
+        });
+        (lo[0] != i64::MAX).then_some(DataBox { min: lo, max: hi })
+    }
+}
 
 /// The index box of a grid's data: the voxels whose change from the background is above
 /// [`DATA_FRACTION`] of the largest change.
@@ -837,13 +1071,11 @@ fn fmt3(v: DVec3) -> String {
 /// stderr. Each names the data's world box and a `bounds` line that holds it.
 fn check_data_placement(
     label: &str,
-    delta_n: &[f64],
-    dims: [usize; 3],
-    min_index: [i32; 3],
+    data: Option<DataBox>,
     world_from_index: &[[f64; 4]; 3],
     bounds: &Bounds,
 ) -> Result<(), FieldError> {
-    let Some(data) = DataBox::find(delta_n, dims, min_index) else {
+    let Some(data) = data else {
         eprintln!(
             "grin: warning: {label}: every voxel maps to the background's index (a constant grid, or a mapping that changes nothing): the medium bends no ray"
         );
@@ -998,6 +1230,60 @@ impl IndexField for VdbField {
 mod tests {
     use super::*;
     use vdb_sys::Transform;
+
+    /// The brick store returns what was put, 0 in bricks not stored (all-zero ones are
+    /// dropped), and its 4x4x4 stencil equals value-by-value reads on and across brick
+    /// edges and the store's own edges.
+    #[test]
+    fn bricks_hold_what_was_put_and_stencils_match_reads() {
+        let bbox = IndexBox {
+            min: [-5, 3, 0],
+            max: [34, 40, 20],
+        };
+        let mut store = Bricks::new(bbox);
+        let f = |ijk: [i32; 3]| {
+            // Zero in the bricks whose first corner has k >= 16 (not stored).
+            if ijk[2] >= 16 {
+                0.0
+            } else {
+                f64::from(ijk[0]) + 100.0 * f64::from(ijk[1]) + 1e4 * f64::from(ijk[2]) + 0.5
+            }
+        };
+        for b in store.brick_indices().collect::<Vec<_>>() {
+            let part = store.brick_box(b);
+            let mut values = vec![0.0; BRICK_VOXELS].into_boxed_slice();
+            for k in part.min[2]..=part.max[2] {
+                for j in part.min[1]..=part.max[1] {
+                    for i in part.min[0]..=part.max[0] {
+                        values[store.local_offset([i, j, k])] = f([i, j, k]);
+                    }
+                }
+            }
+            store.put(b, values);
+        }
+        let stored = store.stored_boxes().len();
+        assert_eq!(stored, 3 * 3, "the k >= 16 bricks are all zero: not stored");
+        for k in -1..=22 {
+            for j in 2..=42 {
+                for i in -6..=36 {
+                    let inside =
+                        (-5..=34).contains(&i) && (3..=40).contains(&j) && (0..=20).contains(&k);
+                    let want = if inside { f([i, j, k]) } else { 0.0 };
+                    let ijk = [i64::from(i), i64::from(j), i64::from(k)];
+                    assert_eq!(store.get(ijk), want, "{ijk:?}");
+                    let taps = store.stencil(ijk);
+                    for c in 0..4 {
+                        for b in 0..4 {
+                            for a in 0..4 {
+                                let at = [ijk[0] + a, ijk[1] + b, ijk[2] + c];
+                                assert_eq!(taps[(a + 4 * (b + 4 * c)) as usize], store.get(at));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     fn params(mapping: Mapping, ambient: f64) -> VdbFieldParams {
         VdbFieldParams {
