@@ -24,8 +24,8 @@ pub fn build_field(
     build_field_capped(medium, scene_dir, crate::vdb::DEFAULT_MAX_DENSE_BYTES)
 }
 
-/// [`build_field`] with a memory cap in bytes for the dense copy of a VDB grid (the
-/// bake command passes its `--max-memory`).
+/// [`build_field`] with a memory cap in bytes for a VDB grid's voxels as loaded (the
+/// bricks kept; its data box at a voxel a byte: the bake command passes its `--max-memory`).
 pub fn build_field_capped(
     medium: &MediumSpec,
     scene_dir: &Path,

@@ -520,6 +520,10 @@ impl VdbField {
                     part.voxel_count()
                 )));
             }
+            // All background (most bricks of a sparse cache): delta_n 0, nothing to keep.
+            if values.iter().all(|&v| f64::from(v) == background) {
+                continue;
+            }
             let mut brick = vec![0.0f64; BRICK_VOXELS].into_boxed_slice();
             let mut it = values.iter();
             for k in part.min[2]..=part.max[2] {

@@ -24,8 +24,9 @@ pub struct Args {
     /// Error budget: max |n error| relative to the field's delta_n range, on random points.
     #[arg(long, default_value_t = bake::DEFAULT_ERROR_BUDGET)]
     pub error: f64,
-    /// Memory cap in bytes for the baked grid (default 1G) and, when given, for the dense
-    /// copy of a VDB grid being read (default 2G there); suffixes k, M, G allowed: 512M.
+    /// Memory cap in bytes for the baked grid (default 1G) and, when given, for what a VDB
+    /// grid keeps in memory (bricks of voxels that change the index; its data box at one
+    /// voxel a byte; default 2G there); suffixes k, M, G allowed: 512M.
     #[arg(long, value_parser = parse_bytes)]
     pub max_memory: Option<u64>,
     /// Interpolation stored as the file's default (and used to measure the error).
@@ -160,7 +161,8 @@ fn bake_one(
         anyhow::bail!("{}: output directory does not exist", dir.display());
     }
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
-    // An explicit --max-memory caps the dense copy of a VDB grid too, not only the bake.
+    // An explicit --max-memory caps what a VDB grid keeps in memory too (its bricks of
+    // voxels that change the index, and its data box at a voxel a byte), not only the bake.
     let vdb_cap = args
         .max_memory
         .unwrap_or(grin_field::vdb::DEFAULT_MAX_DENSE_BYTES);
