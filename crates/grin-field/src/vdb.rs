@@ -31,10 +31,11 @@
 //! Smooth data away from its extreme voxels is unchanged (the orders below hold).
 //! Outside the grid's data box the field is the mapped background value.
 //!
-//! Storage: the data box is read a brick of 16^3 voxels at a time (OpenVDB's copyToDense
+//! Storage: the data box is read a brick of 32^3 voxels at a time (OpenVDB's copyToDense
 //! of the brick) and only the bricks with a voxel whose index differs from the background
 //! are kept ([`Bricks`]): memory follows the data, not its box (two blocks 300 voxels
-//! apart: 0.4 MB kept where the dense copy took 344 MB). `max_bytes` caps the bricks
+//! apart: 0.5 MB kept where the dense copy took 344 MB; 32 voxels a side: smaller bricks
+//! sent more samples across brick edges, 16 made fire-haze's bake 1.33 -> 1.7 s). `max_bytes` caps the bricks
 //! kept, and the box itself at one voxel a byte (reading costs time for every voxel).
 //!
 //! Why ~1220 lines of code in one file (tests after): the mapping, the crop to the active
@@ -56,7 +57,7 @@ pub const DEFAULT_MAX_DENSE_BYTES: u64 = 2 << 30;
 /// Reads the values of an index box (x fastest) into the vector: a grid's brick.
 type ReadBrick<'a> = dyn FnMut(IndexBox, &mut Vec<f32>) -> Result<(), FieldError> + 'a;
 /// Edge of a brick of the loaded voxels ([`Bricks`]), in voxels.
-const BRICK: usize = 16;
+const BRICK: usize = 32;
 /// Voxels in a brick.
 const BRICK_VOXELS: usize = BRICK * BRICK * BRICK;
 /// Voxels of background read around the active box, so the 4-tap stencil near the edge
@@ -918,11 +919,24 @@ impl Bricks {
             }
             return out;
         }
-        for c in 0..4 {
-            for j in 0..4 {
-                for i in 0..4 {
-                    out[i + 4 * (j + 4 * c)] =
-                        self.get([min[0] + i as i64, min[1] + j as i64, min[2] + c as i64]);
+        // Across bricks: each axis's 4 taps as (brick, offset in it), or outside.
+        let axis = |a: usize| -> [Option<(usize, usize)>; 4] {
+            std::array::from_fn(|t| {
+                let v = r[a] + t as i64;
+                (v >= 0 && v < self.dims[a] as i64)
+                    .then_some((v as usize / BRICK, v as usize % BRICK))
+            })
+        };
+        let (ax, ay, az) = (axis(0), axis(1), axis(2));
+        for (c, z) in az.iter().enumerate() {
+            let Some((bz, lz)) = *z else { continue };
+            for (j, y) in ay.iter().enumerate() {
+                let Some((by, ly)) = *y else { continue };
+                for (i, x) in ax.iter().enumerate() {
+                    let Some((bx, lx)) = *x else { continue };
+                    if let Some(v) = &self.bricks[self.slot([bx, by, bz])] {
+                        out[i + 4 * (j + 4 * c)] = v[lx + BRICK * (ly + BRICK * lz)];
+                    }
                 }
             }
         }
@@ -1240,14 +1254,15 @@ mod tests {
     /// edges and the store's own edges.
     #[test]
     fn bricks_hold_what_was_put_and_stencils_match_reads() {
+        let e = BRICK as i32;
         let bbox = IndexBox {
             min: [-5, 3, 0],
-            max: [34, 40, 20],
+            max: [e + 2, e + 8, e + 4],
         };
         let mut store = Bricks::new(bbox);
         let f = |ijk: [i32; 3]| {
-            // Zero in the bricks whose first corner has k >= 16 (not stored).
-            if ijk[2] >= 16 {
+            // Zero in the second layer of bricks along z (not stored).
+            if ijk[2] >= e {
                 0.0
             } else {
                 f64::from(ijk[0]) + 100.0 * f64::from(ijk[1]) + 1e4 * f64::from(ijk[2]) + 0.5
@@ -1266,12 +1281,17 @@ mod tests {
             store.put(b, values);
         }
         let stored = store.stored_boxes().len();
-        assert_eq!(stored, 3 * 3, "the k >= 16 bricks are all zero: not stored");
-        for k in -1..=22 {
-            for j in 2..=42 {
-                for i in -6..=36 {
-                    let inside =
-                        (-5..=34).contains(&i) && (3..=40).contains(&j) && (0..=20).contains(&k);
+        assert_eq!(
+            stored,
+            2 * 2,
+            "the second layer along z is all zero: not stored"
+        );
+        for k in -1..=e + 6 {
+            for j in 2..=e + 10 {
+                for i in -6..=e + 4 {
+                    let inside = (-5..=e + 2).contains(&i)
+                        && (3..=e + 8).contains(&j)
+                        && (0..=e + 4).contains(&k);
                     let want = if inside { f([i, j, k]) } else { 0.0 };
                     let ijk = [i64::from(i), i64::from(j), i64::from(k)];
                     assert_eq!(store.get(ijk), want, "{ijk:?}");
