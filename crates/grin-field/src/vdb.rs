@@ -996,6 +996,58 @@ impl Bricks {
     }
 }
 
+/// Where scalar grid `grid` of `file` has its data ([`DataBox`]: the voxels whose change
+/// from the background is above [`DATA_FRACTION`] of the largest), read a brick at a
+/// time over the box OpenVDB gives for its non-background values (else its active box),
+/// keeping only the bricks that change anything: `Ok(None)` where no value leaves the
+/// background. `max_bytes` caps the bricks kept and the box at one voxel a byte.
+pub fn locate_data(
+    file: &VdbFile,
+    grid: &vdb_sys::GridInfo,
+    max_bytes: u64,
+) -> Result<Option<DataBox>, String> {
+    let Some(bbox) = grid.data_bbox.or(grid.active_bbox) else {
+        return Ok(None);
+    };
+    if bbox.voxel_count() > u128::from(max_bytes) {
+        return Err(format!(
+            "its data box {:?}..={:?} is {} voxels, more than the {max_bytes} read here",
+            bbox.min,
+            bbox.max,
+            bbox.voxel_count()
+        ));
+    }
+    let mut change = Bricks::new(bbox);
+    for b in change.brick_indices().collect::<Vec<_>>() {
+        let part = change.brick_box(b);
+        let values = file
+            .read_scalar(&grid.name, part, max_bytes)
+            .map_err(|e| e.to_string())?
+            .values;
+        if values.iter().all(|&v| f64::from(v) == grid.background) {
+            continue;
+        }
+        let mut brick = vec![0.0f64; BRICK_VOXELS].into_boxed_slice();
+        let mut it = values.iter();
+        for k in part.min[2]..=part.max[2] {
+            for j in part.min[1]..=part.max[1] {
+                for i in part.min[0]..=part.max[0] {
+                    let Some(&v) = it.next() else { break };
+                    let d = (f64::from(v) - grid.background).abs();
+                    brick[change.local_offset([i, j, k])] = if d.is_finite() { d } else { 0.0 };
+                }
+            }
+        }
+        change.put(b, brick);
+        if change.stored_bytes() > max_bytes {
+            return Err(format!(
+                "its non-background voxels need more than the {max_bytes} bytes read here"
+            ));
+        }
+    }
+    Ok(change.data_box(DATA_FRACTION))
+}
+
 /// The index box of a grid's data: the voxels whose change from the background is above
 /// [`DATA_FRACTION`] of the largest change.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -2,15 +2,16 @@
 
 use std::path::Path;
 
-use grin_field::vdb::{DATA_FRACTION, DataBox, compose, placement};
+use grin_field::vdb::{DATA_FRACTION, DataBox, compose, locate_data, placement};
 use grin_scene::UpAxis;
 use serde_json::{Value, json};
 use vdb_sys::{GridInfo, Meta, MetaValue, VdbFile};
 
 use crate::cmd::info::UpArg;
 
-/// Largest dense read (bytes of f32) `grin info` makes to find where a grid's data is.
-const DATA_READ_CAP: u64 = 1 << 30;
+/// What `grin info` reads to find where a grid's data is: bricks of its non-background
+/// voxels within 2 GiB, and a data box of at most 2 Gi voxels.
+const DATA_READ_CAP: u64 = 2 << 30;
 
 /// Where one scalar grid's data is, in the scene frame of `--up`.
 struct DataPlace {
@@ -56,27 +57,12 @@ impl DataPlace {
     }
 }
 
-/// Read a scalar grid's active box and find its data ([`DataBox`]); `Ok(None)` for a grid
+/// Find a scalar grid's data ([`locate_data`]); `Ok(None)` for a grid
 /// whose values never leave the background; `Err` says why it was not looked at.
 fn data_place(file: &VdbFile, g: &GridInfo, up: UpArg) -> Result<Option<DataPlace>, String> {
     if !g.kind.is_scalar() {
         return Err("not a scalar grid".into());
     }
-    let Some(bbox) = g.active_bbox else {
-        return Ok(None);
-    };
-    let dense = file
-        .read_scalar(&g.name, bbox, DATA_READ_CAP)
-        .map_err(|e| e.to_string())?;
-    let change: Vec<f64> = dense
-        .values
-        .iter()
-        .map(|&v| {
-            let d = (f64::from(v) - g.background).abs();
-            if d.is_finite() { d } else { 0.0 }
-        })
-        .collect();
-    let dims = bbox.dims().map(|d| d as usize);
     let turn = placement(
         match up {
             UpArg::Y => UpAxis::Y,
@@ -87,7 +73,7 @@ fn data_place(file: &VdbFile, g: &GridInfo, up: UpArg) -> Result<Option<DataPlac
         [0.0; 3],
     );
     Ok(
-        DataBox::find(&change, dims, bbox.min).map(|data| DataPlace {
+        locate_data(file, g, DATA_READ_CAP)?.map(|data| DataPlace {
             data,
             world_from_index: compose(&turn, &g.transform.world_from_index),
         }),
