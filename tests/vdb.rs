@@ -1395,6 +1395,41 @@ vdb.write(sys.argv[1], grids=[g])
     assert_eq!((b.min, b.max), ([-2, -2, -2], [307, 307, 307]));
 }
 
+/// `grin info` on a cache active over a 700^3 domain (a dense read of it, 1.4 GB, was
+/// refused: "data: not located") with two small blocks near opposite corners: it reads
+/// the blocks' box a brick at a time and reports exactly where the data is.
+#[test]
+fn info_locates_the_data_of_a_large_cache() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("large.vdb");
+    run_openvdb_python(
+        dir.path(),
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+g = vdb.FloatGrid()
+g.name = "temperature"
+g.fill((0, 0, 0), (699, 699, 699), 0.0, active=True)
+g.copyFromArray(np.ones((4, 5, 6), dtype=np.float32), ijk=(20, 30, 40), tolerance=0)
+g.copyFromArray(np.ones((3, 3, 3), dtype=np.float32), ijk=(650, 640, 630), tolerance=0)
+g.transform = vdb.createLinearTransform(voxelSize=0.02)
+vdb.write(sys.argv[1], grids=[g])
+"#,
+        &file,
+    );
+    let out = run(&["info", file.to_str().expect("utf8"), "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let g = &v["grids"][0];
+    assert_eq!(g["data_index_box"]["min"], serde_json::json!([20, 30, 40]), "{g}");
+    assert_eq!(g["data_index_box"]["max"], serde_json::json!([652, 642, 632]), "{g}");
+}
+
 /// A sequence whose grid is renamed in one frame or changes type in another is refused
 /// before anything is rendered, naming the frame, its file and what differs.
 #[test]
