@@ -1386,7 +1386,11 @@ vdb.write(sys.argv[1], grids=[g])
         t.elapsed().as_secs_f64(),
         field.voxel_bytes()
     );
-    assert!(field.voxel_bytes() < 1 << 20, "{} bytes", field.voxel_bytes());
+    assert!(
+        field.voxel_bytes() < 1 << 20,
+        "{} bytes",
+        field.voxel_bytes()
+    );
     // Voxel centres inside each block, and the background between them.
     assert!((field.n(DVec3::splat(0.025)) - 1.0001).abs() < 1e-12);
     assert!((field.n(DVec3::splat(3.025)) - 1.0002).abs() < 1e-12);
@@ -1426,8 +1430,16 @@ vdb.write(sys.argv[1], grids=[g])
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
     let g = &v["grids"][0];
-    assert_eq!(g["data_index_box"]["min"], serde_json::json!([20, 30, 40]), "{g}");
-    assert_eq!(g["data_index_box"]["max"], serde_json::json!([652, 642, 632]), "{g}");
+    assert_eq!(
+        g["data_index_box"]["min"],
+        serde_json::json!([20, 30, 40]),
+        "{g}"
+    );
+    assert_eq!(
+        g["data_index_box"]["max"],
+        serde_json::json!([652, 642, 632]),
+        "{g}"
+    );
 }
 
 /// A sequence whose grid is renamed in one frame or changes type in another is refused

@@ -72,12 +72,10 @@ fn data_place(file: &VdbFile, g: &GridInfo, up: UpArg) -> Result<Option<DataPlac
         [0.0; 3],
         [0.0; 3],
     );
-    Ok(
-        locate_data(file, g, DATA_READ_CAP)?.map(|data| DataPlace {
-            data,
-            world_from_index: compose(&turn, &g.transform.world_from_index),
-        }),
-    )
+    Ok(locate_data(file, g, DATA_READ_CAP)?.map(|data| DataPlace {
+        data,
+        world_from_index: compose(&turn, &g.transform.world_from_index),
+    }))
 }
 
 /// Print the grids of `path` (text, or JSON on stdout with `json`).
