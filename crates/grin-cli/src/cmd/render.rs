@@ -769,13 +769,17 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
             None => summary.exr.display().to_string(),
         };
         report(format!(
-            "rendered {}x{} x {} spp on {} ({}) in {:.3} s (+ {:.3} s setup): {:.3} Mrays/s, {:.1} steps/ray, {:.1} field evals/ray\nwrote {}",
+            "rendered {}x{} x {} spp on {} ({}) in {:.3} s{} (+ {:.3} s setup): {:.3} Mrays/s, {:.1} steps/ray, {:.1} field evals/ray\nwrote {}",
             summary.width,
             summary.height,
             summary.spp,
             summary.backend,
             summary.adapter,
             summary.seconds,
+            summary
+                .device_seconds
+                .map(|d| format!(", {d:.3} s of it on the device"))
+                .unwrap_or_default(),
             summary.setup_seconds,
             summary.rays_per_second * 1e-6,
             summary.steps_per_ray,
