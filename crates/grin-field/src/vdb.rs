@@ -55,7 +55,7 @@ use crate::field::{FieldError, FieldSample, IndexField};
 /// delta_n): 2 GiB.
 pub const DEFAULT_MAX_DENSE_BYTES: u64 = 2 << 30;
 /// Reads the values of an index box (x fastest) into the vector: a grid's brick.
-type ReadBrick<'a> = dyn FnMut(IndexBox, &mut Vec<f32>) -> Result<(), FieldError> + 'a;
+type ReadBrick<'a, E = FieldError> = dyn FnMut(IndexBox, &mut Vec<f32>) -> Result<(), E> + 'a;
 /// Edge of a brick of the loaded voxels ([`Bricks`]), in voxels.
 const BRICK: usize = 32;
 /// Voxels in a brick.
@@ -506,71 +506,63 @@ impl VdbField {
                 read_box.min, read_box.max, params.max_bytes
             )));
         }
-        let mut voxels = Bricks::new(read_box);
         let (mut lo, mut hi) = (ambient, ambient);
         let mut non_finite = 0u64;
         let mut first_non_finite = None;
-        let mut values = Vec::new();
-        for b in voxels.brick_indices() {
-            let part = voxels.brick_box(b);
-            read(part, &mut values)?;
-            if values.len() as u128 != part.voxel_count() {
+        let mut checked = |part: IndexBox, out: &mut Vec<f32>| -> Result<(), FieldError> {
+            read(part, out)?;
+            if out.len() as u128 != part.voxel_count() {
                 return Err(FieldError::Other(format!(
                     "{label}: read {} values for a brick of {} voxels",
-                    values.len(),
+                    out.len(),
                     part.voxel_count()
                 )));
             }
-            // All background (most bricks of a sparse cache): delta_n 0, nothing to keep.
-            if values.iter().all(|&v| f64::from(v) == background) {
-                continue;
+            Ok(())
+        };
+        let delta_n = |ijk: [i32; 3], v: f32| -> Result<f64, FieldError> {
+            if !v.is_finite() {
+                non_finite += 1;
+                first_non_finite.get_or_insert(ijk);
+                return Ok(0.0);
             }
-            let mut brick = vec![0.0f64; BRICK_VOXELS].into_boxed_slice();
-            let mut it = values.iter();
-            for k in part.min[2]..=part.max[2] {
-                for j in part.min[1]..=part.max[1] {
-                    for i in part.min[0]..=part.max[0] {
-                        let Some(&v) = it.next() else { break };
-                        let ijk = [i, j, k];
-                        if !v.is_finite() {
-                            non_finite += 1;
-                            first_non_finite.get_or_insert(ijk);
-                            continue;
-                        }
-                        let n = mapping.n(f64::from(v), ambient).map_err(|t| {
-                            let p = world_of(ijk);
-                            param_err(
-                                "map",
-                                format!(
-                                    "grid value {v} maps to T = {t} K <= 0 at world ({:.4}, {:.4}, {:.4})",
-                                    p[0], p[1], p[2]
-                                ),
-                            )
-                        })? + shift;
-                        if n <= 0.0 || !n.is_finite() {
-                            let p = world_of(ijk);
-                            return Err(FieldError::NonPositive {
-                                field: label,
-                                n,
-                                x: p[0],
-                                y: p[1],
-                                z: p[2],
-                            });
-                        }
-                        lo = lo.min(n);
-                        hi = hi.max(n);
-                        brick[voxels.local_offset(ijk)] = n - ambient;
-                    }
-                }
+            let n = mapping.n(f64::from(v), ambient).map_err(|t| {
+                let p = world_of(ijk);
+                param_err(
+                    "map",
+                    format!(
+                        "grid value {v} maps to T = {t} K <= 0 at world ({:.4}, {:.4}, {:.4})",
+                        p[0], p[1], p[2]
+                    ),
+                )
+            })? + shift;
+            if n <= 0.0 || !n.is_finite() {
+                let p = world_of(ijk);
+                return Err(FieldError::NonPositive {
+                    field: label.clone(),
+                    n,
+                    x: p[0],
+                    y: p[1],
+                    z: p[2],
+                });
             }
-            voxels.put(b, brick);
-            if voxels.stored_bytes() > params.max_bytes {
-                return Err(FieldError::Other(format!(
+            lo = lo.min(n);
+            hi = hi.max(n);
+            Ok(n - ambient)
+        };
+        let voxels = Bricks::read(
+            read_box,
+            background,
+            params.max_bytes,
+            &mut checked,
+            delta_n,
+            || {
+                FieldError::Other(format!(
                     "{label}: the voxels that change the index (in bricks of {BRICK}^3 within the index box {:?}..={:?}) need more than the memory cap of {} bytes; raise it (`grin bake --max-memory`) or crop the grid",
                     read_box.min, read_box.max, params.max_bytes
-                )));
-            }
-        }
+                ))
+            },
+        )?;
         if let (Some(ijk), NonFinitePolicy::Reject) = (first_non_finite, params.non_finite) {
             let p = world_of(ijk);
             return Err(FieldError::Other(format!(
@@ -846,6 +838,45 @@ impl Bricks {
         }
     }
 
+    /// The store over `bbox`, read a brick at a time by `read` (the brick's box -> its
+    /// values, x fastest). A brick all at `background` is skipped (most bricks of a sparse
+    /// cache); the others keep `voxel(index, value)` of each voxel and are stored where one
+    /// of those is not 0. An error of `read` or `voxel`, or `over_cap()` once the store
+    /// holds more than `max_bytes`, ends the read.
+    fn read<E>(
+        bbox: IndexBox,
+        background: f64,
+        max_bytes: u64,
+        read: &mut ReadBrick<'_, E>,
+        mut voxel: impl FnMut([i32; 3], f32) -> Result<f64, E>,
+        over_cap: impl Fn() -> E,
+    ) -> Result<Self, E> {
+        let mut store = Bricks::new(bbox);
+        let mut values = Vec::new();
+        for b in store.brick_indices() {
+            let part = store.brick_box(b);
+            read(part, &mut values)?;
+            if values.iter().all(|&v| f64::from(v) == background) {
+                continue;
+            }
+            let mut brick = vec![0.0f64; BRICK_VOXELS].into_boxed_slice();
+            let mut it = values.iter();
+            for k in part.min[2]..=part.max[2] {
+                for j in part.min[1]..=part.max[1] {
+                    for i in part.min[0]..=part.max[0] {
+                        let Some(&v) = it.next() else { break };
+                        brick[store.local_offset([i, j, k])] = voxel([i, j, k], v)?;
+                    }
+                }
+            }
+            store.put(b, brick);
+            if store.stored_bytes() > max_bytes {
+                return Err(over_cap());
+            }
+        }
+        Ok(store)
+    }
+
     /// Every brick's position in the brick grid, x fastest.
     fn brick_indices(&self) -> impl Iterator<Item = [usize; 3]> + use<> {
         let c = self.counts;
@@ -1017,34 +1048,24 @@ pub fn locate_data(
             bbox.voxel_count()
         ));
     }
-    let mut change = Bricks::new(bbox);
-    for b in change.brick_indices().collect::<Vec<_>>() {
-        let part = change.brick_box(b);
-        let values = file
+    let mut read = |part: IndexBox, out: &mut Vec<f32>| -> Result<(), String> {
+        *out = file
             .read_scalar(&grid.name, part, max_bytes)
             .map_err(|e| e.to_string())?
             .values;
-        if values.iter().all(|&v| f64::from(v) == grid.background) {
-            continue;
-        }
-        let mut brick = vec![0.0f64; BRICK_VOXELS].into_boxed_slice();
-        let mut it = values.iter();
-        for k in part.min[2]..=part.max[2] {
-            for j in part.min[1]..=part.max[1] {
-                for i in part.min[0]..=part.max[0] {
-                    let Some(&v) = it.next() else { break };
-                    let d = (f64::from(v) - grid.background).abs();
-                    brick[change.local_offset([i, j, k])] = if d.is_finite() { d } else { 0.0 };
-                }
-            }
-        }
-        change.put(b, brick);
-        if change.stored_bytes() > max_bytes {
-            return Err(format!(
-                "its non-background voxels need more than the {max_bytes} bytes read here"
-            ));
-        }
-    }
+        Ok(())
+    };
+    let change = Bricks::read(
+        bbox,
+        grid.background,
+        max_bytes,
+        &mut read,
+        |_, v| {
+            let d = (f64::from(v) - grid.background).abs();
+            Ok(if d.is_finite() { d } else { 0.0 })
+        },
+        || format!("its non-background voxels need more than the {max_bytes} bytes read here"),
+    )?;
     Ok(change.data_box(DATA_FRACTION))
 }
 
