@@ -1294,6 +1294,22 @@ vdb.write(sys.argv[1], grids=[g])
     );
 }
 
+/// n = 1 + 1e-4 * value in the box [lo, hi]^3 (world), ambient 1, under `max_bytes`.
+fn temperature_in_box(lo: f64, hi: f64, max_bytes: u64) -> VdbFieldParams {
+    VdbFieldParams {
+        mapping: Mapping::Linear { k: 1e-4 },
+        units: 1.0,
+        non_finite: NonFinitePolicy::Reject,
+        bounds: Bounds::Box {
+            min: DVec3::splat(lo),
+            max: DVec3::splat(hi),
+        },
+        ambient: Some(1.0),
+        max_bytes,
+        placement: grin_field::vdb::IDENTITY,
+    }
+}
+
 /// A cache whose active box is its whole domain (a 200^3 fill of background-valued active
 /// voxels, as fluid caches are written) with a 10^3 hot block: only the block (and 2
 /// voxels of padding) is read into memory, found from OpenVDB's tree without a dense copy
@@ -1325,19 +1341,8 @@ vdb.write(sys.argv[1], grids=[g])
     assert_eq!((data.min, data.max), ([90, 100, 80], [99, 109, 89]));
     assert_eq!(info.data_voxel_count, 1000);
 
-    let params = VdbFieldParams {
-        mapping: Mapping::Linear { k: 1e-4 },
-        units: 1.0,
-        non_finite: NonFinitePolicy::Reject,
-        bounds: Bounds::Box {
-            min: DVec3::splat(-0.01),
-            max: DVec3::splat(2.0),
-        },
-        ambient: Some(1.0),
-        // A dense copy of the domain (8e6 voxels, 96 MB) would not fit under this cap.
-        max_bytes: 1 << 20,
-        placement: grin_field::vdb::IDENTITY,
-    };
+    // A dense copy of the domain (8e6 voxels, 96 MB) would not fit under this cap.
+    let params = temperature_in_box(-0.01, 2.0, 1 << 20);
     let field = VdbField::load(&file, "temperature", &params).expect("load");
     let b = field.index_box();
     assert_eq!((b.min, b.max), ([88, 98, 78], [101, 111, 91]));
@@ -1367,18 +1372,7 @@ vdb.write(sys.argv[1], grids=[g])
 "#,
         &file,
     );
-    let params = VdbFieldParams {
-        mapping: Mapping::Linear { k: 1e-4 },
-        units: 1.0,
-        non_finite: NonFinitePolicy::Reject,
-        bounds: Bounds::Box {
-            min: DVec3::splat(-0.1),
-            max: DVec3::splat(3.2),
-        },
-        ambient: Some(1.0),
-        max_bytes: 32 << 20,
-        placement: grin_field::vdb::IDENTITY,
-    };
+    let params = temperature_in_box(-0.1, 3.2, 32 << 20);
     let t = std::time::Instant::now();
     let field = VdbField::load(&file, "temperature", &params).expect("load");
     eprintln!(
