@@ -89,7 +89,8 @@ fn render_gpu_writes_exr_png_and_summary() {
 
 /// The frame is dispatched in bands of rows (32 Ki pixels on lavapipe, 2 Mi / spp on a
 /// GPU); their size (`GRIN_BAND_PIXELS`) must not change a pixel: bands of 700 pixels
-/// (7 rows of 96, the last band partial) give the same EXR as one band for the frame.
+/// (7 rows of 96, the last band partial) give the same EXR as one band for the frame. A
+/// value that is not a positive number is said and the default band used.
 #[test]
 fn band_size_does_not_change_the_image() {
     if !have_gpu("band_size_does_not_change_the_image") {
@@ -106,10 +107,22 @@ fn band_size_does_not_change_the_image() {
             .output()
             .expect("run grin");
         assert!(o.status.success(), "grin render failed: {}", stderr(&o));
-        grin_trace::image::Frame::read_exr(&out).expect("EXR readable")
+        (
+            grin_trace::image::Frame::read_exr(&out).expect("EXR readable"),
+            stderr(&o),
+        )
     };
-    let whole = render("100000", "whole.exr");
-    let banded = render("700", "banded.exr");
+    let (whole, _) = render("100000", "whole.exr");
+    let (banded, _) = render("700", "banded.exr");
+    let (default, err) = render("-3", "default.exr");
+    assert!(
+        err.contains("GRIN_BAND_PIXELS=\"-3\" is not a positive number"),
+        "{err}"
+    );
+    assert!(
+        whole.pixels == default.pixels,
+        "the default band changes pixels"
+    );
     assert!(
         whole.pixels.iter().any(|p| p.steps > 0.0),
         "the medium is marched"

@@ -39,17 +39,25 @@ fn pixels_per_band(ctx: &GpuContext, spp: u32) -> u32 {
     } else {
         (PIXELS_PER_BAND_GPU / spp.max(1)).max(PIXELS_PER_BAND_CPU)
     };
-    let wanted = std::env::var("GRIN_BAND_PIXELS")
-        .ok()
-        .and_then(|v| v.trim().parse::<u32>().ok())
-        .filter(|&n| n > 0)
-        .unwrap_or(default);
+    let wanted = band_override().ok().flatten().unwrap_or(default);
     let limits = ctx.limits();
     let fits = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size)
         / std::mem::size_of::<PixelOut>() as u64;
     wanted.min(u32::try_from(fits).unwrap_or(u32::MAX)).max(1)
+}
+
+/// `GRIN_BAND_PIXELS` as a positive integer: `Ok(None)` when unset, `Err` with the text
+/// when it is something else (the default band is used then, with a warning).
+fn band_override() -> Result<Option<u32>, String> {
+    match std::env::var("GRIN_BAND_PIXELS") {
+        Err(_) => Ok(None),
+        Ok(v) => match v.trim().parse::<u32>() {
+            Ok(n) if n > 0 => Ok(Some(n)),
+            _ => Err(v),
+        },
+    }
 }
 
 /// Workgroup size of `render_main` and `bench_main` (keep in sync with the shaders).
@@ -186,6 +194,11 @@ impl<'a> GpuRenderer<'a> {
         let s = &scene.settings;
         let mut params = frame_params(scene)?;
         let mut warnings = Vec::new();
+        if let Err(v) = band_override() {
+            warnings.push(format!(
+                "GRIN_BAND_PIXELS={v:?} is not a positive number of pixels: the adapter's default band is used"
+            ));
+        }
         let field = match &scene.medium {
             Some(m) => {
                 let owned;
