@@ -22,7 +22,7 @@ const MIN_SPAN_REL: f32 = 1e-9;
 const MIN_FLIGHT_VOXELS: f32 = 1e-3;
 // boundary::EXIT_TOL_REL (unreachable in f32: the bisection stops when the step
 // fraction runs out of bits, then projects onto the surface, as the CPU's f32 path does).
-const EXIT_TOL_REL: f32 = 1e-12;
+const EXIT_TOL_REL: f32 = 1e-14;
 const F32_EPSILON: f32 = 1.1920929e-7;
 // boundary::EXIT_TOL_EPS: the tolerance is at least this much roundoff times the
 // bounds' largest coordinate.

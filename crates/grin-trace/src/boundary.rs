@@ -295,9 +295,12 @@ impl Segment {
 pub const MAX_BISECTIONS: u32 = 64;
 
 /// Exit tolerance of the bisection method, as a fraction of the bounds' radius: |signed
-/// distance| of the exit point to the surface. 1e-12 R leaves 3 orders of headroom to
-/// the 1e-9 R the boundary tests ask for and is ~10^4 ulp of the coordinates.
-pub const EXIT_TOL_REL: f64 = 1e-12;
+/// distance| of the exit point to the surface. 1e-14 R is ~45 ulp of the coordinates in
+/// f64, a Newton re-step or two more than 1e-12 R, and takes the exit point off the error
+/// floor: at 1e-12 R it left exit directions ~1e-12 rad off on the fish-eye (a curved ray
+/// ends 1e-12 R early or late), which hid two halvings of the step from the order fits of
+/// `grin bench accuracy`.
+pub const EXIT_TOL_REL: f64 = 1e-14;
 /// ... and at least this many units of the precision's roundoff times the largest
 /// coordinate of the bounds: in f32 a point on the surface is known to no better, so an
 /// exit search held to 1e-12 R only spends re-steps that cannot move the point (the GPU
