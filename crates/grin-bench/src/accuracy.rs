@@ -19,7 +19,7 @@ use crate::cases::{Case, Exit};
 use crate::methods::{Method, Policy, Precision, all_methods};
 
 /// Tolerance of the numerical reference, relative to the case's length scale.
-pub const REFERENCE_TOL: f64 = 1e-12;
+pub const REFERENCE_TOL: f64 = 1e-14;
 
 /// The reference exits of a case and how far the numerical reference is from the exact
 /// solution (where there is one).
@@ -341,6 +341,10 @@ pub struct Order {
     pub expected: u32,
     /// Least-squares slope over the points used (None: fewer than 3 in range).
     pub measured: Option<f64>,
+    /// The same fit of the optical path's error, where the case's exact solution gives
+    /// the path (Luneburg, rod): it sees the phase along a ray, which the exit direction
+    /// need not (rk4 on the lens: direction 5, path 4; docs/accuracy.md).
+    pub measured_opl: Option<f64>,
     pub points_used: usize,
     /// The steps a ray of the runs fitted (finest last), so a reader sees the range.
     pub steps: String,
@@ -383,8 +387,11 @@ impl OrderVerdict {
 }
 
 /// Errors below this (rad) are at the reference's or the precision's floor and above
-/// `ORDER_MAX_ERR` outside the asymptotic range: neither is used in order fits.
-pub const ORDER_MIN_ERR_F64: f64 = 1e-10;
+/// `ORDER_MAX_ERR` outside the asymptotic range: neither is used in order fits. In f64
+/// the references (exact, or Dormand-Prince at [`REFERENCE_TOL`]) and the exit search
+/// (`boundary::EXIT_TOL_REL`, 1e-14 R) leave errors of 1e-15 .. 1e-14 R: two decades
+/// below this floor, so they move no fitted slope by more than ~0.01.
+pub const ORDER_MIN_ERR_F64: f64 = 1e-12;
 pub const ORDER_MIN_ERR_F32: f64 = 1e-5;
 pub const ORDER_MAX_ERR: f64 = 1e-2;
 /// An order is fitted over the finest this many runs inside the error window (two
@@ -393,6 +400,11 @@ pub const ORDER_MAX_ERR: f64 = 1e-2;
 pub const ORDER_FIT_POINTS: usize = 3;
 /// How far a measured order may be from the expected one and count as it.
 pub const ORDER_TOLERANCE: f64 = 0.3;
+/// A run is in an order fit only where the run at twice its step took at most this
+/// fraction of its steps: the step asked for is the step taken. Steps capped at the
+/// field's feature size (the plume's R/2 .. R/8 take 14, 14 and 17 steps a ray) are a mix
+/// of two step sizes, not a point of the h sequence.
+pub const STEP_HALVED_MAX_RATIO: f64 = 0.6;
 
 /// Convergence orders of every integrator with fixed steps, on each smooth case.
 pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
@@ -421,14 +433,26 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
                     }
                     let formal = grin_trace::integrate::order(integrator);
                     let expected = case.order_limit.map_or(formal, |l| formal.min(l));
-                    let runs: Vec<(f64, f64)> = pts
-                        .iter()
-                        .map(|p| {
-                            let err = if p.failed() { f64::INFINITY } else { p.err_dir };
-                            (p.steps_per_ray, err)
-                        })
-                        .collect();
-                    let (measured, used) = fit_order(&runs, floor);
+                    // (step asked, steps a ray, error; infinite when the run failed)
+                    let runs = |error: fn(&Point) -> f64| -> Vec<(f64, f64, f64)> {
+                        pts.iter()
+                            .map(|p| {
+                                let e = if p.failed() { f64::INFINITY } else { error(p) };
+                                (p.param, p.steps_per_ray, e)
+                            })
+                            .collect()
+                    };
+                    let (measured, used) =
+                        fit_order(&step_halved_runs(&runs(|p| p.err_dir)), floor);
+                    // The optical path's order, where the case's exact solution gives it
+                    // (the numerical references' own path sums sit near 1e-11).
+                    let exact_opl = case
+                        .exact
+                        .as_ref()
+                        .is_some_and(|e| e.iter().all(|x| x.opl.is_some()));
+                    let measured_opl = exact_opl
+                        .then(|| fit_order(&step_halved_runs(&runs(|p| p.err_opl)), floor).0)
+                        .flatten();
                     let steps = used
                         .iter()
                         .map(|p| format!("{:.0}", p.0))
@@ -442,6 +466,7 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
                         formal,
                         expected,
                         measured,
+                        measured_opl,
                         points_used: used.len(),
                         steps,
                         verdict: OrderVerdict::of(measured, expected),
@@ -451,6 +476,21 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
         }
     }
     out
+}
+
+/// The runs of `runs` (step or its parameter, steps a ray, error) whose step was the one
+/// asked for: the run at twice the step took at most [`STEP_HALVED_MAX_RATIO`] of its
+/// steps (the coarsest run, with none to compare, is left out too). Returns (steps a
+/// ray, error) for [`fit_order`].
+pub fn step_halved_runs(runs: &[(f64, f64, f64)]) -> Vec<(f64, f64)> {
+    runs.iter()
+        .filter(|&&(param, steps, _)| {
+            runs.iter().any(|&(p2, s2, _)| {
+                (p2 / (2.0 * param) - 1.0).abs() < 1e-9 && s2 <= STEP_HALVED_MAX_RATIO * steps
+            })
+        })
+        .map(|&(_, steps, err)| (steps, err))
+        .collect()
 }
 
 /// The order of one method's fixed-step runs, each given as (steps a ray, exit-direction

@@ -17,7 +17,7 @@
 //!
 //! The other fields (Gaussian plume, an `expr` formula, fBm noise, and baked grids of the
 //! analytic ones) have no closed form: their reference is the Dormand-Prince pair at a
-//! tolerance of 1e-12 R in f64 with the bisection exit on the *unbaked* source, so a baked
+//! tolerance of 1e-14 R in f64 with the bisection exit on the *unbaked* source, so a baked
 //! case's error includes what the bake itself lost.
 
 use std::f64::consts::PI;

@@ -10,7 +10,8 @@ use grin_scene::ExitMethod;
 
 use crate::accuracy::{
     AccuracyRun, DECADES, ORDER_FIT_POINTS, ORDER_MAX_ERR, ORDER_MIN_ERR_F32, ORDER_MIN_ERR_F64,
-    ORDER_TOLERANCE, OrderVerdict, Point, cheapest_at, pareto,
+    ORDER_TOLERANCE, OrderVerdict, Point, REFERENCE_TOL, STEP_HALVED_MAX_RATIO, cheapest_at,
+    pareto,
 };
 use crate::chart::{Chart, Curve, LineKind, png, svg};
 use crate::methods::{Policy, Precision};
@@ -378,11 +379,12 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
         run.seconds
     );
     let _ = writeln!(s, "## References\n");
+    let reference_kind = format!("dopri {REFERENCE_TOL:.0e} on the source");
     let references = run.cases.iter().zip(&run.references).map(|(c, r)| {
         let kind = if c.exact.is_some() {
             "exact"
         } else {
-            "dopri 1e-12 on the source"
+            &reference_kind
         };
         vec![
             c.name.to_string(),
@@ -473,7 +475,8 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
     let fitted = run.orders.len() - count(OrderVerdict::TooFewPoints);
     let _ = writeln!(
         s,
-        "The slope of log error against log step over the finest {ORDER_FIT_POINTS} runs with {ORDER_MIN_ERR_F64:.0e} < error < {ORDER_MAX_ERR:.0e} rad (f32: from {ORDER_MIN_ERR_F32:.0e}); expected: the formal order, or the field's own limit where lower. Of {fitted} fitted: {} within {ORDER_TOLERANCE} of the expected order, {} faster, {} slower; {} rows with fewer than 3 runs in the window.\n",
+        "The slope of log error against log step over the finest {ORDER_FIT_POINTS} runs with {ORDER_MIN_ERR_F64:.0e} < error < {ORDER_MAX_ERR:.0e} rad (f32: from {ORDER_MIN_ERR_F32:.0e}) whose step was the one asked for (halving it at least {:.2}x the steps: not capped at the field's feature size); \"path\" is the same fit of the optical path's error where the exact solution gives it; expected: the formal order, or the field's own limit where lower. Of {fitted} fitted: {} within {ORDER_TOLERANCE} of the expected order, {} faster, {} slower; {} rows with fewer than 3 runs in the window.\n",
+        1.0 / STEP_HALVED_MAX_RATIO,
         count(OrderVerdict::AsExpected),
         count(OrderVerdict::Faster),
         count(OrderVerdict::Slower),
@@ -488,6 +491,7 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             o.formal.to_string(),
             o.expected.to_string(),
             opt(o.measured, |x| format!("{x:.2}")),
+            opt(o.measured_opl, |x| format!("{x:.2}")),
             o.verdict.name().to_string(),
             o.steps.clone(),
         ]
@@ -502,6 +506,7 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             "formal",
             "expected",
             "measured",
+            "path",
             "verdict",
             "steps a ray fitted",
         ],
