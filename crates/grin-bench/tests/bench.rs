@@ -119,7 +119,10 @@ fn rk4_superconverges_at_the_lens_exit_but_not_along_the_path() {
         (direction - 5.0).abs() < 0.3,
         "lens exit direction: order {direction:.2}"
     );
-    assert!((path - 4.0).abs() < 0.3, "lens optical path: order {path:.2}");
+    assert!(
+        (path - 4.0).abs() < 0.3,
+        "lens optical path: order {path:.2}"
+    );
     assert!(
         (rod_direction - 4.0).abs() < 0.3,
         "rod exit direction: order {rod_direction:.2}"
