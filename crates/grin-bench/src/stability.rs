@@ -168,13 +168,7 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
             error_points: 1000,
             ..Default::default()
         };
-        let (baked, report) = grin_field::bake::bake(source.as_ref(), &opts, &|_, _, _| {})?;
-        let warning = (!report.meets_budget).then(|| {
-            format!(
-                "the bake reports relative error {:.1e} over its budget {:.0e}",
-                report.relative_error, report.budget
-            )
-        });
+        let (baked, warning) = bake_case(source.as_ref(), &opts)?;
         let rays = [0.1, 0.25, 0.4]
             .iter()
             .map(|&y| {
@@ -334,7 +328,93 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
             StabilityCase::new("GRIN rod (exact)", "a smooth field with an exact solution: every method should converge; f32 at tight tolerances hits its roundoff floor", field, rays, 1.5),
         );
     }
+
+    // 9. Noise finer than the grid: fBm whose finest octave (1/32 of the sphere) is a
+    // third of the bake's node spacing.
+    {
+        let source = medium(
+            "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nambient_index = 1.0003\nfield = { kind = \"noise\", noise = \"fbm\", octaves = 3, frequency = 8.0, amplitude = 2e-3, seed = 11 }",
+        )?;
+        let reference = fine_reference(source.clone());
+        let opts = grin_field::bake::BakeOptions {
+            resolution: Some(24),
+            ..Default::default()
+        };
+        let (baked, warning) = bake_case(source.as_ref(), &opts)?;
+        let rays = parallel_rays(&reference, &[(0.05, 0.1), (-0.3, 0.2), (0.4, -0.35)]);
+        v.push(
+            StabilityCase::new("noise finer than the grid", "fBm with features of 0.03 R baked at 24 nodes (0.087 R apart): the grid cannot hold the field, and the bake must say so", Arc::new(baked), rays, 1.0)
+                .with_warning(warning),
+        );
+    }
+
+    // 10, 11. A heat-haze plume (delta_n 1e-5) stored as i16 and as f32: quantisation
+    // must keep a deflection of ~1e-5 rad to 1 %. Voxels hold delta_n = n - ambient, not
+    // n (n ~ 1.0003 in f32 would keep only 1.2e-7, 1 % of the plume), and i16 scales each
+    // channel to its own largest value.
+    for (storage, name, why) in [
+        (
+            grin_field::baked::Storage::I16,
+            "1e-5 delta_n in i16 storage",
+            "a plume of delta_n 1e-5 baked into 16-bit integers: each channel is scaled to its own largest value, so delta_n keeps 3e-10 steps",
+        ),
+        (
+            grin_field::baked::Storage::F32,
+            "1e-5 delta_n in f32 storage",
+            "the same plume in f32: delta_n = n - ambient is stored, not n, so it keeps 7 digits where n ~ 1.0003 would keep 1 % of the plume",
+        ),
+    ] {
+        let source = medium(
+            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nambient_index = 1.000293\nfield = { kind = \"plume\", plumes = [ { a = 1.0e-5, center = [0.0, 0.0, 0.0], s = 0.25 } ] }",
+        )?;
+        let reference = fine_reference(source.clone());
+        let opts = grin_field::bake::BakeOptions {
+            resolution: Some(64),
+            interp: grin_field::baked::Interp::Tricubic,
+            storage: Some(storage),
+            ..Default::default()
+        };
+        let (baked, warning) = bake_case(source.as_ref(), &opts)?;
+        let rays = parallel_rays(&reference, &[(0.0, 0.15), (0.1, 0.25), (-0.2, 0.4)]);
+        v.push(
+            StabilityCase::new(name, why, Arc::new(baked), rays, 3f64.sqrt())
+                .with_tol(WEAK_FIELD_TOL)
+                .with_warning(warning),
+        );
+    }
     Ok(v)
+}
+
+/// Converged for the 1e-5 plume: 1 % of its rays' deflection (1.0e-5 .. 1.4e-5 rad).
+const WEAK_FIELD_TOL: f64 = 1e-7;
+
+/// `source` baked with `opts`, and the warning grin gives where the bake misses its budget.
+fn bake_case(
+    source: &dyn IndexField,
+    opts: &grin_field::bake::BakeOptions,
+) -> anyhow::Result<(grin_field::baked::BakedField, Option<String>)> {
+    let (baked, report) = grin_field::bake::bake(source, opts, &|_, _, _| {})?;
+    let warning = (!report.meets_budget).then(|| {
+        format!(
+            "the bake reports relative error {:.1e} over its budget {:.0e}",
+            report.relative_error, report.budget
+        )
+    });
+    Ok((baked, warning))
+}
+
+/// Rays along +z from z = -1.5 at the (x, y) offsets, with `reference`'s exits as truth.
+fn parallel_rays(
+    reference: &impl Fn(DVec3, DVec3) -> Exit,
+    offsets: &[(f64, f64)],
+) -> Vec<(DVec3, DVec3, Truth)> {
+    offsets
+        .iter()
+        .map(|&(x, y)| {
+            let o = DVec3::new(x, y, -1.5);
+            (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
+        })
+        .collect()
 }
 
 /// A reference that resolves any feature: RK4 at a fixed step of 1e-4 of the box radius
@@ -785,7 +865,7 @@ pub fn markdown(m: &Matrix, command: &str) -> String {
     if let Some(note) = &m.gpu {
         let _ = writeln!(
             s,
-            "\n{note}: the `gpu` rows run the render kernel's own march on each case's field as `grin render --backend gpu` bakes it (the baked jump: its own grid), so their errors include that bake's."
+            "\n{note}: the `gpu` rows run the render kernel's own march on each case's field as `grin render --backend gpu` bakes it (the cases baked by the matrix itself: their own grids), so their errors include that bake's."
         );
         for (case, w) in &m.gpu_warnings {
             let _ = writeln!(s, "- GPU bake of **{case}** warns: {w}.");
