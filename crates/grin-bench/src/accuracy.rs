@@ -400,11 +400,12 @@ pub const ORDER_MAX_ERR: f64 = 1e-2;
 pub const ORDER_FIT_POINTS: usize = 3;
 /// How far a measured order may be from the expected one and count as it.
 pub const ORDER_TOLERANCE: f64 = 0.3;
-/// A run is in an order fit only where the run at twice its step took at most this
-/// fraction of its steps: the step asked for is the step taken. Steps capped at the
-/// field's feature size (the plume's R/2 .. R/8 take 14, 14 and 17 steps a ray) are a mix
-/// of two step sizes, not a point of the h sequence.
-pub const STEP_HALVED_MAX_RATIO: f64 = 0.6;
+/// A run is in an order fit only where the steps taken grew with the step asked for:
+/// against the next coarser run of the sweep, steps a ray rose by at least this fraction
+/// of the factor the step shrank by (halving the step: 1.67x the steps or more). Steps
+/// capped at the field's feature size (the plume's R/2 .. R/8 take 14, 14 and 17 steps a
+/// ray) are a mix of two step sizes, not a point of the h sequence.
+pub const STEPS_FOLLOW_MIN: f64 = 0.83;
 
 /// Convergence orders of every integrator with fixed steps, on each smooth case.
 pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
@@ -442,8 +443,7 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
                             })
                             .collect()
                     };
-                    let (measured, used) =
-                        fit_order(&step_halved_runs(&runs(|p| p.err_dir)), floor);
+                    let (measured, used) = fit_order(&uncapped_runs(&runs(|p| p.err_dir)), floor);
                     // The optical path's order, where the case's exact solution gives it
                     // (the numerical references' own path sums sit near 1e-11).
                     let exact_opl = case
@@ -451,7 +451,7 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
                         .as_ref()
                         .is_some_and(|e| e.iter().all(|x| x.opl.is_some()));
                     let measured_opl = exact_opl
-                        .then(|| fit_order(&step_halved_runs(&runs(|p| p.err_opl)), floor).0)
+                        .then(|| fit_order(&uncapped_runs(&runs(|p| p.err_opl)), floor).0)
                         .flatten();
                     let steps = used
                         .iter()
@@ -479,15 +479,24 @@ pub fn orders(cases: &[Case], points: &[Point]) -> Vec<Order> {
 }
 
 /// The runs of `runs` (step or its parameter, steps a ray, error) whose step was the one
-/// asked for: the run at twice the step took at most [`STEP_HALVED_MAX_RATIO`] of its
-/// steps (the coarsest run, with none to compare, is left out too). Returns (steps a
-/// ray, error) for [`fit_order`].
-pub fn step_halved_runs(runs: &[(f64, f64, f64)]) -> Vec<(f64, f64)> {
+/// asked for: their steps a ray rose by at least [`STEPS_FOLLOW_MIN`] of the factor the
+/// step shrank by since the next coarser run (the coarsest run: up to the next finer
+/// one; a capped run takes more steps than its step asks, so the rise to the next run is
+/// short). Returns (steps a ray, error) for [`fit_order`].
+pub fn uncapped_runs(runs: &[(f64, f64, f64)]) -> Vec<(f64, f64)> {
+    let follows = |coarse: &(f64, f64, f64), fine: &(f64, f64, f64)| {
+        fine.1 / coarse.1 >= STEPS_FOLLOW_MIN * (coarse.0 / fine.0)
+    };
+    let nearest = |run: &(f64, f64, f64), coarser: bool| {
+        runs.iter()
+            .filter(|r| if coarser { r.0 > run.0 } else { r.0 < run.0 })
+            .min_by(|a, b| (a.0 - run.0).abs().total_cmp(&(b.0 - run.0).abs()))
+    };
     runs.iter()
-        .filter(|&&(param, steps, _)| {
-            runs.iter().any(|&(p2, s2, _)| {
-                (p2 / (2.0 * param) - 1.0).abs() < 1e-9 && s2 <= STEP_HALVED_MAX_RATIO * steps
-            })
+        .filter(|run| match (nearest(run, true), nearest(run, false)) {
+            (Some(coarse), _) => follows(coarse, run),
+            (None, Some(fine)) => follows(run, fine),
+            (None, None) => false,
         })
         .map(|&(_, steps, err)| (steps, err))
         .collect()

@@ -10,8 +10,7 @@ use grin_scene::ExitMethod;
 
 use crate::accuracy::{
     AccuracyRun, DECADES, ORDER_FIT_POINTS, ORDER_MAX_ERR, ORDER_MIN_ERR_F32, ORDER_MIN_ERR_F64,
-    ORDER_TOLERANCE, OrderVerdict, Point, REFERENCE_TOL, STEP_HALVED_MAX_RATIO, cheapest_at,
-    pareto,
+    ORDER_TOLERANCE, OrderVerdict, Point, REFERENCE_TOL, STEPS_FOLLOW_MIN, cheapest_at, pareto,
 };
 use crate::chart::{Chart, Curve, LineKind, png, svg};
 use crate::methods::{Policy, Precision};
@@ -476,7 +475,7 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
     let _ = writeln!(
         s,
         "The slope of log error against log step over the finest {ORDER_FIT_POINTS} runs with {ORDER_MIN_ERR_F64:.0e} < error < {ORDER_MAX_ERR:.0e} rad (f32: from {ORDER_MIN_ERR_F32:.0e}) whose step was the one asked for (halving it at least {:.2}x the steps: not capped at the field's feature size); \"path\" is the same fit of the optical path's error where the exact solution gives it; expected: the formal order, or the field's own limit where lower. Of {fitted} fitted: {} within {ORDER_TOLERANCE} of the expected order, {} faster, {} slower; {} rows with fewer than 3 runs in the window.\n",
-        1.0 / STEP_HALVED_MAX_RATIO,
+        2.0 * STEPS_FOLLOW_MIN,
         count(OrderVerdict::AsExpected),
         count(OrderVerdict::Faster),
         count(OrderVerdict::Slower),

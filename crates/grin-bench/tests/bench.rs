@@ -655,11 +655,11 @@ fn orders_are_fitted_in_the_asymptotic_range() {
 }
 
 /// Runs whose step was capped (halving the step asked for did not double the steps taken)
-/// are no point of the h sequence, nor is the coarsest run, with no coarser one to show it
-/// was not capped: the plume's fixed steps R/2 .. R/8 take 14, 14, 17 steps a ray.
+/// are no point of the h sequence: the plume's fixed steps R/2 .. R/8 take 14, 14, 17
+/// steps a ray. The coarsest run is judged against the next finer one.
 #[test]
 fn capped_steps_are_left_out_of_order_fits() {
-    use grin_bench::accuracy::step_halved_runs;
+    use grin_bench::accuracy::uncapped_runs;
     // (step asked, steps a ray, error)
     let runs = [
         (0.5, 14.0, 4e-9),
@@ -669,6 +669,15 @@ fn capped_steps_are_left_out_of_order_fits() {
         (0.03125, 65.0, 1.8e-12),
         (0.015625, 129.0, 3e-14),
     ];
-    let kept: Vec<f64> = step_halved_runs(&runs).iter().map(|r| r.0).collect();
+    let kept: Vec<f64> = uncapped_runs(&runs).iter().map(|r| r.0).collect();
     assert_eq!(kept, [33.0, 65.0, 129.0]);
+    // The quick sweep's steps shrink 4x at a time (R/4, R/16, R/64): the steps must rise
+    // ~4x, not 2x.
+    let quick = [
+        (0.25, 8.0, 1e-5),
+        (0.0625, 31.0, 4e-8),
+        (0.015625, 60.0, 1e-10),
+    ];
+    let kept: Vec<f64> = uncapped_runs(&quick).iter().map(|r| r.0).collect();
+    assert_eq!(kept, [8.0, 31.0]);
 }
