@@ -19,6 +19,8 @@ pub const ADAPTIVE_MIN_DS_REL: f64 = 1e-12;
 pub const ADAPTIVE_MIN_DS_EPS: f64 = 1e3;
 /// Tolerances are raised to at least this many units of roundoff (times the radius): an
 /// f32 trace cannot resolve 1e-10, and step doubling would shrink the steps to nothing.
+/// The roundoff is the trace's or the field's samples' (`IndexField::sample_eps`: a baked
+/// grid's f32), whichever is coarser.
 pub const ADAPTIVE_TOL_FLOOR_EPS: f64 = 2.0;
 /// Default first error-controlled step, as a fraction of the bounds' radius.
 pub const ADAPTIVE_INITIAL_DS_REL: f64 = 0.01;
@@ -222,7 +224,8 @@ impl StepController {
         let exponent = 1.0 / p as f64;
         let eps = R::EPS.to_f64();
         let ds_min = ADAPTIVE_MIN_DS_REL.max(ADAPTIVE_MIN_DS_EPS * eps) * self.len_scale;
-        let tol_floor = ADAPTIVE_TOL_FLOOR_EPS * eps * self.len_scale;
+        // The floor is the trace's roundoff or the field's own, whichever is coarser.
+        let tol_floor = ADAPTIVE_TOL_FLOOR_EPS * eps.max(field.sample_eps()) * self.len_scale;
         let ds_max = self.ds_max.min(cap).max(ds_min);
         let mut evals = 0;
         let mut rejections = 0;

@@ -656,6 +656,10 @@ impl IndexField for BakedField {
         Some(self)
     }
 
+    fn sample_eps(&self) -> f64 {
+        f64::from(f32::EPSILON)
+    }
+
     fn n_uncertainty(&self) -> f64 {
         let e = self.provenance.max_err_n;
         if e.is_finite() && e > 0.0 { e } else { 0.0 }
