@@ -461,22 +461,35 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
         Suite::Full => {
             let l = luneburg(48)?;
             let p = plume(36)?;
-            let rod = grin_rod(32)?;
+            let (fish, rod) = (fish_eye(32)?, grin_rod(32)?);
+            let (e, n, vdb) = (expr(36)?, noise(32)?, vdb_plume(36)?);
             let mut v = vec![
                 l.clone(),
-                fish_eye(32)?,
-                rod,
+                fish.clone(),
+                rod.clone(),
                 p.clone(),
-                expr(36)?,
-                noise(32)?,
-                vdb_plume(36)?,
+                e.clone(),
+                n.clone(),
+                vdb.clone(),
             ];
+            let others = [fish, rod, e, n, vdb];
+            // Every reference field baked: the lens and the plume with every
+            // interpolation and storage, the others with the two ends of it (the most
+            // accurate grid, tricubic f32, and the most compact, trilinear i16).
             for base in [&l, &p] {
                 for (interp, storage) in [
                     (Interp::Trilinear, Storage::I16),
                     (Interp::Trilinear, Storage::F32),
                     (Interp::Tricubic, Storage::F32),
                     (Interp::Tricubic, Storage::I16),
+                ] {
+                    v.push(baked(base, 64, interp, storage)?);
+                }
+            }
+            for base in &others {
+                for (interp, storage) in [
+                    (Interp::Trilinear, Storage::I16),
+                    (Interp::Tricubic, Storage::F32),
                 ] {
                     v.push(baked(base, 64, interp, storage)?);
                 }
