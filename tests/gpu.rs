@@ -136,6 +136,66 @@ fn band_size_does_not_change_the_image() {
     assert_eq!(differ, 0, "pixels differ between band sizes");
 }
 
+/// Rays too long for lavapipe's loop limit (65,535 loop iterations an invocation in all,
+/// ~21,800 steps) end `error` there, and `grin render` says why and what traces them
+/// whole; on a GPU, which has no such limit, the same rays (~200,000 steps) leave.
+#[test]
+fn rays_past_lavapipes_loop_limit_are_named_as_such() {
+    if !have_gpu("rays_past_lavapipes_loop_limit_are_named_as_such") {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tmp");
+    let scene = std::fs::read_to_string(scenes().join("luneburg.toml"))
+        .expect("scene")
+        .replace(
+            "step = { fixed = 0.01 }",
+            "step = { fixed = 1e-5 }\nmax_steps = 1000000",
+        );
+    assert!(
+        scene.contains("fixed = 1e-5"),
+        "the scene's step was not replaced"
+    );
+    let path = dir.path().join("long.toml");
+    std::fs::write(&path, scene).expect("write scene");
+    let o = grin()
+        .args([
+            "render",
+            "--backend",
+            "gpu",
+            "--size",
+            "6x4",
+            "--json",
+            "-o",
+        ])
+        .arg(dir.path().join("long.exr"))
+        .arg(&path)
+        .output()
+        .expect("run grin");
+    assert!(o.status.success(), "grin render failed: {}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON summary");
+    let adapter = v["adapter"].as_str().expect("adapter").to_string();
+    let errors = v["status_counts"]["error"].as_u64().expect("error count");
+    let warned = v["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .find(|w| w.contains("on a CPU adapter (lavapipe)"))
+        .map(str::to_owned);
+    if adapter.ends_with(", Cpu)") {
+        assert!(errors > 0, "{v}");
+        let w = warned.expect("the loop limit is named");
+        assert!(
+            w.starts_with(&format!("{errors} pixels ended `error` after 2000+ steps")),
+            "{w}"
+        );
+        assert!(w.contains("--backend cpu traces them whole"), "{w}");
+    } else {
+        assert_eq!(errors, 0, "{adapter}: {v}");
+        assert!(warned.is_none(), "{adapter}: {warned:?}");
+    }
+}
+
 #[test]
 fn no_adapter_is_a_clear_error_and_writes_nothing() {
     let dir = tempfile::tempdir().expect("tmp");

@@ -27,6 +27,18 @@ pub struct GpuContext {
 /// split, the medium pass. Both share one bind group layout.
 pub(crate) type RenderPipelines = (wgpu::ComputePipeline, Option<wgpu::ComputePipeline>);
 
+/// lavapipe's loop limit: all loops of one shader invocation together stop after this
+/// many iterations. The march spends ~3 a step, 9 with dopri, one more per object the
+/// step's chord is tested against and more where a step searches for an exit: a ray ends
+/// `error` there after ~21,800 rk4 steps through a bare medium, ~10,900 in the Luneburg
+/// scene (two planes), ~7,000 dopri steps (docs/accuracy.md).
+pub const CPU_ADAPTER_LOOP_ITERATIONS: u32 = 65_535;
+
+/// Pixels that ended `error` after at least this many steps on an adapter with a loop
+/// limit are reported as likely cut short by it (the fewest seen, a ray reflecting along
+/// the surface with an exit search every step, is ~6,500).
+pub const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2_000.0;
+
 /// One line naming an adapter: `llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)`.
 pub fn describe_adapter(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
@@ -198,6 +210,14 @@ impl GpuContext {
     /// Render pipelines compiled on this device so far.
     pub fn pipelines_compiled(&self) -> usize {
         self.pipelines.lock().map_or(0, |m| m.len())
+    }
+
+    /// The loop iterations one shader invocation may run in all on this adapter, where it
+    /// has such a limit: lavapipe (Mesa's gallivm, the CPU adapter) ends every loop of an
+    /// invocation after [`CPU_ADAPTER_LOOP_ITERATIONS`] (`LP_MAX_TGSI_LOOP_ITERATIONS`,
+    /// shared by all its loops). A GPU has none.
+    pub fn loop_limit(&self) -> Option<u32> {
+        (self.info.device_type == wgpu::DeviceType::Cpu).then_some(CPU_ADAPTER_LOOP_ITERATIONS)
     }
 
     /// `name (backend, device type)` of the adapter in use.

@@ -470,6 +470,11 @@ impl<'a> GpuRenderer<'a> {
         self.ctx.adapter_name()
     }
 
+    /// [`GpuContext::loop_limit`] of the adapter rendering.
+    pub fn loop_limit(&self) -> Option<u32> {
+        self.ctx.loop_limit()
+    }
+
     /// Warnings about the field, for the user: the bake made here is over the default
     /// error budget ([`crate::field::bake_warning`]), or the scene's baked file did not
     /// fit the device and was baked again. Empty when the field is as the scene asked.
