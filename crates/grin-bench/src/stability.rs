@@ -145,13 +145,7 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
             "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }\nfield = { kind = \"plume\", plumes = [ { a = 0.05, center = [0.0, 0.0, 0.0], s = 0.01 } ] }",
         )?;
         let reference = fine_reference(field.clone());
-        let rays = [0.003, 0.007, 0.012]
-            .iter()
-            .map(|&y| {
-                let o = DVec3::new(0.0, y, -1.5);
-                (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
-            })
-            .collect();
+        let rays = parallel_rays(&reference, &[(0.0, 0.003), (0.0, 0.007), (0.0, 0.012)]);
         v.push(
             StabilityCase::new("steep narrow plume", "a plume 1% of the box wide (a = 0.05, s = 0.01) deflects rays by ~0.1 rad; a step longer than it can pass over it between samples", field, rays, 3f64.sqrt()),
         );
@@ -169,13 +163,7 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
             ..Default::default()
         };
         let (baked, warning) = bake_case(source.as_ref(), &opts)?;
-        let rays = [0.1, 0.25, 0.4]
-            .iter()
-            .map(|&y| {
-                let o = DVec3::new(0.0, y, -1.5);
-                (o, DVec3::Z, Truth::Exits(reference(o, DVec3::Z)))
-            })
-            .collect();
+        let rays = parallel_rays(&reference, &[(0.0, 0.1), (0.0, 0.25), (0.0, 0.4)]);
         v.push(
             StabilityCase::new("index jump in a baked grid", "a 0.5 jump in n over 0.2% of the box, baked at 48^3: the grid smears the interface over a voxel", Arc::new(baked), rays, 3f64.sqrt())
                 .with_tol(1e-3)
