@@ -189,7 +189,10 @@ fn rays_past_lavapipes_loop_limit_are_named_as_such() {
             w.starts_with(&format!("{errors} pixels ended `error` after 2000+ steps")),
             "{w}"
         );
-        assert!(w.contains("--backend cpu traces them whole"), "{w}");
+        assert!(
+            w.contains("(grin render --backend cpu) traces them whole"),
+            "{w}"
+        );
     } else {
         assert_eq!(errors, 0, "{adapter}: {v}");
         assert!(warned.is_none(), "{adapter}: {warned:?}");

@@ -335,3 +335,50 @@ fn view_without_an_adapter_is_one_clear_error() {
     );
     assert!(!e.contains("panicked"), "{e}");
 }
+
+/// The viewer names lavapipe's loop limit as `grin render` does: the Luneburg scene at a
+/// fixed step of 1e-5 (~200,000 steps a ray) has pixels cut short on a CPU adapter, and the
+/// summary's warnings say so once (the last frame's count, not one line a frame); on a
+/// GPU, which has no such limit, there is no such warning.
+#[test]
+fn view_names_lavapipes_loop_limit() {
+    let x = xvfb();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = std::fs::read_to_string(scenes().join("luneburg.toml"))
+        .expect("scene")
+        .replace(
+            "step = { fixed = 0.01 }",
+            "step = { fixed = 1e-5 }\nmax_steps = 1000000",
+        );
+    assert!(
+        scene.contains("fixed = 1e-5"),
+        "the scene's step was not replaced"
+    );
+    let path = dir.path().join("long.toml");
+    std::fs::write(&path, scene).expect("write scene");
+    let o = view(&x, dir.path())
+        .arg("view")
+        .arg(&path)
+        .args(["--frames", "2", "--size", "32x18", "--json"])
+        .output()
+        .expect("run grin view");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s = json(&o);
+    let adapter = s["adapter"].as_str().expect("adapter");
+    let named: Vec<&str> = s["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .filter(|w| w.contains("on a CPU adapter (lavapipe)"))
+        .collect();
+    if adapter.ends_with(", Cpu)") {
+        assert_eq!(named.len(), 1, "{s}");
+        assert!(
+            named[0].contains("pixels ended `error` after 2000+ steps"),
+            "{s}"
+        );
+    } else {
+        assert!(named.is_empty(), "{adapter}: {s}");
+    }
+}

@@ -5,6 +5,9 @@
 use bytemuck::{Pod, Zeroable};
 
 /// Integrator codes (`FrameParams::integrator`).
+/// `aov.status` of a ray that ended `error` (the kernel's STATUS_ERROR, grin-trace's
+/// `RayStatus::Error`; tests/constants.rs holds all three equal).
+pub const STATUS_ERROR: u32 = 4;
 pub const INTEGRATOR_EULER: u32 = 0;
 pub const INTEGRATOR_SYMPLECTIC_EULER: u32 = 1;
 pub const INTEGRATOR_VERLET: u32 = 2;

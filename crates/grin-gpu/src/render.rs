@@ -475,6 +475,24 @@ impl<'a> GpuRenderer<'a> {
         self.ctx.loop_limit()
     }
 
+    /// Where `frame`'s pixels ended `error` after many steps on an adapter with a loop
+    /// limit (lavapipe): how many, what they likely are, and what traces them whole.
+    pub fn loop_limit_warning(&self, frame: &Frame) -> Option<String> {
+        let limit = self.loop_limit()?;
+        let error = crate::gpu_data::STATUS_ERROR as f32;
+        let suspect = frame
+            .pixels
+            .iter()
+            .filter(|p| p.status == error && p.steps >= crate::device::LOOP_LIMIT_SUSPECT_STEPS)
+            .count();
+        (suspect > 0).then(|| {
+            format!(
+                "{suspect} pixels ended `error` after {:.0}+ steps on a CPU adapter (lavapipe), which stops all loops of a shader invocation after {limit} iterations in all (~3 a step, more with dopri, with objects in the scene or an exit search every step: 10,900 steps a ray in the Luneburg scene): they were likely cut short there, not failed; a GPU has no such limit, and the CPU backend (grin render --backend cpu) traces them whole",
+                crate::device::LOOP_LIMIT_SUSPECT_STEPS
+            )
+        })
+    }
+
     /// Warnings about the field, for the user: the bake made here is over the default
     /// error budget ([`crate::field::bake_warning`]), or the scene's baked file did not
     /// fit the device and was baked again. Empty when the field is as the scene asked.

@@ -126,6 +126,7 @@ fn mirrored_constants_have_the_same_values() {
             f64::from(status_code(RayStatus::MaxSteps)),
         ),
         ("STATUS_ERROR", f64::from(status_code(RayStatus::Error))),
+        ("STATUS_ERROR", u(g::STATUS_ERROR)),
         (
             "STATUS_DEGRADED",
             f64::from(status_code(RayStatus::Degraded)),

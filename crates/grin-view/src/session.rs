@@ -170,6 +170,9 @@ pub struct Session<'a> {
     accum: Option<Accum>,
     /// Warnings about the current field (an under-resolved bake), for the panel.
     pub warnings: Vec<String>,
+    /// What the last frame itself warns of (pixels cut short by lavapipe's loop limit):
+    /// replaced every frame, shown after `warnings`.
+    pub frame_warning: Option<String>,
     /// Whether the current field's GPU grid came from the disk cache.
     pub cache_use: Option<CacheUse>,
     /// The current field's GPU grid: node counts and bytes.
@@ -209,6 +212,7 @@ impl<'a> Session<'a> {
             gpus: [None, None],
             accum: None,
             warnings: Vec::new(),
+            frame_warning: None,
             cache_use: None,
             field_grid: None,
         };
@@ -369,6 +373,7 @@ impl<'a> Session<'a> {
             Err(e) => return Err(e.into()),
         };
         let gpu_seconds = start.elapsed().as_secs_f64();
+        self.frame_warning = g.renderer.loop_limit_warning(&frame);
         let spp = applied.render.spp;
         let n = frame.pixels.len();
         let rays = n as f64 * f64::from(spp);

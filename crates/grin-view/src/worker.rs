@@ -204,7 +204,12 @@ fn run(
                     rendered,
                     settings,
                     scale,
-                    warnings: session.warnings.clone(),
+                    warnings: session
+                        .warnings
+                        .iter()
+                        .chain(&session.frame_warning)
+                        .cloned()
+                        .collect(),
                     cache: session.cache_use,
                     field_grid: session.field_grid,
                 };

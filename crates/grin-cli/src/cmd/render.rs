@@ -700,10 +700,7 @@ fn render_frame(
             let start = Instant::now();
             let frame = renderer.render(&tick, &cancel)?;
             device_seconds = renderer.last_device_seconds();
-            if let Some(w) = renderer
-                .loop_limit()
-                .and_then(|limit| loop_limit_warning(&frame, limit))
-            {
+            if let Some(w) = renderer.loop_limit_warning(&frame) {
                 bar.suspend(|| eprintln!("grin: warning: {w}"));
                 warnings.push(w);
             }
@@ -808,23 +805,6 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
         }
     }
     Ok(())
-}
-
-/// Where pixels ended `error` after many steps on an adapter whose loop limit is `limit`
-/// (lavapipe): what they likely are, and what traces them whole.
-fn loop_limit_warning(frame: &Frame, limit: u32) -> Option<String> {
-    let error = grin_trace::RayStatus::Error as u32 as f32;
-    let suspect = frame
-        .pixels
-        .iter()
-        .filter(|p| p.status == error && p.steps >= grin_gpu::device::LOOP_LIMIT_SUSPECT_STEPS)
-        .count();
-    (suspect > 0).then(|| {
-        format!(
-            "{suspect} pixels ended `error` after {:.0}+ steps on a CPU adapter (lavapipe), which stops all loops of a shader invocation after {limit} iterations in all (~3 a step, more with dopri, with objects in the scene or an exit search every step: 10,900 steps a ray in the Luneburg scene): they were likely cut short there, not failed; a GPU has no such limit, and --backend cpu traces them whole",
-            grin_gpu::device::LOOP_LIMIT_SUSPECT_STEPS
-        )
-    })
 }
 
 /// Pixels per `aov.status` value, by name.
