@@ -145,18 +145,7 @@ fn rays_past_lavapipes_loop_limit_are_named_as_such() {
         return;
     }
     let dir = tempfile::tempdir().expect("tmp");
-    let scene = std::fs::read_to_string(scenes().join("luneburg.toml"))
-        .expect("scene")
-        .replace(
-            "step = { fixed = 0.01 }",
-            "step = { fixed = 1e-5 }\nmax_steps = 1000000",
-        );
-    assert!(
-        scene.contains("fixed = 1e-5"),
-        "the scene's step was not replaced"
-    );
-    let path = dir.path().join("long.toml");
-    std::fs::write(&path, scene).expect("write scene");
+    let path = common::long_luneburg_scene(dir.path());
     let o = grin()
         .args([
             "render",

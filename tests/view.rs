@@ -344,18 +344,7 @@ fn view_without_an_adapter_is_one_clear_error() {
 fn view_names_lavapipes_loop_limit() {
     let x = xvfb();
     let dir = tempfile::tempdir().expect("tempdir");
-    let scene = std::fs::read_to_string(scenes().join("luneburg.toml"))
-        .expect("scene")
-        .replace(
-            "step = { fixed = 0.01 }",
-            "step = { fixed = 1e-5 }\nmax_steps = 1000000",
-        );
-    assert!(
-        scene.contains("fixed = 1e-5"),
-        "the scene's step was not replaced"
-    );
-    let path = dir.path().join("long.toml");
-    std::fs::write(&path, scene).expect("write scene");
+    let path = common::long_luneburg_scene(dir.path());
     let o = view(&x, dir.path())
         .arg("view")
         .arg(&path)

@@ -95,3 +95,22 @@ step = {{ fixed = {step} }}
 "#
     )
 }
+
+/// The Luneburg example scene at a fixed step of 1e-5 (~200,000 steps a ray, max_steps
+/// 10^6), written as `long.toml` into `dir`: rays past lavapipe's loop limit.
+pub fn long_luneburg_scene(dir: &Path) -> std::path::PathBuf {
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes");
+    let scene = std::fs::read_to_string(scenes.join("luneburg.toml"))
+        .expect("scene")
+        .replace(
+            "step = { fixed = 0.01 }",
+            "step = { fixed = 1e-5 }\nmax_steps = 1000000",
+        );
+    assert!(
+        scene.contains("fixed = 1e-5"),
+        "the scene's step was not replaced"
+    );
+    let path = dir.join("long.toml");
+    std::fs::write(&path, scene).expect("write scene");
+    path
+}
