@@ -470,15 +470,10 @@ impl<'a> GpuRenderer<'a> {
         self.ctx.adapter_name()
     }
 
-    /// [`GpuContext::loop_limit`] of the adapter rendering.
-    pub fn loop_limit(&self) -> Option<u32> {
-        self.ctx.loop_limit()
-    }
-
     /// Where `frame`'s pixels ended `error` after many steps on an adapter with a loop
     /// limit (lavapipe): how many, what they likely are, and what traces them whole.
     pub fn loop_limit_warning(&self, frame: &Frame) -> Option<String> {
-        let limit = self.loop_limit()?;
+        let limit = self.ctx.loop_limit()?;
         let error = crate::gpu_data::STATUS_ERROR as f32;
         let suspect = frame
             .pixels
