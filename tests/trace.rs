@@ -346,3 +346,74 @@ fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
     let rows = read_output(&out);
     assert!(rows.iter().all(|r| r.0 == "degraded"));
 }
+
+/// A table longer than a batch streams: every row comes back in order (the output is
+/// written a batch at a time), and a bad row far down is named by its file line, with no
+/// output left behind. (The reader was quadratic: 200k rows took 220 s to read.)
+#[test]
+fn a_long_table_streams_and_a_bad_row_is_named_by_its_line() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let rows = 150_000;
+    // Rays that miss the lens: the test is the table's reading and writing.
+    let mut text = String::from("# far from the lens\nid,ox,oy,oz,dx,dy,dz\n");
+    for i in 0..rows {
+        text.push_str(&format!("{i},-3,{},0,1,0,0\n", 5.0 + i as f64 * 1e-5));
+    }
+    let rays = d.write("rays.csv", &text);
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &rays, &out], &["--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(summary["rays"], rows);
+    assert_eq!(summary["missed"], rows);
+    assert!(summary["total_seconds"].as_f64().expect("total") >= 0.0);
+    let written = std::fs::read_to_string(&out).expect("output");
+    let lines: Vec<&str> = written.lines().collect();
+    assert_eq!(lines.len(), rows + 1);
+    assert!(
+        lines[0].starts_with("ox,oy,oz,dx,dy,dz,id,status"),
+        "{}",
+        lines[0]
+    );
+    for (k, line) in lines[1..].iter().enumerate().step_by(9973) {
+        assert_eq!(
+            line.split(',').nth(6),
+            Some(k.to_string().as_str()),
+            "{line}"
+        );
+    }
+    // One bad row after them all: file line 2 + rows + 1; nothing is written.
+    text.push_str("x,-3,0,zero,1,0,0\n");
+    let rays = d.write("bad.csv", &text);
+    let out = d.path("bad-out.csv");
+    let o = run(&[&scene, &rays, &out], &[]);
+    assert!(!o.status.success());
+    assert_eq!(
+        stderr(&o).trim(),
+        format!(
+            "grin: error: {}:{}: column `oz`: `zero` is not a number",
+            rays.display(),
+            rows + 3
+        )
+    );
+    assert!(!out.exists(), "a failed trace leaves no output");
+}
+
+/// Input echoed in an error keeps its control characters escaped: a NUL or a terminal
+/// escape in a ray table reaches the terminal as `\u{0}`, `\u{1b}`.
+#[test]
+fn control_characters_in_inputs_are_escaped_in_errors() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,\0\u{1b}[2J,1,0,0\n");
+    let out = d.path("out.csv");
+    let o = run(&[&scene, &rays, &out], &[]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(!err.contains('\0') && !err.contains('\u{1b}'), "{err:?}");
+    assert!(
+        err.contains("column `oz`: `\\u{0}\\u{1b}[2J` is not a number"),
+        "{err}"
+    );
+}

@@ -1,11 +1,16 @@
 //! Ray tables for `grin trace`: read the input CSV (`ox,oy,oz,dx,dy,dz`, in any order, and
 //! any other columns, which are passed through), trace every ray in parallel, and write
 //! the table back as CSV or JSON with the result columns
-//! `status,px,py,pz,qx,qy,qz,opl,length,steps,evals` (ARCHITECTURE.md, "Ray tables").
+//! `status,px,py,pz,qx,qy,qz,opl,length,steps,evals` (docs/architecture.md, "Ray tables").
 //! CSV through the `csv` crate (quoting, `#` comments, a UTF-8 BOM), JSON through
 //! serde_json; `-` reads standard input.
+//!
+//! Tables stream: [`RayReader`] hands out batches of rows and [`TableWriter`] writes each
+//! batch's results as it comes, so the cost is linear in the rows and the memory follows a
+//! batch, not the table (a million rows trace in the memory of [`BATCH_ROWS`]).
 
-use std::io::{self, Write};
+use std::collections::VecDeque;
+use std::io::{self, BufRead, Write};
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
@@ -20,6 +25,8 @@ pub const INPUT_COLUMNS: [&str; 6] = ["ox", "oy", "oz", "dx", "dy", "dz"];
 pub const OUTPUT_COLUMNS: [&str; 11] = [
     "status", "px", "py", "pz", "qx", "qy", "qz", "opl", "length", "steps", "evals",
 ];
+/// Rows read, traced and written at a time by a streaming trace.
+pub const BATCH_ROWS: usize = 1 << 16;
 
 /// Why a ray table could not be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -83,115 +90,282 @@ pub enum TableFormat {
     Json,
 }
 
-/// Read a ray table file, or standard input for `-`.
-pub fn read_rays(path: &Path) -> Result<RayTable, TableError> {
-    let read_err = |err| TableError::Read {
-        path: path.to_owned(),
-        err,
-    };
-    let text = if path.as_os_str() == "-" {
-        let mut text = String::new();
-        io::Read::read_to_string(&mut io::stdin().lock(), &mut text).map_err(read_err)?;
-        text
-    } else {
-        std::fs::read_to_string(path).map_err(read_err)?
-    };
-    parse_rays(&text, path)
+/// The input with its blank lines and `#` comment lines (outside quoted fields) left out,
+/// a leading UTF-8 BOM dropped, and the file's line number of every line it passes on
+/// kept, so the csv reader's line numbers map back to the file's. The map holds only the
+/// lines the reader has not yet reported on.
+#[derive(Debug)]
+struct LineFilter<R> {
+    inner: R,
+    /// The passed line being handed out, and how much of it is gone.
+    line: Vec<u8>,
+    at: usize,
+    /// Lines of the file read so far.
+    read_lines: usize,
+    /// Bytes of the file read so far.
+    read_bytes: u64,
+    /// Inside a quoted field that runs on past a line end.
+    in_quotes: bool,
+    /// File line of each passed line, from passed line `first_passed` (1-based) on.
+    lines: VecDeque<usize>,
+    first_passed: usize,
 }
 
-/// Parse a ray table (`path` only names it in errors). Blank lines and lines starting
-/// with `#` are skipped. `nan`/`inf` values parse (those rays trace as `error`); text that
-/// is not a number and rows with the wrong number of columns are errors naming the line.
-pub fn parse_rays(text: &str, path: &Path) -> Result<RayTable, TableError> {
-    let text = text.trim_start_matches('\u{feff}');
-    let mut reader = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .flexible(true)
-        .has_headers(false)
-        .from_reader(text.as_bytes());
-    // 1-based line where the record read from byte `at` starts: csv reports where it began
-    // reading, before the blank and `#` lines it skipped.
-    let line_of = |at: u64| {
-        let mut at = (at as usize).min(text.len());
-        let mut line = 1 + text.as_bytes()[..at]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count();
-        while let Some(end) = text[at..].find('\n') {
-            let l = text[at..at + end].trim();
-            if !(l.is_empty() || l.starts_with('#')) {
-                break;
-            }
-            at += end + 1;
-            line += 1;
+impl<R: BufRead> LineFilter<R> {
+    fn new(inner: R) -> Self {
+        LineFilter {
+            inner,
+            line: Vec::new(),
+            at: 0,
+            read_lines: 0,
+            read_bytes: 0,
+            in_quotes: false,
+            lines: VecDeque::new(),
+            first_passed: 1,
         }
-        line
-    };
-    let csv_err = |e: csv::Error| TableError::Csv {
-        path: path.to_owned(),
-        line: e.position().map_or(0, |p| line_of(p.byte())),
-        message: e.to_string(),
-    };
-    let mut records = reader.records();
-    let header = match records.next() {
-        None => {
+    }
+
+    /// The file's line of the csv reader's line `passed` (1-based); 0 where unknown.
+    fn file_line(&self, passed: u64) -> usize {
+        let k = (passed as usize).checked_sub(self.first_passed);
+        k.and_then(|k| self.lines.get(k)).copied().unwrap_or(0)
+    }
+
+    /// Forget the lines before the reader's line `passed`.
+    fn forget_before(&mut self, passed: u64) {
+        while self.first_passed < passed as usize && self.lines.len() > 1 {
+            self.lines.pop_front();
+            self.first_passed += 1;
+        }
+    }
+
+    /// Read file lines until one is to be passed on (into `self.line`); false at the end.
+    fn next_line(&mut self) -> io::Result<bool> {
+        loop {
+            self.line.clear();
+            self.at = 0;
+            let n = self.inner.read_until(b'\n', &mut self.line)?;
+            if n == 0 {
+                return Ok(false);
+            }
+            self.read_bytes += n as u64;
+            self.read_lines += 1;
+            if self.read_lines == 1 && self.line.starts_with("\u{feff}".as_bytes()) {
+                self.line.drain(..3);
+            }
+            let starts_quoted = self.in_quotes;
+            // `""` inside a quoted field toggles twice: the parity of quotes is the state.
+            let quotes = self.line.iter().filter(|&&b| b == b'"').count();
+            self.in_quotes ^= quotes % 2 == 1;
+            if !starts_quoted {
+                let text = self.line.trim_ascii();
+                if text.is_empty() || text.starts_with(b"#") {
+                    continue;
+                }
+            }
+            self.lines.push_back(self.read_lines);
+            return Ok(true);
+        }
+    }
+}
+
+impl<R: BufRead> io::Read for LineFilter<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if self.at == self.line.len() && !self.next_line()? {
+            return Ok(0);
+        }
+        let n = buf.len().min(self.line.len() - self.at);
+        buf[..n].copy_from_slice(&self.line[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
+    }
+}
+
+/// A ray table read a batch of rows at a time: linear in the rows, its memory that of a
+/// batch. Blank lines and lines starting with `#` are skipped. `nan`/`inf` values parse
+/// (those rays trace as `error`); text that is not a number and rows with the wrong number
+/// of columns are errors naming the line.
+#[derive(Debug)]
+pub struct RayReader<R: io::Read> {
+    csv: csv::Reader<LineFilter<io::BufReader<R>>>,
+    path: PathBuf,
+    /// Where each of [`INPUT_COLUMNS`] is in a record.
+    index: [usize; 6],
+    /// Where each extra column is in a record.
+    extra_at: Vec<usize>,
+    width: usize,
+    extra_columns: Vec<String>,
+    record: csv::StringRecord,
+}
+
+impl RayReader<Box<dyn io::Read>> {
+    /// Open a ray table file, or standard input for `-`, and read its header.
+    pub fn open(path: &Path) -> Result<Self, TableError> {
+        let input: Box<dyn io::Read> = if path.as_os_str() == "-" {
+            Box::new(io::stdin())
+        } else {
+            Box::new(std::fs::File::open(path).map_err(|err| TableError::Read {
+                path: path.to_owned(),
+                err,
+            })?)
+        };
+        RayReader::new(input, path)
+    }
+}
+
+impl<R: io::Read> RayReader<R> {
+    /// Read the header from `input` (`path` only names it in errors).
+    pub fn new(input: R, path: &Path) -> Result<Self, TableError> {
+        let filter = LineFilter::new(io::BufReader::with_capacity(1 << 16, input));
+        let mut csv = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .has_headers(false)
+            .from_reader(filter);
+        let mut header = csv::StringRecord::new();
+        let got = csv.read_record(&mut header);
+        let mut reader = RayReader {
+            csv,
+            path: path.to_owned(),
+            index: [0; 6],
+            extra_at: Vec::new(),
+            width: 0,
+            extra_columns: Vec::new(),
+            record: csv::StringRecord::new(),
+        };
+        if !got.map_err(|e| reader.csv_err(e))? {
             return Err(TableError::Empty {
                 path: path.to_owned(),
             });
         }
-        Some(r) => r.map_err(csv_err)?,
-    };
-    let hline = header.position().map_or(1, |p| line_of(p.byte()));
-    let names: Vec<&str> = header.iter().collect();
-    let index: Vec<Option<usize>> = INPUT_COLUMNS
-        .iter()
-        .map(|c| names.iter().position(|n| n == c))
-        .collect();
-    let unique = INPUT_COLUMNS
-        .iter()
-        .all(|c| names.iter().filter(|n| *n == c).count() == 1);
-    let (Some(index), true) = (index.into_iter().collect::<Option<Vec<usize>>>(), unique) else {
-        return Err(TableError::Header {
-            path: path.to_owned(),
-            line: hline,
-            found: names.join(","),
-        });
-    };
-    let extra_at: Vec<usize> = (0..names.len()).filter(|i| !index.contains(i)).collect();
-    let mut table = RayTable {
-        extra_columns: extra_at.iter().map(|&i| names[i].to_owned()).collect(),
-        rows: Vec::new(),
-    };
-    for record in records {
-        let record = record.map_err(csv_err)?;
-        let line = record.position().map_or(0, |p| line_of(p.byte()));
-        if record.len() != names.len() {
-            return Err(TableError::Columns {
+        let hline = reader.line_of(&header).max(1);
+        let names: Vec<&str> = header.iter().collect();
+        let index: Option<Vec<usize>> = INPUT_COLUMNS
+            .iter()
+            .map(|c| names.iter().position(|n| n == c))
+            .collect();
+        let unique = INPUT_COLUMNS
+            .iter()
+            .all(|c| names.iter().filter(|n| *n == c).count() == 1);
+        let (Some(index), true) = (index, unique) else {
+            return Err(TableError::Header {
                 path: path.to_owned(),
-                line,
-                expected: names.len(),
-                found: record.len(),
+                line: hline,
+                found: names.join(","),
             });
-        }
-        let mut v = [0.0; 6];
-        for (k, &i) in index.iter().enumerate() {
-            let f = &record[i];
-            v[k] = f.parse::<f64>().map_err(|_| TableError::Number {
-                path: path.to_owned(),
-                line,
-                column: INPUT_COLUMNS[k],
-                value: f.to_owned(),
-            })?;
-        }
-        table.rows.push(RayRow {
-            line,
-            origin: DVec3::new(v[0], v[1], v[2]),
-            dir: DVec3::new(v[3], v[4], v[5]),
-            extra: extra_at.iter().map(|&i| record[i].to_owned()).collect(),
-        });
+        };
+        reader.index.copy_from_slice(&index);
+        reader.extra_at = (0..names.len()).filter(|i| !index.contains(i)).collect();
+        reader.extra_columns = reader
+            .extra_at
+            .iter()
+            .map(|&i| names[i].to_owned())
+            .collect();
+        reader.width = names.len();
+        Ok(reader)
     }
-    Ok(table)
+
+    /// The names of the columns that are not ray inputs, passed through to the output.
+    pub fn extra_columns(&self) -> &[String] {
+        &self.extra_columns
+    }
+
+    /// Bytes of the input read so far (for progress).
+    pub fn bytes_read(&self) -> u64 {
+        self.csv.get_ref().read_bytes
+    }
+
+    fn line_of(&self, record: &csv::StringRecord) -> usize {
+        record
+            .position()
+            .map_or(0, |p| self.csv.get_ref().file_line(p.line()))
+    }
+
+    fn csv_err(&self, e: csv::Error) -> TableError {
+        if let csv::ErrorKind::Io(err) = e.kind() {
+            return TableError::Read {
+                path: self.path.clone(),
+                err: io::Error::new(err.kind(), err.to_string()),
+            };
+        }
+        TableError::Csv {
+            path: self.path.clone(),
+            line: e
+                .position()
+                .map_or(0, |p| self.csv.get_ref().file_line(p.line())),
+            message: e.to_string(),
+        }
+    }
+
+    /// Append up to `max` rows to `out`; returns how many were appended (0 at the end).
+    pub fn next_batch(&mut self, max: usize, out: &mut Vec<RayRow>) -> Result<usize, TableError> {
+        let mut n = 0;
+        while n < max {
+            let mut record = std::mem::take(&mut self.record);
+            let got = self.csv.read_record(&mut record);
+            let got = got.map_err(|e| self.csv_err(e));
+            self.record = record;
+            if !got? {
+                break;
+            }
+            let record = &self.record;
+            let line = self.line_of(record);
+            if let Some(p) = record.position() {
+                self.csv.get_mut().forget_before(p.line());
+            }
+            if record.len() != self.width {
+                return Err(TableError::Columns {
+                    path: self.path.clone(),
+                    line,
+                    expected: self.width,
+                    found: record.len(),
+                });
+            }
+            let mut v = [0.0; 6];
+            for (k, &i) in self.index.iter().enumerate() {
+                let f = &record[i];
+                v[k] = f.parse::<f64>().map_err(|_| TableError::Number {
+                    path: self.path.clone(),
+                    line,
+                    column: INPUT_COLUMNS[k],
+                    value: f.to_owned(),
+                })?;
+            }
+            out.push(RayRow {
+                line,
+                origin: DVec3::new(v[0], v[1], v[2]),
+                dir: DVec3::new(v[3], v[4], v[5]),
+                extra: self
+                    .extra_at
+                    .iter()
+                    .map(|&i| record[i].to_owned())
+                    .collect(),
+            });
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Every remaining row.
+    pub fn read_all(mut self) -> Result<RayTable, TableError> {
+        let mut rows = Vec::new();
+        while self.next_batch(BATCH_ROWS, &mut rows)? > 0 {}
+        Ok(RayTable {
+            extra_columns: self.extra_columns,
+            rows,
+        })
+    }
+}
+
+/// Read a whole ray table file, or standard input for `-` (a streaming trace uses
+/// [`RayReader`]).
+pub fn read_rays(path: &Path) -> Result<RayTable, TableError> {
+    RayReader::open(path)?.read_all()
+}
+
+/// Parse a ray table (`path` only names it in errors); see [`RayReader`].
+pub fn parse_rays(text: &str, path: &Path) -> Result<RayTable, TableError> {
+    RayReader::new(text.as_bytes(), path)?.read_all()
 }
 
 /// Trace every row in parallel (rayon) in precision `R`; `tick` is called once per ray
@@ -225,35 +399,41 @@ pub struct TableSummary {
     /// Mean steps and field evaluations over the rays that entered the medium.
     pub mean_steps: f64,
     pub mean_evals: f64,
+    /// Rays that entered the medium, their steps and evaluations (the means' sums).
+    entered: u64,
+    steps: u64,
+    evals: u64,
 }
 
 impl TableSummary {
     pub fn of(results: &[RayResult]) -> Self {
-        let mut s = TableSummary {
-            rays: results.len(),
-            ..Default::default()
-        };
-        let (mut steps, mut evals, mut entered) = (0u64, 0u64, 0u64);
+        let mut s = TableSummary::default();
+        s.add(results);
+        s
+    }
+
+    /// Count a further batch of results in.
+    pub fn add(&mut self, results: &[RayResult]) {
+        self.rays += results.len();
         for r in results {
             match r.status {
-                RayStatus::Missed => s.missed += 1,
-                RayStatus::Exited => s.exited += 1,
-                RayStatus::Absorbed => s.absorbed += 1,
-                RayStatus::MaxSteps => s.max_steps += 1,
-                RayStatus::Error => s.error += 1,
-                RayStatus::Degraded => s.degraded += 1,
+                RayStatus::Missed => self.missed += 1,
+                RayStatus::Exited => self.exited += 1,
+                RayStatus::Absorbed => self.absorbed += 1,
+                RayStatus::MaxSteps => self.max_steps += 1,
+                RayStatus::Error => self.error += 1,
+                RayStatus::Degraded => self.degraded += 1,
             }
             if r.steps > 0 {
-                entered += 1;
-                steps += u64::from(r.steps);
-                evals += r.evals;
+                self.entered += 1;
+                self.steps += u64::from(r.steps);
+                self.evals += r.evals;
             }
         }
-        if entered > 0 {
-            s.mean_steps = steps as f64 / entered as f64;
-            s.mean_evals = evals as f64 / entered as f64;
+        if self.entered > 0 {
+            self.mean_steps = self.steps as f64 / self.entered as f64;
+            self.mean_evals = self.evals as f64 / self.entered as f64;
         }
-        s
     }
 }
 
@@ -282,73 +462,149 @@ fn row_values(row: &RayRow) -> [f64; 6] {
 }
 
 /// A number in Rust's shortest round-trip form, with an exponent where that is shorter
-/// (`1e-11`, not `0.00000000001`) and no `.0` on integers.
-fn fmt_num(v: f64) -> String {
-    let s = format!("{v:?}");
-    match s.strip_suffix(".0") {
-        Some(int) => int.to_owned(),
-        None => s,
+/// (`1e-11`, not `0.00000000001`) and no `.0` on integers, written into `buf`.
+fn fmt_num_into(buf: &mut String, v: f64) {
+    use std::fmt::Write as _;
+    buf.clear();
+    let _ = write!(buf, "{v:?}");
+    if buf.ends_with(".0") {
+        buf.truncate(buf.len() - 2);
     }
 }
 
-/// Write a traced table: the ray columns, the passed-through columns, then the results.
-/// CSV numbers are in Rust's shortest round-trip form; JSON is an array of objects keyed
-/// by column name (non-finite numbers `null`, passed-through values as strings).
+/// Writes a traced table a batch at a time: [`TableWriter::rows`] for each batch, then
+/// [`TableWriter::finish`]. CSV numbers are in Rust's shortest round-trip form; JSON is an
+/// array of objects keyed by column name (non-finite numbers `null`, passed-through values
+/// as strings).
+#[derive(Debug)]
+pub struct TableWriter {
+    format: TableFormat,
+    extra_columns: Vec<String>,
+    started: bool,
+    rows: usize,
+    buf: String,
+}
+
+impl TableWriter {
+    pub fn new(format: TableFormat, extra_columns: &[String]) -> Self {
+        TableWriter {
+            format,
+            extra_columns: extra_columns.to_vec(),
+            started: false,
+            rows: 0,
+            buf: String::new(),
+        }
+    }
+
+    fn start(&mut self, w: &mut dyn Write) -> io::Result<()> {
+        if self.started {
+            return Ok(());
+        }
+        self.started = true;
+        match self.format {
+            TableFormat::Csv => {
+                let mut out = csv::Writer::from_writer(&mut *w);
+                let header = INPUT_COLUMNS
+                    .iter()
+                    .copied()
+                    .chain(self.extra_columns.iter().map(String::as_str))
+                    .chain(OUTPUT_COLUMNS);
+                out.write_record(header)?;
+                out.flush()
+            }
+            TableFormat::Json => w.write_all(b"["),
+        }
+    }
+
+    /// Write a batch of rows with their results.
+    pub fn rows(
+        &mut self,
+        w: &mut dyn Write,
+        rows: &[RayRow],
+        results: &[RayResult],
+    ) -> io::Result<()> {
+        self.start(w)?;
+        match self.format {
+            TableFormat::Csv => {
+                let mut out = csv::Writer::from_writer(&mut *w);
+                for (row, r) in rows.iter().zip(results) {
+                    for v in row_values(row) {
+                        fmt_num_into(&mut self.buf, v);
+                        out.write_field(&self.buf)?;
+                    }
+                    for v in &row.extra {
+                        out.write_field(v)?;
+                    }
+                    out.write_field(r.status.name())?;
+                    for v in result_values(r) {
+                        fmt_num_into(&mut self.buf, v);
+                        out.write_field(&self.buf)?;
+                    }
+                    out.write_field(r.steps.to_string())?;
+                    out.write_field(r.evals.to_string())?;
+                    out.write_record(None::<&[u8]>)?;
+                }
+                out.flush()?;
+            }
+            TableFormat::Json => {
+                for (row, r) in rows.iter().zip(results) {
+                    let text = serde_json::to_string_pretty(&self.json_row(row, r))
+                        .map_err(io::Error::other)?;
+                    w.write_all(if self.rows == 0 { b"\n" } else { b",\n" })?;
+                    for (i, line) in text.lines().enumerate() {
+                        if i > 0 {
+                            w.write_all(b"\n")?;
+                        }
+                        w.write_all(b"  ")?;
+                        w.write_all(line.as_bytes())?;
+                    }
+                    self.rows += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn json_row(&self, row: &RayRow, r: &RayResult) -> serde_json::Value {
+        use serde_json::{Map, Value};
+        let num = |v: f64| serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number);
+        let mut o = Map::new();
+        for (name, v) in INPUT_COLUMNS.iter().zip(row_values(row)) {
+            o.insert((*name).to_owned(), num(v));
+        }
+        for (name, v) in self.extra_columns.iter().zip(&row.extra) {
+            o.insert(name.clone(), Value::String(v.clone()));
+        }
+        o.insert("status".into(), Value::String(r.status.name().into()));
+        for (name, v) in OUTPUT_COLUMNS[1..9].iter().zip(result_values(r)) {
+            o.insert((*name).to_owned(), num(v));
+        }
+        o.insert("steps".into(), Value::from(r.steps));
+        o.insert("evals".into(), Value::from(r.evals));
+        Value::Object(o)
+    }
+
+    /// End the table (the header alone where there were no rows).
+    pub fn finish(mut self, w: &mut dyn Write) -> io::Result<()> {
+        self.start(w)?;
+        if self.format == TableFormat::Json {
+            w.write_all(if self.rows == 0 { b"]\n" } else { b"\n]\n" })?;
+        }
+        w.flush()
+    }
+}
+
+/// Write a whole traced table: the ray columns, the passed-through columns, then the
+/// results (see [`TableWriter`]).
 pub fn write_table(
     w: &mut dyn Write,
     format: TableFormat,
     table: &RayTable,
     results: &[RayResult],
 ) -> io::Result<()> {
-    match format {
-        TableFormat::Csv => {
-            let mut out = csv::Writer::from_writer(w);
-            let header = INPUT_COLUMNS
-                .iter()
-                .copied()
-                .chain(table.extra_columns.iter().map(String::as_str))
-                .chain(OUTPUT_COLUMNS);
-            out.write_record(header)?;
-            for (row, r) in table.rows.iter().zip(results) {
-                let mut record: Vec<String> = row_values(row).map(fmt_num).to_vec();
-                record.extend(row.extra.iter().cloned());
-                record.push(r.status.name().to_owned());
-                record.extend(result_values(r).map(fmt_num));
-                record.push(r.steps.to_string());
-                record.push(r.evals.to_string());
-                out.write_record(&record)?;
-            }
-            out.flush()?;
-        }
-        TableFormat::Json => {
-            use serde_json::{Map, Value};
-            let num = |v: f64| serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number);
-            let rows: Vec<Value> = table
-                .rows
-                .iter()
-                .zip(results)
-                .map(|(row, r)| {
-                    let mut o = Map::new();
-                    for (name, v) in INPUT_COLUMNS.iter().zip(row_values(row)) {
-                        o.insert((*name).to_owned(), num(v));
-                    }
-                    for (name, v) in table.extra_columns.iter().zip(&row.extra) {
-                        o.insert(name.clone(), Value::String(v.clone()));
-                    }
-                    o.insert("status".into(), Value::String(r.status.name().into()));
-                    for (name, v) in OUTPUT_COLUMNS[1..9].iter().zip(result_values(r)) {
-                        o.insert((*name).to_owned(), num(v));
-                    }
-                    o.insert("steps".into(), Value::from(r.steps));
-                    o.insert("evals".into(), Value::from(r.evals));
-                    Value::Object(o)
-                })
-                .collect();
-            serde_json::to_writer_pretty(&mut *w, &rows).map_err(io::Error::other)?;
-            writeln!(w)?;
-        }
-    }
-    Ok(())
+    let mut out = TableWriter::new(format, &table.extra_columns);
+    out.rows(w, &table.rows, results)?;
+    out.finish(w)
 }
 
 /// Write a traced table to `path` through grin-output: a failed write leaves no partial
@@ -469,6 +725,72 @@ mod tests {
             keys[..8],
             ["ox", "oy", "oz", "dx", "dy", "dz", "id", "note"]
         );
+    }
+
+    /// Batches of a long table keep the file's line numbers (comments and blank lines
+    /// between them, a quoted field over two lines, a `#` inside it), and a bad row far
+    /// down is named by its line.
+    #[test]
+    fn batches_keep_line_numbers() {
+        let mut text = String::from("# a table\nox,oy,oz,dx,dy,dz,note\n");
+        let mut line = 2;
+        for i in 0..100_000 {
+            if i % 7 == 0 {
+                text.push_str("\n# comment\n");
+                line += 2;
+            }
+            if i == 5 {
+                text.push_str("0,0,0,0,0,1,\"two\n# lines\"\n");
+                line += 2;
+                continue;
+            }
+            text.push_str(&format!("{i},0,0,0,0,1,n\n"));
+            line += 1;
+        }
+        let mut reader = RayReader::new(text.as_bytes(), p()).expect("header");
+        let mut rows = Vec::new();
+        while reader.next_batch(4096, &mut rows).expect("rows") > 0 {}
+        assert_eq!(rows.len(), 100_000);
+        assert_eq!(rows[5].extra, ["two\n# lines"]);
+        assert_eq!(rows[5].line, 10, "where the quoted row starts");
+        assert_eq!(rows[6].line, 12);
+        let last = rows.last().expect("rows");
+        assert_eq!((last.origin.x, last.line), (99_999.0, line));
+        text.push_str("1,2,x,0,0,1,n\n");
+        let e = parse_rays(&text, p()).expect_err("bad row").to_string();
+        assert_eq!(
+            e,
+            format!("rays.csv:{}: column `oz`: `x` is not a number", line + 1)
+        );
+    }
+
+    /// The streamed writer's output is the same in one batch or many, in both formats.
+    #[test]
+    fn batched_writes_equal_one_write() {
+        let t = parse_rays(
+            "ox,oy,oz,dx,dy,dz,id\n0,0,-3,0,0,2,a\n1,0,-3,0,0,2,b\n2,0,-3,0,0,2,c\n",
+            p(),
+        )
+        .expect("valid");
+        let res: Vec<RayResult> = t.rows.iter().map(missed).collect();
+        for format in [TableFormat::Csv, TableFormat::Json] {
+            let mut whole = Vec::new();
+            write_table(&mut whole, format, &t, &res).expect("write");
+            let mut parts = Vec::new();
+            let mut w = TableWriter::new(format, &t.extra_columns);
+            w.rows(&mut parts, &t.rows[..1], &res[..1]).expect("write");
+            w.rows(&mut parts, &t.rows[1..], &res[1..]).expect("write");
+            w.finish(&mut parts).expect("finish");
+            assert_eq!(
+                String::from_utf8_lossy(&whole),
+                String::from_utf8_lossy(&parts)
+            );
+        }
+        let mut empty = Vec::new();
+        TableWriter::new(TableFormat::Json, &[])
+            .finish(&mut empty)
+            .expect("finish");
+        assert_eq!(empty, b"[]\n");
     }
 
     #[test]

@@ -129,7 +129,10 @@ struct Summary<'a> {
     error: usize,
     mean_steps: f64,
     mean_evals: f64,
+    /// Tracing alone.
     seconds: f64,
+    /// Reading, tracing and writing the table (the pilots before it not counted).
+    total_seconds: f64,
     rays_per_second: f64,
     /// `step = { auto = ... }`: what the pilot rays chose.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -168,8 +171,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .validate_for(&field.bounds())
         .with_context(|| format!("{}: [render]", args.scene.display()))?;
 
-    let rays = table::read_rays(&args.rays)?;
-    let rows = &rays.rows;
+    // The table streams: the first batch is read now (its rays are the pilots'), the rest
+    // while the output is written, a batch at a time.
+    let mut reader = table::RayReader::open(&args.rays)?;
+    let mut rows = Vec::new();
+    reader.next_batch(table::BATCH_ROWS, &mut rows)?;
     // `step = { auto = ... }`: pilot rays (some of the table's own) choose the method.
     let free_integrator = scene.render.integrator.is_none() && args.integrator.is_none();
     let pilots: Vec<_> = rows.iter().map(|r| (r.origin, r.dir)).collect();
@@ -200,30 +206,73 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => TableFormat::Csv,
     };
 
-    let bar = if rows.len() >= PROGRESS_MIN_RAYS {
-        ProgressBar::with_draw_target(Some(rows.len() as u64), ProgressDrawTarget::stderr())
-    } else {
-        ProgressBar::hidden()
+    // Progress in bytes of the input where its size is known, else in rays.
+    let input_bytes = std::fs::metadata(&args.rays)
+        .ok()
+        .filter(|m| m.is_file())
+        .map(|m| m.len());
+    let bar = match input_bytes {
+        _ if rows.len() < PROGRESS_MIN_RAYS => ProgressBar::hidden(),
+        Some(len) => {
+            let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "tracing {bar:40} {percent}% of the table, {msg} rays ({elapsed}, eta {eta})",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            bar
+        }
+        None => {
+            let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template("tracing {msg} rays ({elapsed})")
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+            );
+            bar
+        }
     };
-    bar.set_style(
-        ProgressStyle::with_template("tracing {bar:40} {pos}/{len} rays ({per_sec}, eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let start = Instant::now();
-    let tick = || bar.inc(1);
-    let results = if args.f32 {
-        table::trace_rows::<f32>(field.as_ref(), &settings, rows, &tick)
-    } else {
-        table::trace_rows::<f64>(field.as_ref(), &settings, rows, &tick)
-    };
+    let wall = Instant::now();
+    let mut seconds = 0.0;
+    let mut s = TableSummary::default();
+    let mut failed: Option<table::TableError> = None;
+    let written = grin_output::write_file(&args.output, |w| {
+        let mut out = table::TableWriter::new(format, reader.extra_columns());
+        loop {
+            let start = Instant::now();
+            let results = if args.f32 {
+                table::trace_rows::<f32>(field.as_ref(), &settings, &rows, &|| {})
+            } else {
+                table::trace_rows::<f64>(field.as_ref(), &settings, &rows, &|| {})
+            };
+            seconds += start.elapsed().as_secs_f64();
+            s.add(&results);
+            out.rows(w, &rows, &results)?;
+            bar.set_message(s.rays.to_string());
+            bar.set_position(reader.bytes_read());
+            rows.clear();
+            match reader.next_batch(table::BATCH_ROWS, &mut rows) {
+                Ok(0) => break,
+                Ok(_) => {}
+                Err(e) => {
+                    let text = e.to_string();
+                    failed = Some(e);
+                    return Err(std::io::Error::other(text));
+                }
+            }
+        }
+        out.finish(w)
+    });
     bar.finish_and_clear();
-    let seconds = start.elapsed().as_secs_f64();
-    table::write_table_file(&args.output, format, &rays, &results)?;
+    if let Some(e) = failed {
+        return Err(e.into());
+    }
+    written?;
+    let total_seconds = wall.elapsed().as_secs_f64();
 
-    let s = TableSummary::of(&results);
     let precision = if args.f32 { "f32" } else { "f64" };
     eprintln!(
-        "traced {} rays ({}, {}, {precision}) in {seconds:.3} s: {} exited, {} degraded, {} missed, {} max_steps, {} absorbed, {} error; mean {:.1} steps, {:.1} evals per ray -> {}",
+        "traced {} rays ({}, {}, {precision}) in {seconds:.3} s ({total_seconds:.3} s with reading and writing): {} exited, {} degraded, {} missed, {} max_steps, {} absorbed, {} error; mean {:.1} steps, {:.1} evals per ray -> {}",
         s.rays,
         field.describe(),
         settings.integrator.name(),
@@ -257,6 +306,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             mean_steps: s.mean_steps,
             mean_evals: s.mean_evals,
             seconds,
+            total_seconds,
             rays_per_second: if seconds > 0.0 {
                 s.rays as f64 / seconds
             } else {
@@ -266,12 +316,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         // Where the table itself went to a stream (`-o -`, a device: it may be stdout), the
         // summary goes to stderr, as `grin render` does.
-        let text = serde_json::to_string(&summary)?;
-        if grin_output::Destination::resolve(&args.output).is_ok_and(|d| d.is_stream()) {
-            eprintln!("{text}");
-        } else {
-            outln!("{text}");
-        }
+        crate::report(
+            crate::is_stream(&args.output),
+            serde_json::to_string(&summary)?,
+        );
     }
     Ok(())
 }
