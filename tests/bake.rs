@@ -379,3 +379,66 @@ fn noise_scene_bakes_within_budget() {
     assert_eq!(v["meets_budget"], true);
     assert!(v["relative_error"].as_f64().expect("rel") <= 1e-3);
 }
+
+/// `grin bake -o -` writes the binary alone on stdout, a .grinf grin reads back; the
+/// summary (text, or JSON with `--json`) goes to stderr.
+#[test]
+fn bake_to_stdout_writes_only_the_grid() {
+    let d = Dir::new();
+    let s = d.write("lens.toml", &scene(LUNEBURG, ""));
+    for json in [false, true] {
+        let mut cmd = grin();
+        cmd.arg("bake")
+            .arg(&s)
+            .args(["-o", "-", "--resolution", "12"]);
+        if json {
+            cmd.arg("--json");
+        }
+        let o = cmd.output().expect("run grin bake");
+        assert!(o.status.success(), "{}", stderr(&o));
+        let field = grin_field::grinf::from_bytes(&o.stdout, "stdout")
+            .unwrap_or_else(|e| panic!("stdout is not a .grinf: {e}"));
+        // 12 nodes across the lens and the trilinear margin of 2 on each side.
+        assert_eq!(field.geometry().dims.iter().max(), Some(&16));
+        let err = stderr(&o);
+        if json {
+            let v: serde_json::Value = serde_json::from_str(err.trim()).expect("JSON on stderr");
+            assert_eq!(v["output"], "-");
+        } else {
+            assert!(
+                err.contains("baked     ") && err.contains("grid      "),
+                "{err}"
+            );
+        }
+    }
+}
+
+/// Frame ranges at the ends of i64 are refused before any frame is written (the range
+/// check overflowed and `--frames=-1..9223372036854775807` wrote frames without end).
+#[test]
+fn frame_ranges_cannot_overflow_past_the_cap() {
+    let d = Dir::new();
+    let s = d.write("lens.toml", &scene(LUNEBURG, ""));
+    for cmd in ["bake", "render"] {
+        let out = d.path(if cmd == "bake" {
+            "f.####.grinf"
+        } else {
+            "f.####.exr"
+        });
+        let o = grin()
+            .arg(cmd)
+            .arg(&s)
+            .arg("-o")
+            .arg(&out)
+            .arg("--frames=-1..9223372036854775807")
+            .output()
+            .expect("run grin");
+        assert!(!o.status.success(), "{cmd} accepted the range");
+        assert!(
+            stderr(&o).contains("has 9223372036854775809 frames; at most 100000"),
+            "{cmd}: {}",
+            stderr(&o)
+        );
+        assert_eq!(d.names(), ["lens.toml"], "{cmd} wrote a frame");
+    }
+}

@@ -158,6 +158,27 @@ fn bad_images_are_errors_naming_the_file() {
     let dir = tempfile::tempdir().expect("tmp");
     let d = dir.path();
     std::fs::write(d.join("broken.png"), b"\x89PNG\r\n\x1a\nnot really").expect("file");
+    // An image bomb: a 4x4 EXR whose header is patched to declare 60000x60000 (it aborted
+    // with "memory allocation of 43200000000 bytes failed" before its size was checked).
+    let pixels = exr::prelude::SpecificChannels::rgb(|_: exr::prelude::Vec2<usize>| {
+        (0.5f32, 0.5f32, 0.5f32)
+    });
+    use exr::prelude::WritableImage as _;
+    exr::prelude::Image::from_channels((4, 4), pixels)
+        .write()
+        .to_file(d.join("bomb.exr"))
+        .expect("exr");
+    let mut bytes = std::fs::read(d.join("bomb.exr")).expect("read");
+    for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+        let at = bytes
+            .windows(name.len())
+            .position(|w| w == name)
+            .expect("window attribute")
+            + name.len()
+            + 4;
+        bytes[at + 8..at + 16].copy_from_slice(&[59_999i32.to_le_bytes(); 2].concat());
+    }
+    std::fs::write(d.join("bomb.exr"), bytes).expect("write");
     let cam = "[camera]\nposition = [0.0, 1.0, -4.0]\nlook_at = [0.0, 0.0, 0.0]\n[render]\nwidth = 8\nheight = 8\n";
     let wall = "shape = { plane = { point = [0.0, 0.0, 2.0], normal = [0.0, 0.0, -1.0] } }";
     let cases = [
@@ -182,6 +203,16 @@ fn bad_images_are_errors_naming_the_file() {
         (
             "[sky]\nplate = { path = \"nowhere.exr\" }\n".to_string(),
             "background plate",
+        ),
+        (
+            "[sky]\nplate = { path = \"bomb.exr\" }\n".to_string(),
+            "bomb.exr",
+        ),
+        (
+            format!(
+                "[[object]]\n{wall}\nmaterial = {{ texture = {{ path = \"bomb.exr\", size = [1.0, 1.0] }} }}\n"
+            ),
+            "60000x60000 exceeds 16384 texels a side",
         ),
         (
             "[[object]]\nshape = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\n\

@@ -58,6 +58,35 @@ macro_rules! outln {
     };
 }
 
+/// Print a command's result (summary, JSON): on stdout, or on stderr where the command's
+/// own output went to a stream (`-o -`, a device), which may be stdout itself.
+fn report(output_is_stream: bool, text: impl std::fmt::Display) {
+    if output_is_stream {
+        eprintln!("{text}");
+    } else {
+        write_stdout(format_args!("{text}"));
+    }
+}
+
+/// `text` with its control characters but line ends escaped (`\u{0}`, `\u{1b}`): an error
+/// that quotes a user's input must not write a NUL or a terminal escape to the terminal.
+fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_control() && c != '\n' {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
+}
+
+/// Whether `output` is written into a stream (`-`, a device, a FIFO) rather than a file.
+fn is_stream(output: &std::path::Path) -> bool {
+    grin_output::Destination::resolve(output).is_ok_and(|d| d.is_stream())
+}
+
 mod cmd;
 
 fn main() -> ExitCode {
@@ -84,7 +113,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("grin: error: {e:#}");
+            eprintln!("grin: error: {}", printable(&format!("{e:#}")));
             ExitCode::FAILURE
         }
     }

@@ -388,7 +388,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<BakedField, GrinfError> {
             scale: h.scale,
         },
     };
-    BakedField::new(
+    let field = BakedField::new(
         h.geometry,
         voxels,
         h.interp,
@@ -400,7 +400,92 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<BakedField, GrinfError> {
     .map_err(|e| GrinfError::Header {
         path: path.into(),
         message: e.to_string(),
-    })
+    })?;
+    check_whole(&field).map_err(|message| GrinfError::Header {
+        path: path.into(),
+        message,
+    })?;
+    Ok(field)
+}
+
+/// Correlation above which the stored gradient and the differences of the stored index
+/// are taken to be the same field, so their ratio measures the grid's spacing.
+const SAME_FIELD_CORRELATION: f64 = 0.9;
+/// How far that ratio may stray from 1 (a resolved bake: within a few percent).
+const SPACING_RATIO_LIMIT: f64 = 1.25;
+/// Most interior nodes sampled for the spacing check.
+const SPACING_SAMPLES: usize = 1 << 20;
+
+/// What a CRC cannot catch: a header whose numbers are consistent with the payload's
+/// size but not with its content. A grid that clamps beyond its nodes must cover the
+/// bounds it claims; and the stored gradient must be the gradient of the stored index at
+/// the stored spacing (a wrong spacing, or dims permuted over the same payload, would
+/// otherwise give confident, wrong exits). A field too fine for its grid (noise under
+/// the spacing) correlates poorly and is not judged.
+fn check_whole(field: &BakedField) -> Result<(), String> {
+    let g = field.geometry();
+    if field.outside() == Outside::Clamp {
+        let (lo, hi) = g.world_box();
+        let (b_lo, b_hi) = crate::field::IndexField::bounds(field).aabb();
+        let slack = 1e-6 * g.spacing.max_element();
+        if !(lo.cmple(b_lo + slack).all() && hi.cmpge(b_hi - slack).all()) {
+            return Err(format!(
+                "the grid {lo} .. {hi} does not cover the bounds {b_lo} .. {b_hi} it claims \
+                 (a clamped grid must)"
+            ));
+        }
+    }
+    let [nx, ny, nz] = g.dims;
+    if nx < 3 || ny < 3 || nz < 3 {
+        return Ok(());
+    }
+    let interior = (nx - 2) * (ny - 2) * (nz - 2);
+    let stride = interior.div_ceil(SPACING_SAMPLES).max(1);
+    let v = field.voxels();
+    let h = g.spacing.to_array();
+    // Per axis: sums of fd*g, g*g, fd*fd.
+    let mut sums = [[0.0f64; 3]; 3];
+    let mut k = 0usize;
+    while k < interior {
+        let (i, j, l) = (
+            1 + k % (nx - 2),
+            1 + (k / (nx - 2)) % (ny - 2),
+            1 + k / ((nx - 2) * (ny - 2)),
+        );
+        let c = v.get(g.index(i, j, l));
+        let steps = [[1, 0, 0], [0, 1, 0], [0, 0, 1]];
+        for (a, d) in steps.iter().enumerate() {
+            let up = v.get(g.index(i + d[0], j + d[1], l + d[2]))[0];
+            let down = v.get(g.index(i - d[0], j - d[1], l - d[2]))[0];
+            let fd = (f64::from(up) - f64::from(down)) / (2.0 * h[a]);
+            let gs = f64::from(c[1 + a]);
+            sums[a][0] += fd * gs;
+            sums[a][1] += gs * gs;
+            sums[a][2] += fd * fd;
+        }
+        k += stride;
+    }
+    let energy = sums.iter().map(|s| s[1]).fold(0.0, f64::max);
+    for (a, [fg, gg, ff]) in sums.into_iter().enumerate() {
+        // An axis along which the index hardly changes says nothing about its spacing.
+        if !(gg > 1e-6 * energy && gg > 0.0 && ff > 0.0) {
+            continue;
+        }
+        let correlation = fg / (gg * ff).sqrt();
+        let ratio = fg / gg;
+        if correlation > SAME_FIELD_CORRELATION
+            && !(1.0 / SPACING_RATIO_LIMIT..=SPACING_RATIO_LIMIT).contains(&ratio)
+        {
+            return Err(format!(
+                "the stored gradient along {} is {:.3}x the differences of the stored index at \
+                 the grid spacing {}: the spacing or dims do not match the data",
+                ["x", "y", "z"][a],
+                1.0 / ratio,
+                h[a]
+            ));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -546,6 +546,22 @@ impl VdbField {
                     z: p[2],
                 });
             }
+            // What a bake's storage and the GPU's f32 can carry (a value of 1e32 in the
+            // grid rendered OPD -inf and rays that left after a few steps).
+            if (n - ambient).abs() > crate::baked::MAX_BAKED_DELTA_N {
+                let p = world_of(ijk);
+                return Err(param_err(
+                    "map",
+                    format!(
+                        "grid value {v} maps to n = {n:e} at world ({:.4}, {:.4}, {:.4}): \
+                         |n - ambient| must be at most {} (what a bake and the GPU can carry)",
+                        p[0],
+                        p[1],
+                        p[2],
+                        crate::baked::MAX_BAKED_DELTA_N
+                    ),
+                ));
+            }
             lo = lo.min(n);
             hi = hi.max(n);
             Ok(n - ambient)

@@ -5,10 +5,17 @@
 //! scene states it (bounds, ambient index, field kind and every parameter, `t`), the
 //! bytes of every file it names (a VDB cache, a `.grinf`), the GPU bake policy (its
 //! resolution cap and error budget) and this crate's version. Entries are `.grinf` files
-//! with a small JSON beside them (the bake's warnings), written through grin-output (no
+//! with a small JSON beside them (the key they were stored under, the grid's size and
+//! checksum, the format version, the bake's warnings), written through grin-output (no
 //! partial file is ever visible), in `$GRIN_CACHE_DIR`, else `$XDG_CACHE_HOME/grin/bakes`,
 //! else `$HOME/.cache/grin/bakes`. Past [`CACHE_CAP_BYTES`] the least recently used
-//! entries are removed. A corrupt entry is baked again and replaced.
+//! entries are removed.
+//!
+//! The cache trusts nothing it reads: an entry is used only when its JSON names the key
+//! asked for, the grid's own checksum verifies and equals the one the JSON recorded, and
+//! the grid's bounds and ambient index are the medium's. Anything else (a corrupt file,
+//! another scene's bake put in its place, two writers that crossed) is a miss that bakes
+//! again and replaces the entry, with a warning saying why.
 
 use std::path::{Path, PathBuf};
 
@@ -22,6 +29,20 @@ use crate::field::{DEFAULT_GPU_BAKE_RESOLUTION, bake_for_gpu_auto, bake_warning}
 
 /// Total size of the cache's entries kept on disk.
 pub const CACHE_CAP_BYTES: u64 = 4 << 30;
+
+/// What an entry's JSON records beside its grid.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+struct EntryMeta {
+    /// The key the entry was stored under.
+    key: String,
+    /// The grid file's size and its CRC-32 (the one in its own trailer).
+    bytes: u64,
+    crc32: u32,
+    /// The .grinf format version of the grid.
+    grinf_version: u32,
+    /// The bake's warnings.
+    warnings: Vec<String>,
+}
 
 /// What the cache did for one field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -74,7 +95,7 @@ impl BakeCache {
     /// digits. Errors when a file the medium names cannot be read.
     pub fn key(medium: &MediumSpec, scene_dir: &Path) -> Result<String, GpuError> {
         let mut h = Sha256::new();
-        h.update(b"grin-gpu bake cache v4\0");
+        h.update(b"grin-gpu bake cache v5\0");
         h.update(env!("CARGO_PKG_VERSION").as_bytes());
         h.update(format!("\0res={DEFAULT_GPU_BAKE_RESOLUTION}\0").as_bytes());
         h.update(format!("budget={}\0", grin_field::bake::DEFAULT_ERROR_BUDGET).as_bytes());
@@ -109,33 +130,64 @@ impl BakeCache {
         self.dir.join(format!("{key}.json"))
     }
 
-    /// The cached bake under `key`, if there is a readable one (its warnings with it).
-    pub fn get(&self, key: &str) -> Option<(BakedField, Vec<String>)> {
+    /// The cached bake under `key` (its warnings with it): `Ok(None)` when there is no
+    /// entry, `Err(why)` when there is one that cannot be trusted (see the module's
+    /// notes); the caller bakes again either way.
+    pub fn get(&self, key: &str) -> Result<Option<(BakedField, Vec<String>)>, String> {
         let grid = self.grid_path(key);
-        if !grid.is_file() {
-            return None;
+        let meta_path = self.warnings_path(key);
+        if !grid.is_file() && !meta_path.is_file() {
+            return Ok(None);
         }
-        let baked = grin_field::grinf::load(&grid).ok()?;
-        let warnings = std::fs::read(self.warnings_path(key))
-            .ok()
-            .and_then(|b| serde_json::from_slice::<Vec<String>>(&b).ok())?;
+        let bad = |why: String| format!("the cached bake {} {why}", grid.display());
+        let meta: EntryMeta = std::fs::read(&meta_path)
+            .map_err(|e| e.to_string())
+            .and_then(|b| serde_json::from_slice(&b).map_err(|e| e.to_string()))
+            .map_err(|e| bad(format!("has no readable record ({e})")))?;
+        if meta.key != key {
+            return Err(bad(format!("was stored under another key ({})", meta.key)));
+        }
+        let header = grin_field::grinf::read_header(&grid).map_err(|e| bad(e.to_string()))?;
+        if (header.crc32, header.file_bytes, header.version)
+            != (meta.crc32, meta.bytes, meta.grinf_version)
+        {
+            return Err(bad(format!(
+                "is not the grid its record names (checksum {:#010x} of {} bytes, recorded \
+                 {:#010x} of {} bytes)",
+                header.crc32, header.file_bytes, meta.crc32, meta.bytes
+            )));
+        }
+        let baked = grin_field::grinf::load(&grid).map_err(|e| bad(e.to_string()))?;
         // Touch for least-recently-used eviction.
         let _ = std::fs::File::options()
             .append(true)
             .open(&grid)
             .and_then(|f| f.set_modified(std::time::SystemTime::now()));
-        Some((baked, warnings))
+        Ok(Some((baked, meta.warnings)))
     }
 
-    /// Store a bake under `key`, then trim the cache to [`CACHE_CAP_BYTES`].
+    /// Store a bake under `key`, then trim the cache to [`CACHE_CAP_BYTES`]. The grid is
+    /// written first, its record last: a record names the checksum of the grid it was
+    /// written with, so writers that cross leave an entry [`BakeCache::get`] refuses, never
+    /// one that mixes two bakes.
     pub fn put(&self, key: &str, baked: &BakedField, warnings: &[String]) -> Result<(), String> {
         std::fs::create_dir_all(&self.dir)
             .map_err(|e| format!("{}: cannot create the bake cache: {e}", self.dir.display()))?;
-        let json = serde_json::to_vec(warnings).map_err(|e| e.to_string())?;
-        // Warnings first: an entry counts once its grid is there.
+        let bytes = grin_field::grinf::to_bytes(baked);
+        let header =
+            grin_field::grinf::parse_header(&bytes, "the bake").map_err(|e| e.to_string())?;
+        let meta = EntryMeta {
+            key: key.to_owned(),
+            bytes: header.file_bytes,
+            crc32: header.crc32,
+            grinf_version: header.version,
+            warnings: warnings.to_vec(),
+        };
+        let json = serde_json::to_vec(&meta).map_err(|e| e.to_string())?;
+        grin_output::write_file(&self.grid_path(key), |w| w.write_all(&bytes))
+            .map_err(|e| e.to_string())?;
         grin_output::write_file(&self.warnings_path(key), |w| w.write_all(&json))
             .map_err(|e| e.to_string())?;
-        grin_field::grinf::save(baked, &self.grid_path(key)).map_err(|e| e.to_string())?;
         self.trim(CACHE_CAP_BYTES);
         Ok(())
     }
@@ -176,10 +228,21 @@ pub fn gpu_bake_cached(
     field: &dyn IndexField,
     cache: Option<(&BakeCache, &str)>,
 ) -> Result<(BakedField, Vec<String>, CacheUse), GpuError> {
-    if let Some((c, key)) = cache
-        && let Some((baked, warnings)) = c.get(key)
-    {
-        return Ok((baked, warnings, CacheUse::Hit));
+    let mut distrusted = None;
+    if let Some((c, key)) = cache {
+        match c.get(key) {
+            Ok(Some((baked, warnings))) if same_medium(&baked, field) => {
+                return Ok((baked, warnings, CacheUse::Hit));
+            }
+            Ok(Some(_)) => {
+                distrusted = Some(format!(
+                    "the cached bake under {key} is of other bounds or another ambient index \
+                     than the medium"
+                ));
+            }
+            Ok(None) => {}
+            Err(why) => distrusted = Some(why),
+        }
     }
     let (baked, report) = bake_for_gpu_auto(field).map_err(|e| GpuError::Bake(e.to_string()))?;
     let mut warnings: Vec<String> = bake_warning(&report).into_iter().collect();
@@ -193,7 +256,17 @@ pub fn gpu_bake_cached(
         },
         None => CacheUse::Off,
     };
+    // Said now, not stored with the entry: the next use of it is a plain hit.
+    if let Some(why) = distrusted {
+        warnings.push(format!("{why}: baked again and replaced"));
+    }
     Ok((baked, warnings, used))
+}
+
+/// Whether a cached grid is a bake of `field`'s medium: the same bounds and ambient index.
+fn same_medium(baked: &BakedField, field: &dyn IndexField) -> bool {
+    baked.bounds() == field.bounds()
+        && (baked.ambient_index() - field.ambient_index()).abs() <= 1e-12 * field.ambient_index()
 }
 
 /// The grid the GPU marches for `scene`, whose medium is the scene file's `medium`
@@ -216,4 +289,83 @@ pub fn scene_gpu_field(
     let key = cache.map(|_| BakeCache::key(spec, scene_dir)).transpose()?;
     let cache = cache.zip(key.as_deref());
     gpu_bake_cached(m.field.as_ref(), cache).map(Some)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+    use grin_field::Bounds;
+    use grin_field::analytic::Luneburg;
+    use grin_field::bake::{BakeOptions, bake};
+
+    use super::*;
+
+    fn lens(radius: f64) -> Luneburg {
+        let bounds = Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius,
+        };
+        Luneburg::new(bounds, 1.0, None).expect("lens")
+    }
+
+    fn small_bake(field: &dyn IndexField) -> BakedField {
+        let opts = BakeOptions {
+            resolution: Some(10),
+            error_points: 50,
+            ..Default::default()
+        };
+        bake(field, &opts, &|_: &str, _: u64, _: u64| {})
+            .expect("bake")
+            .0
+    }
+
+    /// The cache verifies what it reads: another scene's valid bake put in place of an
+    /// entry, or an entry copied under another key, is refused with the reason (and
+    /// `gpu_bake_cached` bakes again with a warning); a bake of other bounds under the
+    /// right key and checksum is not used either.
+    #[test]
+    fn entries_that_lie_are_misses_with_a_reason() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let cache = BakeCache::new(dir.path());
+        let (a, b) = (small_bake(&lens(1.0)), small_bake(&lens(2.0)));
+        assert!(cache.get("ka").expect("no entry").is_none());
+        cache.put("ka", &a, &["wa".into()]).expect("put");
+        cache.put("kb", &b, &[]).expect("put");
+        let (got, warnings) = cache.get("ka").expect("verifies").expect("hit");
+        assert_eq!(got.bounds(), a.bounds());
+        assert_eq!(warnings, ["wa"]);
+
+        // Another scene's valid bake in place of the grid.
+        std::fs::copy(dir.path().join("kb.grinf"), dir.path().join("ka.grinf")).expect("cp");
+        let e = cache.get("ka").expect_err("lies");
+        assert!(e.contains("is not the grid its record names"), "{e}");
+        // The whole entry of another key copied under this one.
+        std::fs::copy(dir.path().join("kb.json"), dir.path().join("ka.json")).expect("cp");
+        let e = cache.get("ka").expect_err("lies");
+        assert!(e.contains("was stored under another key (kb)"), "{e}");
+        // A record that is not JSON.
+        std::fs::write(dir.path().join("ka.json"), b"\0junk").expect("write");
+        let e = cache.get("ka").expect_err("junk");
+        assert!(e.contains("has no readable record"), "{e}");
+
+        // Through gpu_bake_cached: a verified entry of other bounds is baked again, with
+        // a warning, and the entry is replaced so the next call hits.
+        let field = lens(1.0);
+        cache.put("kc", &b, &[]).expect("put");
+        let (baked, warnings, used) = gpu_bake_cached(&field, Some((&cache, "kc"))).expect("bakes");
+        assert_eq!(used, CacheUse::Stored);
+        assert_eq!(baked.bounds(), field.bounds());
+        assert!(
+            warnings
+                .iter()
+                .any(|w| w.contains("other bounds") && w.contains("baked again and replaced")),
+            "{warnings:?}"
+        );
+        let (_, warnings, used) = gpu_bake_cached(&field, Some((&cache, "kc"))).expect("hit");
+        assert_eq!(used, CacheUse::Hit);
+        assert!(
+            !warnings.iter().any(|w| w.contains("baked again")),
+            "{warnings:?}"
+        );
+    }
 }

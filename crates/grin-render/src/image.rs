@@ -113,6 +113,17 @@ impl Frame {
 
     /// Read an EXR written by [`Frame::write_exr`] (beauty and AOVs).
     pub fn read_exr(path: &Path) -> Result<Frame, RenderError> {
+        // The header's size first: a small file declaring a huge image is refused unread.
+        let (w, h) = crate::surface::exr_declared_size(path).map_err(|e| output_err(path, e))?;
+        if w as u64 * h as u64 > crate::scene::MAX_PIXELS {
+            return Err(output_err(
+                path,
+                format!(
+                    "{w}x{h} exceeds the {} pixels a frame may hold",
+                    crate::scene::MAX_PIXELS
+                ),
+            ));
+        }
         let image = read_all_flat_layers_from_file(path).map_err(|e| output_err(path, e))?;
         let layer = image
             .layer_data

@@ -20,45 +20,14 @@ pub struct Image {
 
 /// Largest image side accepted (GPU 2D textures reach 8192-32768 texels a side).
 pub const MAX_IMAGE_SIDE: usize = 16384;
+/// Most texels an image may hold: 2^25 (8192x4096). Decoding holds the file's pixels, a
+/// linear float copy and grin's texels at once, up to 32 bytes a texel: ~1 GiB here.
+pub const MAX_IMAGE_TEXELS: usize = 1 << 25;
+/// Most bytes the decoder may allocate for one image (its pixels and buffers).
+const MAX_DECODE_BYTES: u64 = 1 << 30;
 
-/// Read a `.png` (8 or 16 bit, sRGB: decoded to linear), `.exr` (first RGBA layer,
-/// linear) or `.hdr` (Radiance, linear) image. The error is the message alone: callers
-/// name the file and what it was for.
-pub fn load_image(path: &Path) -> Result<Image, String> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let decode = |srgb: bool| -> Result<(usize, usize, Vec<[f32; 3]>), String> {
-        let img = image::open(path).map_err(|e| e.to_string())?.into_rgb32f();
-        let (w, h) = (img.width() as usize, img.height() as usize);
-        let texels = img
-            .pixels()
-            .map(|p| if srgb { p.0.map(srgb_to_linear) } else { p.0 })
-            .collect();
-        Ok((w, h, texels))
-    };
-    let (width, height, texels) = match ext.as_deref() {
-        Some("exr") => {
-            let image = exr::prelude::read_first_rgba_layer_from_file(
-                path,
-                |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
-                |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                    px[pos.y() * *w + pos.x()] = [r, g, b];
-                },
-            )
-            .map_err(|e| e.to_string())?;
-            let size = image.layer_data.size;
-            (
-                size.width(),
-                size.height(),
-                image.layer_data.channel_data.pixels.1,
-            )
-        }
-        Some("hdr") => decode(false)?,
-        Some("png") => decode(true)?,
-        _ => return Err("must be a .png, .exr or .hdr file".into()),
-    };
+/// Refuse a declared size before anything of that size is allocated.
+fn check_size(width: usize, height: usize) -> Result<(), String> {
     if width == 0 || height == 0 {
         return Err("the image is empty".into());
     }
@@ -67,6 +36,97 @@ pub fn load_image(path: &Path) -> Result<Image, String> {
             "{width}x{height} exceeds {MAX_IMAGE_SIDE} texels a side"
         ));
     }
+    if width * height > MAX_IMAGE_TEXELS {
+        return Err(format!(
+            "{width}x{height} is {} texels, over the {MAX_IMAGE_TEXELS} ({} MiB decoded) \
+             an image may hold",
+            width * height,
+            (MAX_IMAGE_TEXELS * 32) >> 20
+        ));
+    }
+    Ok(())
+}
+
+/// The largest layer an EXR's headers declare (width, height), read without decoding any
+/// pixel: every layer is checked, whichever the reader then takes.
+pub fn exr_declared_size(path: &Path) -> Result<(usize, usize), String> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| e.to_string())?;
+    meta.headers
+        .iter()
+        .map(|h| (h.layer_size.width(), h.layer_size.height()))
+        .max_by_key(|&(w, h)| w.saturating_mul(h))
+        .ok_or_else(|| "the EXR has no layer".to_string())
+}
+
+/// The size an image's header declares, read without decoding it.
+fn declared_size(path: &Path, exr: bool) -> Result<(usize, usize), String> {
+    if exr {
+        return exr_declared_size(path);
+    }
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| e.to_string())?
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .into_dimensions()
+        .map_err(|e| e.to_string())?;
+    Ok((w as usize, h as usize))
+}
+
+/// Read a `.png` (8 or 16 bit, sRGB: decoded to linear), `.exr` (first RGBA layer,
+/// linear) or `.hdr` (Radiance, linear) image. Its header's size is checked against
+/// [`MAX_IMAGE_SIDE`] and [`MAX_IMAGE_TEXELS`] before any pixel is decoded, and the decoder
+/// allocates within a limit, so a small file declaring a huge image is refused, not
+/// decoded. The error is the message alone: callers name the file and what it was for.
+pub fn load_image(path: &Path) -> Result<Image, String> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let exr = match ext.as_deref() {
+        Some("exr") => true,
+        Some("hdr" | "png") => false,
+        _ => return Err("must be a .png, .exr or .hdr file".into()),
+    };
+    let (w, h) = declared_size(path, exr)?;
+    check_size(w, h)?;
+    let decode = |srgb: bool| -> Result<(usize, usize, Vec<[f32; 3]>), String> {
+        let mut reader = image::ImageReader::open(path)
+            .map_err(|e| e.to_string())?
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?;
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_IMAGE_SIDE as u32);
+        limits.max_image_height = Some(MAX_IMAGE_SIDE as u32);
+        limits.max_alloc = Some(MAX_DECODE_BYTES);
+        reader.limits(limits);
+        let img = reader.decode().map_err(|e| e.to_string())?.into_rgb32f();
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let texels = img
+            .pixels()
+            .map(|p| if srgb { p.0.map(srgb_to_linear) } else { p.0 })
+            .collect();
+        Ok((w, h, texels))
+    };
+    let (width, height, texels) = if exr {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
+            |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = [r, g, b];
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let size = image.layer_data.size;
+        (
+            size.width(),
+            size.height(),
+            image.layer_data.channel_data.pixels.1,
+        )
+    } else {
+        decode(ext.as_deref() == Some("png"))?
+    };
+    // The pixels decoded are the header's: a decoder that disagreed is refused too.
+    check_size(width, height)?;
     if let Some(bad) = texels
         .iter()
         .flatten()
@@ -299,5 +359,97 @@ mod tests {
             dot_intensity(d, density, 7, [0.1, 0.1]),
             dot_intensity(d, density, 8, [0.1, 0.1])
         );
+    }
+
+    /// CRC-32 (PNG's) of `bytes`, to seal crafted chunks.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 == 1 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
+    /// A PNG whose header declares `w` x `h` grey pixels and whose data is one tiny
+    /// (short) IDAT chunk: a few hundred bytes that would decode to gigabytes.
+    fn png_bomb(w: u32, h: u32) -> Vec<u8> {
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut chunk = |kind: &[u8], data: &[u8]| {
+            png.extend_from_slice(&(data.len() as u32).to_be_bytes());
+            let mut body = kind.to_vec();
+            body.extend_from_slice(data);
+            png.extend_from_slice(&body);
+            png.extend_from_slice(&crc32(&body).to_be_bytes());
+        };
+        let mut ihdr = w.to_be_bytes().to_vec();
+        ihdr.extend_from_slice(&h.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+        chunk(b"IHDR", &ihdr);
+        // zlib stream of a few zero bytes (stored block), far short of the image.
+        chunk(
+            b"IDAT",
+            &[0x78, 0x01, 0x01, 0x04, 0x00, 0xfb, 0xff, 0, 0, 0, 0],
+        );
+        chunk(b"IEND", &[]);
+        png
+    }
+
+    fn temp(name: &str, bytes: &[u8]) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("grin-surface-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).expect("write");
+        path
+    }
+
+    /// Image bombs: a small file whose header declares a huge image is refused from its
+    /// header, before anything of that size is allocated (the 20000^2 PNG took 9.4 GB, the
+    /// 60000^2 EXR aborted), and a size under the side limit but over the texel budget is
+    /// refused too.
+    #[test]
+    fn huge_declared_images_are_refused_unread() {
+        let e = load_image(&temp("bomb.png", &png_bomb(20_000, 20_000))).expect_err("bomb");
+        assert_eq!(e, "20000x20000 exceeds 16384 texels a side");
+        let e = load_image(&temp("wide.png", &png_bomb(16_384, 16_384))).expect_err("budget");
+        assert!(
+            e.starts_with("16384x16384 is 268435456 texels, over the 33554432"),
+            "{e}"
+        );
+        // A small valid image still loads; the crafted one's header is read the same way.
+        let ok = load_image(&temp("small.png", &png_bomb(2, 2)));
+        assert!(ok.is_err(), "the short IDAT is an error, not a panic");
+
+        // An EXR of 4x4 texels whose data window is patched to declare 60000x60000.
+        let path = temp("small.exr", b"");
+        let pixels = exr::prelude::SpecificChannels::rgb(|_: exr::prelude::Vec2<usize>| {
+            (0.5f32, 0.5f32, 0.5f32)
+        });
+        use exr::prelude::WritableImage as _;
+        exr::prelude::Image::from_channels((4, 4), pixels)
+            .write()
+            .to_file(&path)
+            .expect("exr");
+        let good = load_image(&path).expect("a small EXR loads");
+        assert_eq!((good.width, good.height), (4, 4));
+        let mut bytes = std::fs::read(&path).expect("read");
+        for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+            let at = bytes
+                .windows(name.len())
+                .position(|w| w == name)
+                .expect("window attribute")
+                + name.len()
+                + 4;
+            bytes[at + 8..at + 12].copy_from_slice(&59_999i32.to_le_bytes());
+            bytes[at + 12..at + 16].copy_from_slice(&59_999i32.to_le_bytes());
+        }
+        let e = load_image(&temp("bomb.exr", &bytes)).expect_err("bomb");
+        assert_eq!(e, "60000x60000 exceeds 16384 texels a side");
     }
 }

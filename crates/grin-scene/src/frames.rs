@@ -80,13 +80,33 @@ pub fn parse_frame_range(s: &str) -> Result<(i64, i64), String> {
     if b < a {
         return Err(format!("frame range {a}..{b} ends before it starts"));
     }
-    if b - a >= MAX_FRAMES {
+    let count = frame_count(a, b);
+    if count > MAX_FRAMES as u64 {
         return Err(format!(
-            "frame range {a}..{b} has {} frames; at most {MAX_FRAMES}",
-            b - a + 1
+            "frame range {a}..{b} has {count} frames; at most {MAX_FRAMES}"
         ));
     }
     Ok((a, b))
+}
+
+/// Frames in `first..=last` (0 when it ends before it starts, [`u64::MAX`] for the one
+/// count past it, i64::MIN..=i64::MAX), without overflow at the ends of i64.
+pub fn frame_count(first: i64, last: i64) -> u64 {
+    let n = (i128::from(last) - i128::from(first) + 1).max(0);
+    u64::try_from(n).unwrap_or(u64::MAX)
+}
+
+/// Most items of a long list that an error message spells out.
+pub const SHOWN_IN_ERRORS: usize = 5;
+
+/// `items` joined with `, `, the first [`SHOWN_IN_ERRORS`] of a longer list and how many
+/// more (an error line stays a line when 100,000 frames are missing).
+pub fn summarize(items: &[String]) -> String {
+    let shown = items[..items.len().min(SHOWN_IN_ERRORS)].join(", ");
+    match items.len().checked_sub(SHOWN_IN_ERRORS) {
+        Some(more) if more > 0 => format!("{shown} and {more} more"),
+        _ => shown,
+    }
 }
 
 impl Scene {
@@ -230,5 +250,30 @@ mod tests {
                 .expect_err("refused")
                 .contains("at most")
         );
+        // The ends of i64: no overflow slips a range past the cap.
+        assert_eq!(
+            parse_frame_range("-1..9223372036854775807").expect_err("refused"),
+            "frame range -1..9223372036854775807 has 9223372036854775809 frames; at most 100000"
+        );
+        assert!(parse_frame_range("-9223372036854775808..9223372036854775807").is_err());
+        assert_eq!(
+            parse_frame_range("9223372036854775807"),
+            Ok((i64::MAX, i64::MAX))
+        );
+        assert_eq!(frame_count(i64::MIN, i64::MAX), u64::MAX);
+        assert_eq!(frame_count(3, 2), 0);
+    }
+
+    #[test]
+    fn long_lists_are_summarised() {
+        let items: Vec<String> = (0..100_000)
+            .map(|f| format!("frame {f}: f.{f}.vdb"))
+            .collect();
+        assert_eq!(
+            summarize(&items),
+            "frame 0: f.0.vdb, frame 1: f.1.vdb, frame 2: f.2.vdb, frame 3: f.3.vdb, \
+             frame 4: f.4.vdb and 99995 more"
+        );
+        assert_eq!(summarize(&items[..2]), "frame 0: f.0.vdb, frame 1: f.1.vdb");
     }
 }

@@ -596,6 +596,12 @@ fn optics_errors_name_the_key() {
         e.contains("optics.wavelength_nm: must be > 0, got -3"),
         "{e}"
     );
+    // A wavelength whose phase (2 pi OPD / wavelength) would be infinite.
+    let e = err("mode = \"interferogram\"\nwavelength_nm = 1e-300");
+    assert!(
+        e.contains("optics.wavelength_nm: must be in 10..=1e6 nm") && e.contains("got 1e-300"),
+        "{e}"
+    );
     let e = err("mode = \"bos\"");
     assert!(e.contains("optics.plane: BOS needs the plane"), "{e}");
     let e = err("mode = \"schlieren\"\nknife = { cutoff = 1.0 }");
@@ -622,4 +628,26 @@ fn optics_errors_name_the_key() {
         .expect_err("no medium")
         .to_string();
     assert!(e.contains("an optical output needs a [medium]"), "{e}");
+}
+
+/// Numbers that overflow downstream are refused with the limit named: an f-number of
+/// 1e-300 (an aperture of 5e298 m, every GPU ray missed).
+#[test]
+fn lens_numbers_are_checked_for_what_they_imply() {
+    let lens = |f_number: &str| {
+        BASE.replace(
+            "fov_y_deg = 40.0",
+            &format!("focal_length_mm = 50.0\nsensor_height_mm = 24.0\nf_number = {f_number}"),
+        )
+    };
+    let e = parse_scene(&lens("1e-300"), Path::new("scene.toml"))
+        .expect_err("aperture")
+        .to_string();
+    assert!(
+        e.contains("camera.f_number: must be at least 0.5 (the fastest a lens in air can be"),
+        "{e}"
+    );
+    assert!(e.contains("got 1e-300"), "{e}");
+    assert!(parse_scene(&lens("0.5"), Path::new("scene.toml")).is_ok());
+    assert!(parse_scene(&lens("2.8"), Path::new("scene.toml")).is_ok());
 }

@@ -17,6 +17,11 @@ pub const MAX_WORLD_COORDINATE: f64 = 1e7;
 /// Largest `render.max_steps` accepted: the GPU bounds its march loop by 2 * max_steps + 2
 /// in u32 arithmetic, which 2^31 would overflow (every medium pixel then stopped at once).
 pub const MAX_STEPS: u32 = 1 << 30;
+/// The fastest lens: f/0.5 is the limit of an aplanatic lens in air (n sin(theta) <= 1).
+pub const MIN_F_NUMBER: f64 = 0.5;
+/// Wavelengths an interferogram accepts, in nm.
+pub const MIN_WAVELENGTH_NM: f64 = 10.0;
+pub const MAX_WAVELENGTH_NM: f64 = 1e6;
 /// Most objects accepted: both backends test every object on every ray (no acceleration
 /// structure), and on the GPU tens of thousands of objects ended every medium pixel in
 /// `error`. A thousand keeps a frame interactive on lavapipe.
@@ -168,7 +173,7 @@ pub(crate) fn validate(scene: &Scene) -> Check {
                 format!("[{first}, {last}] ends before it starts"),
             );
         }
-        if last - first >= crate::frames::MAX_FRAMES {
+        if crate::frames::frame_count(first, last) > crate::frames::MAX_FRAMES as u64 {
             return fail(
                 "animation.frames",
                 format!(
@@ -213,6 +218,17 @@ fn optics(o: &crate::OpticsSpec, has_medium: bool) -> Check {
     }
     positive("optics.knife.source_size_rad", o.knife.source_size_rad)?;
     positive("optics.wavelength_nm", o.wavelength_nm)?;
+    if !(MIN_WAVELENGTH_NM..=MAX_WAVELENGTH_NM).contains(&o.wavelength_nm) {
+        // The phase is 2 pi OPD / wavelength: 1e-300 nm made it infinite.
+        return fail(
+            "optics.wavelength_nm",
+            format!(
+                "must be in {MIN_WAVELENGTH_NM}..={MAX_WAVELENGTH_NM:e} nm (extreme ultraviolet \
+                 to millimetre waves; the phase is 2 pi OPD / wavelength), got {:?}",
+                o.wavelength_nm
+            ),
+        );
+    }
     non_negative("optics.fringes.spacing_px", o.fringes.spacing_px)?;
     finite("optics.fringes.angle_deg", o.fringes.angle_deg)?;
     size("optics.dots.diameter", o.dots.diameter)?;
@@ -296,6 +312,19 @@ fn lens(c: &Camera) -> Check {
         return fail(
             "camera.f_number",
             "needs focal_length_mm (the aperture is focal length / f-number)",
+        );
+    }
+    if let Some(n) = c.f_number
+        && n < MIN_F_NUMBER
+    {
+        // Also what keeps the aperture (focal length / f-number) within the coordinates
+        // the GPU resolves: f_number 1e-300 made an aperture of 5e298 m.
+        return fail(
+            "camera.f_number",
+            format!(
+                "must be at least {MIN_F_NUMBER} (the fastest a lens in air can be, \
+                 n sin(theta) <= 1), got {n:?}"
+            ),
         );
     }
     if c.focus_distance.is_some() && c.f_number.is_none() {

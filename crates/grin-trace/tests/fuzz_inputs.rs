@@ -1,5 +1,6 @@
 //! Bounded fuzz loops over every parser of user text and files: the scene parser, the
-//! expression parser, the ray-table reader and the .grinf reader. Inputs are mutations
+//! expression parser, the ray-table reader, the .grinf reader, frame ranges and tokens,
+//! and image headers (PNG, EXR). Inputs are mutations
 //! of valid ones (bit flips, truncations, spliced tokens, duplicated spans); each outcome
 //! must be `Ok` or a typed error with a message. A panic fails the test (and the case is
 //! printed), a crash (stack overflow, abort) kills it.
@@ -238,6 +239,116 @@ fn grinf_reader_never_panics() {
             Ok(_) => true,
             Err(e) => {
                 assert!(e.to_string().starts_with("fuzz.grinf"), "{e}");
+                false
+            }
+        }
+    });
+}
+
+/// Frame ranges (`A..B`, one frame) and frame tokens in paths: a range accepted holds at
+/// most `MAX_FRAMES` frames, whatever its ends (the ends of i64 overflowed the check).
+#[test]
+fn frame_patterns_never_panic_or_overflow() {
+    let seeds: [&[u8]; 6] = [
+        b"1..24",
+        b"-1..9223372036854775807",
+        b"-9223372036854775808..=9223372036854775807",
+        b"9223372036854775807",
+        b"f.####.exr",
+        b"a_%04d/b_$F4.vdb",
+    ];
+    let tokens = [
+        "..",
+        "..=",
+        "-",
+        "9223372036854775807",
+        "-9223372036854775808",
+        "#",
+        "%d",
+        "%09d",
+        "$F",
+        "$F9",
+        "0",
+        "99999",
+        " ",
+        "\0",
+    ];
+    fuzz("frames", &seeds, &tokens, |b| {
+        let text = String::from_utf8_lossy(b);
+        let _ = grin_scene::frames::substitute_frame(&text, i64::MIN);
+        let _ = grin_scene::frames::substitute_frame(&text, i64::MAX);
+        match grin_scene::frames::parse_frame_range(&text) {
+            Ok((a, c)) => {
+                let n = grin_scene::frames::frame_count(a, c);
+                assert!(
+                    (1..=grin_scene::frames::MAX_FRAMES as u64).contains(&n),
+                    "{text}: {n} frames"
+                );
+                true
+            }
+            Err(e) => {
+                assert!(!e.is_empty());
+                false
+            }
+        }
+    });
+}
+
+/// Image headers (PNG, EXR): mutated small images and bombs (a few hundred bytes that
+/// declare gigapixels) load or fail with a message, never decode past the texel budget
+/// (an allocation of that size would abort the test) and never panic.
+#[test]
+fn image_headers_never_panic_or_allocate_past_the_budget() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let png_path = dir.path().join("seed.png");
+    image::RgbImage::from_fn(3, 2, |x, y| image::Rgb([x as u8 * 60, y as u8 * 90, 7]))
+        .save(&png_path)
+        .expect("png");
+    let exr_path = dir.path().join("seed.exr");
+    use exr::prelude::WritableImage as _;
+    let pixels = exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
+        (p.x() as f32, p.y() as f32, 0.5f32)
+    });
+    exr::prelude::Image::from_channels((4, 3), pixels)
+        .write()
+        .to_file(&exr_path)
+        .expect("exr");
+    let png = std::fs::read(&png_path).expect("png bytes");
+    let exr = std::fs::read(&exr_path).expect("exr bytes");
+    // The bombs: the seeds with their sizes patched to 60000 (EXR data window) and 20000
+    // (PNG IHDR, its CRC left stale).
+    let mut exr_bomb = exr.clone();
+    let name = b"dataWindow\0box2i\0";
+    if let Some(at) = exr_bomb.windows(name.len()).position(|w| w == name) {
+        let at = at + name.len() + 4;
+        exr_bomb[at + 8..at + 16].copy_from_slice(&[59_999i32.to_le_bytes(); 2].concat());
+    }
+    let mut png_bomb = png.clone();
+    png_bomb[16..24].copy_from_slice(&[20_000u32.to_be_bytes(); 2].concat());
+    let seeds: [&[u8]; 4] = [&png, &exr, &exr_bomb, &png_bomb];
+    let tokens = [
+        "\0\0\0\0",
+        "\u{7f}\u{ff}\u{ff}\u{7f}",
+        "IHDR",
+        "IDAT",
+        "box2i",
+        "\u{1}",
+    ];
+    fuzz("image", &seeds, &tokens, |b| {
+        let ext = if b.starts_with(b"\x89PNG") {
+            "png"
+        } else {
+            "exr"
+        };
+        let path = dir.path().join(format!("case.{ext}"));
+        std::fs::write(&path, b).expect("write case");
+        match grin_render::surface::load_image(&path) {
+            Ok(img) => {
+                assert!(img.width * img.height <= grin_render::surface::MAX_IMAGE_TEXELS);
+                true
+            }
+            Err(e) => {
+                assert!(!e.is_empty());
                 false
             }
         }

@@ -117,7 +117,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "{}: {} of frames {first}..{last} missing: {}",
             args.scene.display(),
             missing.len(),
-            missing.join(", ")
+            grin_scene::frames::summarize(&missing)
         );
     }
     grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
@@ -235,10 +235,12 @@ fn bake_one(
         );
     }
     let summary = summary_json(output, &field.describe(), &report);
+    // `-o -`: the binary is stdout's; the summary goes to stderr.
+    let to_stream = crate::is_stream(output);
     if json {
-        outln!("{}", serde_json::to_string_pretty(&summary)?);
+        crate::report(to_stream, serde_json::to_string_pretty(&summary)?);
     } else if !args.json {
-        print_summary(output, &field.describe(), &report);
+        crate::report(to_stream, summary_text(output, &field.describe(), &report));
     }
     Ok(summary)
 }
@@ -251,11 +253,13 @@ fn gradient_mode(spec: &FieldSpec) -> GradientMode {
     }
 }
 
-fn print_summary(out: &Path, source: &str, r: &BakeReport) {
+/// The summary of a bake, a line per aspect.
+fn summary_text(out: &Path, source: &str, r: &BakeReport) -> String {
     let [nx, ny, nz] = r.dims;
-    outln!("baked     {source}");
-    outln!("to        {}", out.display());
-    outln!(
+    let mut lines = Vec::new();
+    lines.push(format!("baked     {source}"));
+    lines.push(format!("to        {}", out.display()));
+    lines.push(format!(
         "grid      {nx}x{ny}x{nz} ({} nodes on the longest axis, {} choice), {} {}",
         r.resolution,
         if r.trials.len() > 1 {
@@ -265,15 +269,15 @@ fn print_summary(out: &Path, source: &str, r: &BakeReport) {
         },
         r.interp.name(),
         r.storage.name()
-    );
-    outln!(
+    ));
+    lines.push(format!(
         "region    {:?} .. {:?}{}",
         r.grid_min.to_array(),
         r.grid_max.to_array(),
         if r.cropped { " (cropped)" } else { "" }
-    );
-    outln!("bytes     {}", r.bytes);
-    outln!(
+    ));
+    lines.push(format!("bytes     {}", r.bytes));
+    lines.push(format!(
         "error     n: max {:.3e} rms {:.3e} ({:.3e} of the delta_n range {:.3e}; budget {:.1e}{})",
         r.errors.max_err_n,
         r.errors.rms_err_n,
@@ -287,22 +291,20 @@ fn print_summary(out: &Path, source: &str, r: &BakeReport) {
         } else {
             ", NOT met"
         }
-    );
-    outln!(
+    ));
+    lines.push(format!(
         "          grad n: max {:.3e} rms {:.3e} ({} random points)",
-        r.errors.max_err_grad,
-        r.errors.rms_err_grad,
-        r.errors.points
-    );
-    outln!(
+        r.errors.max_err_grad, r.errors.rms_err_grad, r.errors.points
+    ));
+    lines.push(format!(
         "macro     {:.1}% of cells homogeneous",
         100.0 * r.homogeneous_cells
-    );
-    outln!(
+    ));
+    lines.push(format!(
         "time      {:.2} s ({} source evaluations)",
-        r.seconds,
-        r.source_evals
-    );
+        r.seconds, r.source_evals
+    ));
+    lines.join("\n")
 }
 
 fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {

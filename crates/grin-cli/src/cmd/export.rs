@@ -29,6 +29,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let size = std::fs::metadata(&args.output)
         .map(|m| m.len())
         .unwrap_or(0);
+    // `-o -`: the VDB is stdout's; the summary goes to stderr.
+    let to_stream = crate::is_stream(&args.output);
     if args.json {
         let summary = serde_json::json!({
             "input": args.input.display().to_string(),
@@ -41,19 +43,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "half_float": args.half,
             "bytes": size,
         });
-        outln!("{summary}");
+        crate::report(to_stream, summary);
     } else {
-        outln!(
-            "exported {} -> {}: grids delta_n, grad_n ({}x{}x{} voxels, voxel {:.4}x{:.4}x{:.4}, {} bytes)",
-            args.input.display(),
-            args.output.display(),
-            dims[0],
-            dims[1],
-            dims[2],
-            s.x,
-            s.y,
-            s.z,
-            size
+        crate::report(
+            to_stream,
+            format_args!(
+                "exported {} -> {}: grids delta_n, grad_n ({}x{}x{} voxels, voxel {:.4}x{:.4}x{:.4}, {} bytes)",
+                args.input.display(),
+                args.output.display(),
+                dims[0],
+                dims[1],
+                dims[2],
+                s.x,
+                s.y,
+                s.z,
+                size
+            ),
         );
     }
     Ok(())

@@ -249,7 +249,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "{}: {} of frames {first}..{last} missing: {}",
             args.scene.display(),
             missing.len(),
-            missing.join(", ")
+            grin_scene::frames::summarize(&missing)
         );
     }
     grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
@@ -354,10 +354,12 @@ fn render_one(
     {
         let start = Instant::now();
         let to_stream = png.is_none();
-        let medium = rs
-            .medium
-            .as_ref()
-            .context("[optics] a shadowgraph needs a [medium]")?;
+        let medium = rs.medium.as_ref().with_context(|| {
+            format!(
+                "{}: [optics] a shadowgraph needs a [medium]",
+                args.scene.display()
+            )
+        })?;
         let mut warnings: Vec<String> = auto_warning.iter().cloned().collect();
         let (sg, adapter, gpu_field, bake_cache) = match args.backend {
             Backend::Cpu => {
@@ -385,8 +387,10 @@ fn render_one(
                 let pixels = u64::from(beam_rs.camera.width) * u64::from(beam_rs.camera.height);
                 if pixels > grin_trace::render::MAX_PIXELS {
                     bail!(
-                        "[optics] the shadowgraph's beam is {pixels} rays (bins x rays_per_pixel); \
-                         at most {} fit one GPU frame: fewer bins or rays_per_pixel",
+                        "{}: [optics] the shadowgraph's beam is {pixels} rays (bins x \
+                         rays_per_pixel); at most {} fit one GPU frame: fewer bins or \
+                         rays_per_pixel",
+                        args.scene.display(),
                         grin_trace::render::MAX_PIXELS
                     );
                 }
@@ -677,8 +681,10 @@ fn render_frame(
             let cache = (!args.no_cache)
                 .then(grin_gpu::cache::BakeCache::user_default)
                 .flatten();
-            let field = grin_gpu::cache::scene_gpu_field(rs, medium, scene_dir, cache.as_ref())?;
-            let renderer = grin_gpu::GpuRenderer::new(ctx, rs, field.as_ref().map(|f| &f.0))?;
+            let field = grin_gpu::cache::scene_gpu_field(rs, medium, scene_dir, cache.as_ref())
+                .with_context(|| format!("{}: [medium]", args.scene.display()))?;
+            let renderer = grin_gpu::GpuRenderer::new(ctx, rs, field.as_ref().map(|f| &f.0))
+                .with_context(|| format!("{}", args.scene.display()))?;
             if let Some((_, field_warnings, used)) = &field {
                 bake_cache = Some(*used);
                 for w in field_warnings {
@@ -758,13 +764,7 @@ fn bos_image_scene(scene: &grin_scene::Scene) -> anyhow::Result<Option<grin_scen
 /// Print a frame's summary (JSON or a few lines).
 fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::Result<()> {
     // Where the EXR itself went to a stream (it may be stdout), the summary goes to stderr.
-    let report = |text: String| {
-        if exr_to_stream {
-            eprintln!("{text}");
-        } else {
-            outln!("{text}");
-        }
-    };
+    let report = |text: String| crate::report(exr_to_stream, text);
     if json {
         report(serde_json::to_string_pretty(summary)?);
     } else {

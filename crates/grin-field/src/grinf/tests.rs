@@ -187,4 +187,43 @@ fn crafted_files_with_valid_checksums_are_refused() {
         "{e}"
     );
     assert!(from_bytes(&good, "good.grinf").is_ok());
+
+    // The whole file: numbers that fit the payload's size but not its content.
+    let f64s = |b: &mut Vec<u8>, at: usize, v: [f64; 3]| {
+        for (k, x) in v.iter().enumerate() {
+            b[at + 8 * k..at + 8 * k + 8].copy_from_slice(&x.to_le_bytes());
+        }
+    };
+    let g = *f.geometry();
+    let sp = g.spacing.to_array();
+    // The ratio the message reports: the stored gradient over the index's differences
+    // (a 20-node bake's central differences read ~3 % low on their own).
+    let ratio = |e: &str, axis: &str| -> f64 {
+        let at = e.find(&format!("along {axis} is ")).expect(e) + 11;
+        e[at..at + 5].parse().expect(e)
+    };
+    // A spacing twice the grid's: the stored gradient is twice the index's differences.
+    let e = resealed(&|b| f64s(b, 72, sp.map(|h| 2.0 * h)));
+    assert!(e.contains("spacing or dims do not match the data"), "{e}");
+    assert!((1.95..2.15).contains(&ratio(&e, "x")), "{e}");
+    // Only y's spacing off by 1.5.
+    let e = resealed(&|b| f64s(b, 72, [sp[0], 1.5 * sp[1], sp[2]]));
+    assert!((1.45..1.6).contains(&ratio(&e, "y")), "{e}");
+    // Dims permuted over the same payload.
+    let e = resealed(&|b| {
+        let [nx, ny, nz] = g.dims.map(|d| (d as u32).to_le_bytes());
+        b[16..20].copy_from_slice(&nz);
+        b[24..28].copy_from_slice(&nx);
+        let _ = ny;
+    });
+    assert!(e.starts_with("crafted.grinf: bad header: "), "{e}");
+    // A clamped grid moved off its bounds.
+    assert_eq!(
+        f.outside(),
+        Outside::Clamp,
+        "the wave fills its box: not cropped"
+    );
+    let o = g.origin.to_array();
+    let e = resealed(&|b| f64s(b, 48, [o[0] + 0.5, o[1], o[2]]));
+    assert!(e.contains("does not cover the bounds"), "{e}");
 }
