@@ -224,7 +224,7 @@ fn stage_march(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let input = stage_in[gid.x];
-    var stats = MarchStats(0u, 0u, 0.0, 0.0);
+    var stats = march_stats_new(input.t);
     let end = march_medium(input.r, input.t, 1.0, &stats);
     var out = stage_blank();
     out.r = end.point;

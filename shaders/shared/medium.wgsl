@@ -200,6 +200,23 @@ struct MarchStats {
     evals: u32,
     opl: f32,
     length: f32,
+    // The optical path difference in two small parts, each summed with f32's relative
+    // precision (opl - n_amb * straight cancels ~1 m to keep ~1e-5 m: the interferogram
+    // was noise): excess = integral of (n - n_amb) ds, geo = integral of (1 - u . dir0) ds,
+    // u the ray's unit direction and dir0 the direction it came in with.
+    excess: f32,
+    geo: f32,
+    dir0: vec3<f32>,
+}
+
+fn march_stats_new(dir0: vec3<f32>) -> MarchStats {
+    return MarchStats(0u, 0u, 0.0, 0.0, 0.0, 0.0, dir0);
+}
+
+// 1 - u . dir0 for unit u as |u - dir0|^2 / 2: no cancellation at small angles.
+fn off_axis(u: vec3<f32>, dir0: vec3<f32>) -> f32 {
+    let w = u - dir0;
+    return 0.5 * dot(w, w);
 }
 
 struct MarchEnd {
@@ -556,6 +573,19 @@ fn accumulate(stats: ptr<function, MarchStats>, a: RayState, sa: FieldSample, b:
     let h2 = h * h / 12.0;
     (*stats).length += 0.5 * h * (n0 + n1) + h2 * (dn0 - dn1);
     (*stats).opl += 0.5 * h * (n0 * n0 + n1 * n1) + h2 * 2.0 * (n0 * dn0 - n1 * dn1);
+    // The same rule for (n - n_amb) n (d/dt: (2n - n_amb) n' = (n + delta) n') and for
+    // off_axis(u) n (d/dt: g' n + g n', g' = (u - dir0) . (grad n - u (u . grad n))).
+    let d0 = sa.delta_n;
+    let d1 = sb.delta_n;
+    (*stats).excess += 0.5 * h * (d0 * n0 + d1 * n1) + h2 * ((n0 + d0) * dn0 - (n1 + d1) * dn1);
+    let dir0 = (*stats).dir0;
+    let u0 = normalize_or_zero(a.t);
+    let u1 = normalize_or_zero(b.t);
+    let g0 = off_axis(u0, dir0);
+    let g1 = off_axis(u1, dir0);
+    let dg0 = dot(u0 - dir0, sa.grad_n - u0 * dot(u0, sa.grad_n));
+    let dg1 = dot(u1 - dir0, sb.grad_n - u1 * dot(u1, sb.grad_n));
+    (*stats).geo += 0.5 * h * (g0 * n0 + g1 * n1) + h2 * ((dg0 * n0 + g0 * dn0) - (dg1 * n1 + g1 * dn1));
     return Segment(a.r, a.t, b.r, b.t, h);
 }
 
@@ -588,9 +618,11 @@ fn absorbed(stats: ptr<function, MarchStats>, seg: Segment, hit: Hit, transmitta
     let chord = seg.r1 - seg.r0;
     let len = length(chord);
     let cut = max(len - hit.t, 0.0);
-    let n = sample_field(hit.point).n;
+    let at = sample_field(hit.point);
     (*stats).length -= cut;
-    (*stats).opl -= n * cut;
+    (*stats).opl -= at.n * cut;
+    (*stats).excess -= at.delta_n * cut;
+    (*stats).geo -= off_axis(chord / len, (*stats).dir0) * cut;
     return MarchEnd(END_OBJECT, STATUS_ABSORBED, hit.point, chord / len, transmittance, hit);
 }
 
@@ -753,6 +785,8 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 let n = s0.n;
                 (*stats).length += fly_len;
                 (*stats).opl += n * fly_len;
+                (*stats).excess += s0.delta_n * fly_len;
+                (*stats).geo += off_axis(direction, (*stats).dir0) * fly_len;
                 seg = Segment(position, direction * n, next.r, direction * n, taken.h);
                 est.has_prev = false;
             } else {

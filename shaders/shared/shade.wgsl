@@ -22,7 +22,8 @@ struct PrimaryAov {
     status: u32,
     // Where the ray left the medium or stopped in it (the camera if it missed).
     exit_pos: vec3<f32>,
-    // opd taken on to the plane through the straight exit, normal to the ray (opd_tail).
+    // opd taken on to the plane through the straight exit, normal to the ray (CPU twin:
+    // opd_tail; here summed from MarchStats' small parts).
     opd_plane: f32,
 }
 
@@ -31,16 +32,6 @@ struct PathSample {
     aov: PrimaryAov,
     // PASS_FIRST only: the path reached the medium and was left to PASS_MEDIUM.
     deferred: bool,
-}
-
-// The path from a ray's exit along `dir` on to the plane through `straight_exit` normal
-// to `entry_dir`; 0 past a 90 degree turn (CPU twin: opd_tail).
-fn opd_tail(straight_exit: vec3<f32>, entry_dir: vec3<f32>, exit: vec3<f32>, dir: vec3<f32>) -> f32 {
-    let c = dot(dir, entry_dir);
-    if c <= 1e-12 {
-        return 0.0;
-    }
-    return dot(straight_exit - exit, entry_dir) / c;
 }
 
 // In PASS_FIRST a path that reaches the medium stops and the pixel is traced again,
@@ -126,12 +117,10 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
             if defer_medium() {
                 return PathSample(radiance, aov, true);
             }
-            var stats = MarchStats(0u, 0u, 0.0, 0.0);
+            var stats = march_stats_new(dir);
             let b = bounds_intersect(origin, dir);
-            var straight = 0.0;
             var straight_exit = origin;
             if b.found {
-                straight = max(b.s_out - max(b.s_in, 0.0), 0.0);
                 straight_exit = origin + dir * max(b.s_out, 0.0);
             }
             let entry_dir = dir;
@@ -168,8 +157,19 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
                 aov.exit_pos = end.point;
                 aov.deflection_deg = angle_between_deg(entry_dir, dir);
                 if status == STATUS_EXITED || status == STATUS_DEGRADED {
-                    aov.opd = stats.opl - ambient_index() * straight;
-                    aov.opd_plane = aov.opd + ambient_index() * opd_tail(straight_exit, entry_dir, end.point, dir);
+                    // opl - n_amb * straight, from its small parts (MarchStats): the path's
+                    // excess index, its length off the entry direction, and its lag
+                    // behind the straight exit along that direction. On to the plane the
+                    // lag is weighed by 1/cos - 1, so the positions' roundoff drops out.
+                    let n_amb = ambient_index();
+                    let lag = dot(straight_exit - end.point, entry_dir);
+                    aov.opd = stats.excess + n_amb * (stats.geo - lag);
+                    let c = dot(dir, entry_dir);
+                    if c > 1e-12 {
+                        aov.opd_plane = stats.excess + n_amb * (stats.geo + lag * off_axis(dir, entry_dir) / c);
+                    } else {
+                        aov.opd_plane = aov.opd;
+                    }
                 } else {
                     aov.opd = 0.0;
                 }
@@ -330,7 +330,7 @@ fn bent_shadow_transmittance(p: vec3<f32>, l: vec3<f32>, dist: f32) -> vec4<f32>
     if before.w < 0.5 {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
-    var stats = MarchStats(0u, 0u, 0.0, 0.0);
+    var stats = march_stats_new(l);
     let end = march_medium(p, l, 1.0, &stats);
     if end.kind == END_EXITED {
         let remaining = max(dist - to_entry - stats.length, 0.0);

@@ -261,6 +261,7 @@ pub fn gpu_result(g: &grin_gpu::march::GpuRay) -> RayResult {
         direction: g.direction,
         opl: g.opl,
         length: g.length,
+        swept: glam::DVec3::ZERO,
         steps: g.steps,
         evals: u64::from(g.evals),
         transmittance: g.transmittance,

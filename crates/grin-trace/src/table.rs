@@ -633,6 +633,7 @@ mod tests {
             direction: DVec3::Z,
             opl: 0.0,
             length: 0.0,
+            swept: DVec3::ZERO,
             steps: 0,
             evals: 0,
             transmittance: 1.0,

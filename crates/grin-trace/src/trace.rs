@@ -107,6 +107,11 @@ pub struct RayResult {
     pub opl: f64,
     /// Geometric length inside the medium.
     pub length: f64,
+    /// The integral of the unit direction u over the length, ∫ u ds: where the length
+    /// and the directions alone would take the ray (its chord, but for the integrator's
+    /// drift of |T| from n). The OPD is taken with it (opl - n_amb (swept . d0 + lag)),
+    /// as the GPU takes it from small parts that f32 keeps (shaders' MarchStats).
+    pub swept: DVec3,
     /// Steps taken (straight macro-cell flights count as steps).
     pub steps: u32,
     /// Field evaluations, including rejected adaptive attempts and exit searches.
@@ -192,6 +197,7 @@ pub fn trace_ray_jittered<R: Real>(
         direction: DVec3::ZERO,
         opl: 0.0,
         length: 0.0,
+        swept: DVec3::ZERO,
         steps: 0,
         evals: 0,
         transmittance: 1.0,
@@ -319,6 +325,7 @@ pub fn trace_ray_jittered<R: Real>(
             let n = s0.n.to_f64();
             res.length += fly;
             res.opl += n * fly;
+            res.swept += dir_w * fly;
             res.steps += 1;
             let seg = Segment {
                 r0: p,
@@ -487,9 +494,9 @@ fn leave<R: Real>(
     }
 }
 
-/// Add one step's length and optical path (n and n^2 integrated over t by the cubic
-/// Hermite rule: h/2 (f0 + f1) + h^2/12 (f0' - f1'), f' from grad n . T) and return its
-/// segment.
+/// Add one step's length, optical path and swept vector (n, n^2 and n u integrated over t
+/// by the cubic Hermite rule: h/2 (f0 + f1) + h^2/12 (f0' - f1'), f' from n' = grad n . T
+/// and u' = grad n - u (u . grad n)) and return its segment.
 fn accumulate<R: Real>(
     res: &mut RayResult,
     a: RayState<R>,
@@ -506,6 +513,11 @@ fn accumulate<R: Real>(
     let h2 = h * h / 12.0;
     res.length += 0.5 * h * (n0 + n1) + h2 * (dn0 - dn1);
     res.opl += 0.5 * h * (n0 * n0 + n1 * n1) + h2 * 2.0 * (n0 * dn0 - n1 * dn1);
+    let (g0, g1) = (sa.grad_n.to_dvec3(), sb.grad_n.to_dvec3());
+    let (u0, u1) = (t0.normalize_or_zero(), t1.normalize_or_zero());
+    let d_swept = |n: f64, dn: f64, u: DVec3, g: DVec3| u * dn + (g - u * u.dot(g)) * n;
+    res.swept += (u0 * n0 + u1 * n1) * (0.5 * h)
+        + (d_swept(n0, dn0, u0, g0) - d_swept(n1, dn1, u1, g1)) * h2;
     Segment {
         r0: a.r.to_dvec3(),
         t0,

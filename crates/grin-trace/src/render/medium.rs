@@ -50,6 +50,8 @@ pub struct MarchStats {
     pub opl: f64,
     /// Geometric length inside the medium.
     pub length: f64,
+    /// ∫ u ds over that length ([`crate::trace::RayResult::swept`]).
+    pub swept: DVec3,
 }
 
 /// The first object met by a step's chord r0 -> r1.
@@ -106,6 +108,7 @@ impl CpuMedium<'_> {
         stats.evals += res.evals;
         stats.opl += res.opl;
         stats.length += res.length;
+        stats.swept += res.swept;
         match res.status {
             RayStatus::Missed => MarchEnd::Missed,
             RayStatus::Exited | RayStatus::Degraded => MarchEnd::Exited {
@@ -121,6 +124,7 @@ impl CpuMedium<'_> {
                     let n = self.field.n(hit.point);
                     stats.length -= cut;
                     stats.opl -= n * cut;
+                    stats.swept -= d * cut;
                     MarchEnd::Object {
                         hit,
                         dir: d,

@@ -167,8 +167,6 @@ impl CpuScene<'_> {
                     let Some(m) = &self.medium else { break };
                     let mut stats = MarchStats::default();
                     let chord = m.bounds.intersect(origin, dir);
-                    let straight =
-                        chord.map_or(0.0, |(s_in, s_out)| (s_out - s_in.max(0.0)).max(0.0));
                     let straight_exit =
                         origin + dir * chord.map_or(0.0, |(_, s_out)| s_out.max(0.0));
                     let entry_dir = dir;
@@ -231,8 +229,12 @@ impl CpuScene<'_> {
                         aov.exit_dir = dir;
                         aov.exit_pos = stopped_at;
                         aov.deflection_deg = entry_dir.angle_between(dir).to_degrees();
+                        // opl - n_amb * straight, with the length that of the path's
+                        // own positions (swept . d0 and its lag behind the straight exit),
+                        // as the GPU takes it (shaders/shared/shade.wgsl).
                         aov.opd = if status.left() {
-                            stats.opl - m.ambient * straight
+                            let lag = (straight_exit - stopped_at).dot(entry_dir);
+                            stats.opl - m.ambient * (stats.swept.dot(entry_dir) + lag)
                         } else {
                             0.0
                         };
