@@ -21,6 +21,7 @@ use glam::DVec3;
 
 use crate::bounds::Bounds;
 use crate::check::{CHECK_RESOLUTION, sample_stats};
+use crate::features::{Enclosed, FeatureMap};
 use crate::field::{FieldError, FieldSample, IndexField};
 use crate::interval::{Interval, IntervalFlat, Positivity, certify_positive};
 
@@ -99,6 +100,10 @@ pub struct ExprField {
     n: Compiled,
     /// n over intervals (crate::interval), with the slots of its variables as for `n`.
     enclosure: (IntervalFlat, Vec<usize>),
+    /// d n / d(x, y, z) over intervals, likewise.
+    grad_enclosure: [Option<(IntervalFlat, Vec<usize>)>; 3],
+    /// The formula's features (crate::features), built on first use.
+    features: std::sync::OnceLock<FeatureMap>,
     /// Why n > 0 is not proven between the check grid's nodes, when it is not.
     positivity: Option<String>,
     /// d n / d(x, y, z); `None` where the formula does not use that coordinate.
@@ -274,8 +279,13 @@ fn parse_with_gradient(text: &str) -> Result<Parsed, String> {
         .unwrap_or_else(|_| Err("the expression parser failed".to_owned()))
 }
 
-/// The formula, its partial derivatives and the formula over intervals.
-type Parsed = (Flat, [Option<Flat>; 3], IntervalFlat);
+/// The formula, its partial derivatives, and both over intervals.
+type Parsed = (
+    Flat,
+    [Option<Flat>; 3],
+    IntervalFlat,
+    [Option<IntervalFlat>; 3],
+);
 
 fn parse_on_this_thread(text: &str) -> Result<Parsed, String> {
     let ex = Flat::parse(text).map_err(|e| format!("does not parse: {}", parse_reason(e.msg())))?;
@@ -311,7 +321,18 @@ fn parse_on_this_thread(text: &str) -> Result<Parsed, String> {
     }
     let enclosure = crate::interval::parse(text)
         .map_err(|e| format!("does not parse over intervals: {}", parse_reason(&e)))?;
-    Ok((ex, grad, enclosure))
+    let mut grad_enclosure = [None, None, None];
+    for (g, e) in grad.iter().zip(grad_enclosure.iter_mut()) {
+        if let Some(g) = g {
+            *e = Some(crate::interval::parse(g.unparse()).map_err(|e| {
+                format!(
+                    "its derivative does not parse over intervals: {}",
+                    parse_reason(&e)
+                )
+            })?);
+        }
+    }
+    Ok((ex, grad, enclosure, grad_enclosure))
 }
 
 /// exmex reports some syntax errors in terms of its own data structures ("we have 10 ops
@@ -335,18 +356,23 @@ impl ExprField {
         if !t.is_finite() {
             return Err(err(format!("time t = {t} is not finite")));
         }
-        let (ex, grad, enclosure) = parse_with_gradient(text).map_err(err)?;
+        let (ex, grad, enclosure, grad_enclosure) = parse_with_gradient(text).map_err(err)?;
         let grad = grad.map(|g| g.map(Compiled::new));
-        let slots = enclosure
-            .var_names()
-            .iter()
-            .map(|v| VARIABLES.iter().position(|k| k == v).unwrap_or(0))
-            .collect();
+        let with_slots = |e: IntervalFlat| {
+            let slots = e
+                .var_names()
+                .iter()
+                .map(|v| VARIABLES.iter().position(|k| k == v).unwrap_or(0))
+                .collect();
+            (e, slots)
+        };
         let mut field = ExprField {
             text: text.to_owned(),
             t,
             n: Compiled::new(ex),
-            enclosure: (enclosure, slots),
+            enclosure: with_slots(enclosure),
+            grad_enclosure: grad_enclosure.map(|e| e.map(with_slots)),
+            features: std::sync::OnceLock::new(),
             positivity: None,
             grad,
             bounds,
@@ -367,7 +393,11 @@ impl ExprField {
                 message: format!("time t = {t} is not finite"),
             });
         }
-        let mut field = ExprField { t, ..self.clone() };
+        let mut field = ExprField {
+            t,
+            features: std::sync::OnceLock::new(),
+            ..self.clone()
+        };
         field.update_sampled_ranges()?;
         Ok(field)
     }
@@ -410,19 +440,34 @@ impl ExprField {
         Ok(())
     }
 
+    /// A formula over intervals, evaluated over the box [a, b] at this field's time
+    /// (`None` where the evaluation fails).
+    fn enclose(
+        &self,
+        (ex, slots): &(IntervalFlat, Vec<usize>),
+        a: DVec3,
+        b: DVec3,
+    ) -> Option<Interval> {
+        let ranges = [
+            Interval { lo: a.x, hi: b.x },
+            Interval { lo: a.y, hi: b.y },
+            Interval { lo: a.z, hi: b.z },
+            Interval::point(self.t),
+        ];
+        let vars: Vec<Interval> = slots.iter().map(|&s| ranges[s]).collect();
+        ex.eval(&vars).ok()
+    }
+
+    /// Where the formula has features a step could pass over, and how long steps may be
+    /// there (crate::features), built on first use.
+    pub fn feature_map(&self) -> &FeatureMap {
+        self.features
+            .get_or_init(|| FeatureMap::build(self, &self.bounds))
+    }
+
     /// Interval branch and bound of n over the bounds (crate::interval).
     fn certify(&self) -> Positivity {
-        let (ex, slots) = &self.enclosure;
-        let eval_box = |a: DVec3, b: DVec3| {
-            let ranges = [
-                Interval { lo: a.x, hi: b.x },
-                Interval { lo: a.y, hi: b.y },
-                Interval { lo: a.z, hi: b.z },
-                Interval::point(self.t),
-            ];
-            let vars: Vec<Interval> = slots.iter().map(|&s| ranges[s]).collect();
-            ex.eval(&vars).unwrap_or_default()
-        };
+        let eval_box = |a: DVec3, b: DVec3| self.enclose(&self.enclosure, a, b).unwrap_or_default();
         let eval_point = |p: DVec3| self.n.eval(&[p.x, p.y, p.z, self.t]);
         // An evaluation error gives the default [0, 0]: not > 0, so the box is split.
         certify_positive(&self.bounds, &eval_box, &eval_point)
@@ -441,6 +486,28 @@ impl ExprField {
     /// The time at which the formula is evaluated.
     pub fn time(&self) -> f64 {
         self.t
+    }
+}
+
+impl Enclosed for ExprField {
+    fn grad_at(&self, p: DVec3) -> DVec3 {
+        self.sample(p).grad_n
+    }
+    fn grad_over(&self, lo: DVec3, hi: DVec3) -> [Interval; 3] {
+        [0, 1, 2].map(|k| match &self.grad_enclosure[k] {
+            // An evaluation that fails proves nothing: the whole line.
+            Some(e) => self.enclose(e, lo, hi).unwrap_or(Interval {
+                lo: f64::NEG_INFINITY,
+                hi: f64::INFINITY,
+            }),
+            None => Interval::point(0.0),
+        })
+    }
+    fn n_min_over(&self, lo: DVec3, hi: DVec3) -> f64 {
+        match self.enclose(&self.enclosure, lo, hi) {
+            Some(n) if n.lo > 0.0 => n.lo,
+            _ => self.n_range.0,
+        }
     }
 }
 
@@ -472,6 +539,12 @@ impl IndexField for ExprField {
     }
     fn describe(&self) -> String {
         format!("expr n = {}", self.text)
+    }
+    fn step_cap(&self, p: DVec3, reach: f64) -> f64 {
+        self.feature_map().step_cap(p, reach)
+    }
+    fn feature_points(&self) -> Vec<DVec3> {
+        self.feature_map().points().to_vec()
     }
 }
 

@@ -76,6 +76,19 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// The longest step from `p` that cannot pass over a feature unseen, where the field
+    /// knows its features locally (an `expr` formula's interval map,
+    /// crate::features), looking `reach` around `p`; infinite elsewhere.
+    fn step_cap(&self, _p: DVec3, _reach: f64) -> f64 {
+        f64::INFINITY
+    }
+
+    /// Points where the field has its finest features (crate::features), for a bake's
+    /// error search: random points can miss a feature 1/100 of the bounds wide.
+    fn feature_points(&self) -> Vec<DVec3> {
+        Vec::new()
+    }
+
     /// The spacing (scene metres) of the samples this field interpolates, where it is a
     /// grid of data (a VDB's voxel size, a baked grid's spacing): a bake finer than it
     /// resolves the interpolation, not the data. `None` for fields given by a formula.

@@ -413,6 +413,9 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<BakedField, GrinfError> {
 const SAME_FIELD_CORRELATION: f64 = 0.9;
 /// How far that ratio may stray from 1 (a resolved bake: within a few percent).
 const SPACING_RATIO_LIMIT: f64 = 1.25;
+/// A grid whose measured RMS gradient error is at most this fraction of its gradient's
+/// RMS claims to resolve its field.
+const RESOLVED_GRAD_ERROR: f64 = 0.1;
 /// Most interior nodes sampled for the spacing check.
 const SPACING_SAMPLES: usize = 1 << 20;
 
@@ -420,8 +423,11 @@ const SPACING_SAMPLES: usize = 1 << 20;
 /// size but not with its content. A grid that clamps beyond its nodes must cover the
 /// bounds it claims; and the stored gradient must be the gradient of the stored index at
 /// the stored spacing (a wrong spacing, or dims permuted over the same payload, would
-/// otherwise give confident, wrong exits). A field too fine for its grid (noise under
-/// the spacing) correlates poorly and is not judged.
+/// otherwise give confident, wrong exits). Only a grid that claims to resolve its field
+/// is judged (its header's RMS gradient error at most [`RESOLVED_GRAD_ERROR`] of the
+/// stored gradient's RMS): an under-resolved bake's node gradients are sharper than its
+/// node differences (a VDB fire at 1.35x), and a field too fine for its grid (noise under
+/// the spacing) correlates poorly.
 fn check_whole(field: &BakedField) -> Result<(), String> {
     let g = field.geometry();
     if field.outside() == Outside::Clamp {
@@ -445,6 +451,7 @@ fn check_whole(field: &BakedField) -> Result<(), String> {
     let h = g.spacing.to_array();
     // Per axis: sums of fd*g, g*g, fd*fd.
     let mut sums = [[0.0f64; 3]; 3];
+    let mut count = 0usize;
     let mut k = 0usize;
     while k < interior {
         let (i, j, l) = (
@@ -463,7 +470,14 @@ fn check_whole(field: &BakedField) -> Result<(), String> {
             sums[a][1] += gs * gs;
             sums[a][2] += fd * fd;
         }
+        count += 1;
         k += stride;
+    }
+    let rms_g = (sums.iter().map(|s| s[1]).sum::<f64>() / count.max(1) as f64).sqrt();
+    // (A NaN claim claims nothing.)
+    let claimed = field.provenance().rms_err_grad;
+    if claimed.is_nan() || claimed > RESOLVED_GRAD_ERROR * rms_g {
+        return Ok(());
     }
     let energy = sums.iter().map(|s| s[1]).fold(0.0, f64::max);
     for (a, [fg, gg, ff]) in sums.into_iter().enumerate() {

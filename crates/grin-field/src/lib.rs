@@ -11,6 +11,7 @@ pub mod build;
 pub mod check;
 pub mod export;
 pub mod expr;
+pub mod features;
 pub mod field;
 pub mod grinf;
 pub mod interval;

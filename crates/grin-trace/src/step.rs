@@ -165,7 +165,17 @@ impl StepController {
     ) -> Taken<R> {
         let n0 = s0.n.to_f64();
         let d0 = s0.n_grad_n();
-        let cap = Self::length_scale_cap(n0, s0.grad_n.to_dvec3().length()).min(self.feature_cap);
+        let mut cap =
+            Self::length_scale_cap(n0, s0.grad_n.to_dvec3().length()).min(self.feature_cap);
+        // The field's own local cap (an `expr` formula's feature map), looked up over the
+        // reach of the step the policy would take.
+        let reach = match self.spec {
+            StepSpec::Fixed(ds) => ds * self.jitter,
+            StepSpec::Heuristic { max, .. } => max * self.jitter,
+            _ => self.ds_adapt.min(self.ds_max),
+        }
+        .min(cap);
+        cap = cap.min(field.step_cap(s.r.to_dvec3(), reach));
         match self.spec {
             StepSpec::Fixed(ds) => {
                 let h = R::from_f64((ds * self.take_jitter()).min(cap) / n0);

@@ -335,7 +335,9 @@ pub fn bake(
             },
         )?;
         progress("measure error", 0, 1);
-        let points = error_points(bounds, crop_lo, crop_hi, opts.error_points, opts.seed);
+        let mut points = error_points(bounds, crop_lo, crop_hi, opts.error_points, opts.seed);
+        // The field's finest features too: random points miss a narrow one.
+        points.extend(source.feature_points());
         let errors = measure_error_at(source, &field, opts.gradient, &points);
         progress("measure error", 1, 1);
         // A feature between the nodes (a plume narrower than their spacing) leaves them
@@ -489,7 +491,7 @@ fn active_region(source: &dyn IndexField, opts: &BakeOptions) -> (DVec3, DVec3, 
     let m = CROP_PROBE_POINTS;
     let ambient = source.ambient_index();
     let step = (hi - lo) / (m - 1) as f64;
-    let probes: Vec<(DVec3, f64)> = (0..m * m * m)
+    let mut probes: Vec<(DVec3, f64)> = (0..m * m * m)
         .into_par_iter()
         .filter_map(|idx| {
             let (i, j, k) = (idx % m, (idx / m) % m, idx / (m * m));
@@ -499,6 +501,14 @@ fn active_region(source: &dyn IndexField, opts: &BakeOptions) -> (DVec3, DVec3, 
                 .then(|| (p, (source.n(p) - ambient).abs()))
         })
         .collect();
+    // Features between the probes (a bump 1/100 of the bounds wide) are where the field
+    // says they are.
+    probes.extend(
+        source
+            .feature_points()
+            .into_iter()
+            .map(|p| (p, (source.n(p) - ambient).abs())),
+    );
     let range = probes.iter().fold(
         0.0f64,
         |a, &(_, d)| if d.is_finite() { a.max(d) } else { a },

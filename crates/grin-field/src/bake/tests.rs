@@ -498,3 +498,51 @@ fn features_between_the_coarsest_nodes_are_not_a_met_budget() {
         "{errors:?}"
     );
 }
+
+/// A bump 1/600 of an `expr` field's bounds, off the axis, between the crop's probes
+/// and far from most random error points: the bake's crop and error search look where the
+/// formula's feature map found it, so a grid that misses it is not a met budget, and the
+/// automatic choice resolves it.
+#[test]
+fn a_narrow_expression_feature_is_searched_where_it_is() {
+    let bounds = Bounds::Box {
+        min: DVec3::splat(-1.0),
+        max: DVec3::splat(1.0),
+    };
+    let src = crate::expr::ExprField::new(
+        "1 + 0.01*exp(-((x-0.31)^2 + (y+0.22)^2 + (z-0.13)^2)/0.000009)",
+        bounds,
+        1.0,
+        0.0,
+    )
+    .expect("expr");
+    assert!(!src.feature_points().is_empty());
+    let coarse = BakeOptions {
+        error_points: 200,
+        resolution: Some(12),
+        ..Default::default()
+    };
+    let (_, report) = bake(&src, &coarse, &quiet()).expect("bake");
+    assert!(report.delta_n_range > 0.5e-2, "{report:?}");
+    assert!(!report.meets_budget, "{report:?}");
+    let auto = BakeOptions {
+        error_points: 200,
+        error_budget: 1e-2,
+        interp: Interp::Tricubic,
+        ..Default::default()
+    };
+    let (field, report) = bake(&src, &auto, &quiet()).expect("bake");
+    assert!(report.cropped, "{report:?}");
+    eprintln!(
+        "narrow expr bump: res {} dims {:?} relative {:e}, met {}",
+        report.resolution, report.dims, report.relative_error, report.meets_budget
+    );
+    let centre = DVec3::new(0.31, -0.22, 0.13);
+    if report.meets_budget {
+        let err = (field.n(centre) - src.n(centre)).abs();
+        assert!(
+            err <= 2.0 * report.budget * 1e-2,
+            "n off by {err:e} at the bump"
+        );
+    }
+}
