@@ -276,9 +276,11 @@ fn beam_rows(count: usize) -> String {
     s
 }
 
-/// The default method: a scene without `integrator` or `step` traces with `auto` 1e-4,
-/// the pilot rays (some of the table's) choose a method that meets it, the summary says
-/// which; every ray ends `exited` within the asked error of the exact Luneburg exit
+/// The default method: a scene without `integrator` or `step` traces with `auto` 1e-4.
+/// A table large enough to pay for them gets pilot rays (some of its own) that choose a
+/// method meeting it, for at most ~20 % of the table's evaluations; a small one (pilots
+/// cost 10-60x such a table) gets error control per length, and the summary says why.
+/// Either way every ray ends `exited` within the asked error of the exact Luneburg exit
 /// direction (through the focus on the far side: the exit direction makes the angle
 /// asin(p / R) with the axis, p the impact).
 #[test]
@@ -288,41 +290,61 @@ fn the_default_method_is_auto_and_meets_its_error() {
         LUNEBURG_SCENE.replace("integrator = \"sharma\"\nstep = { fixed = 0.004 }\n", "");
     assert!(!scene_text.contains("step ="));
     let scene = d.write("lens.toml", &scene_text);
-    let rays = d.write("rays.csv", &beam_rows(24));
-    let out = d.path("out.csv");
-    let o = run(&[&scene, &rays, &out], &["--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value =
-        serde_json::from_slice(&o.stdout).expect("json summary on stdout");
-    let auto = &summary["auto"];
-    assert_eq!(auto["asked"], 1e-4, "{summary}");
-    assert_eq!(auto["met"], true, "{summary}");
-    assert!(
-        auto["chosen"]["error"].as_f64().expect("error") <= 0.7e-4,
-        "{summary}"
-    );
-    assert!(
-        stderr(&o).contains("chosen by pilot rays"),
-        "{}",
-        stderr(&o)
-    );
-    assert_eq!(summary["exited"], 24, "{summary}");
-    for (i, (status, v)) in read_output(&out).iter().enumerate() {
-        assert_eq!(status, "exited");
-        let (p, q) = (&v[6..9], &v[9..12]);
-        let impact = 0.1 + 1.3 * i as f64 / 23.0;
-        let b = (impact * impact + 0.05 * 0.05).sqrt() / 1.5;
-        // Leaves through the focus (2, 0, 0) at angle asin(b) off the axis.
-        assert!(
-            (p[0] - 2.0).abs() < 1e-3 && p[1].abs() < 1e-3,
-            "ray {i} leaves at {p:?}"
-        );
-        let angle = (q[0].clamp(-1.0, 1.0)).acos();
-        assert!(
-            (angle - b.asin()).abs() < 3e-4,
-            "ray {i}: {angle} vs {}",
-            b.asin()
-        );
+    for count in [24, 3200] {
+        let rays = d.write("rays.csv", &beam_rows(count));
+        let out = d.path("out.csv");
+        let o = run(&[&scene, &rays, &out], &["--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let summary: serde_json::Value =
+            serde_json::from_slice(&o.stdout).expect("json summary on stdout");
+        let auto = &summary["auto"];
+        if count < 1600 {
+            assert!(auto.is_null(), "{summary}");
+            let note = summary["auto_note"].as_str().expect("auto_note");
+            assert!(
+                note.starts_with("auto 1e-4 rad: error control per length, no pilot rays"),
+                "{note}"
+            );
+            assert!(stderr(&o).contains(note), "{}", stderr(&o));
+        } else {
+            assert_eq!(auto["asked"], 1e-4, "{summary}");
+            assert_eq!(auto["met"], true, "{summary}");
+            assert_eq!(auto["pilot_rays"], count / 200, "{summary}");
+            assert!(
+                auto["chosen"]["error"].as_f64().expect("error") <= 0.7e-4,
+                "{summary}"
+            );
+            assert!(
+                stderr(&o).contains("chosen by pilot rays"),
+                "{}",
+                stderr(&o)
+            );
+            let table = summary["mean_evals"].as_f64().expect("evals") * count as f64;
+            let pilots = auto["spent_evals"].as_f64().expect("spent");
+            eprintln!("{count} rays: pilots {pilots} evals, table {table}");
+            assert!(
+                pilots <= 0.2 * table,
+                "pilots {pilots} evals, table {table}"
+            );
+        }
+        assert_eq!(summary["exited"], count, "{summary}");
+        for (i, (status, v)) in read_output(&out).iter().enumerate() {
+            assert_eq!(status, "exited");
+            let (p, q) = (&v[6..9], &v[9..12]);
+            let impact = 0.1 + 1.3 * i as f64 / (count - 1) as f64;
+            let b = (impact * impact + 0.05 * 0.05).sqrt() / 1.5;
+            // Leaves through the focus (2, 0, 0) at angle asin(b) off the axis.
+            assert!(
+                (p[0] - 2.0).abs() < 1e-3 && p[1].abs() < 1e-3,
+                "ray {i} leaves at {p:?}"
+            );
+            let angle = (q[0].clamp(-1.0, 1.0)).acos();
+            assert!(
+                (angle - b.asin()).abs() < 3e-4,
+                "ray {i}: {angle} vs {}",
+                b.asin()
+            );
+        }
     }
 }
 

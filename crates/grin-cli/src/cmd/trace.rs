@@ -137,6 +137,9 @@ struct Summary<'a> {
     /// `step = { auto = ... }`: what the pilot rays chose.
     #[serde(skip_serializing_if = "Option::is_none")]
     auto: Option<grin_trace::auto::AutoChoice>,
+    /// `step = { auto = ... }` resolved without pilots (a table too small for them): why.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    auto_note: Option<String>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -178,8 +181,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     reader.next_batch(table::BATCH_ROWS, &mut rows)?;
     // `step = { auto = ... }`: pilot rays (some of the table's own) choose the method.
     let free_integrator = scene.render.integrator.is_none() && args.integrator.is_none();
+    // A small table pays for few pilots: at most ~20 % of its work (none below
+    // MIN_PILOTS: error control per length then keeps the asked error on its own).
     let pilots: Vec<_> = rows.iter().map(|r| (r.origin, r.dir)).collect();
-    let pilots = grin_trace::auto::spread(&pilots, scene.render.pilot_rays as usize);
+    let wanted = scene.render.pilot_rays as usize;
+    let afforded = grin_trace::auto::affordable_pilots(wanted, rows.len());
+    let pilots = grin_trace::auto::spread(&pilots, afforded);
+    let auto_note = match settings.step {
+        grin_scene::StepSpec::Auto(rad) if afforded == 0 && wanted > 0 => Some(format!(
+            "auto {rad:.0e} rad: error control per length, no pilot rays (a table of {} \
+             rays: pilots pay from {} rays on)",
+            rows.len(),
+            grin_trace::auto::MIN_PILOTS * grin_trace::auto::JOB_RAYS_PER_PILOT
+        )),
+        _ => None,
+    };
     let auto = if pilots.is_empty() {
         None
     } else if args.f32 {
@@ -289,6 +305,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(a) = &auto {
         eprintln!("{}", a.summary_line());
     }
+    if let Some(note) = &auto_note {
+        eprintln!("{note}");
+    }
     if args.json {
         let summary = Summary {
             output: &args.output,
@@ -313,6 +332,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 0.0
             },
             auto,
+            auto_note,
         };
         // Where the table itself went to a stream (`-o -`, a device: it may be stdout), the
         // summary goes to stderr, as `grin render` does.
