@@ -87,6 +87,7 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
                     label,
                     color: ci,
                     style: match policy {
+                        _ if exit == ExitMethod::Bisection => LineKind::LongDash,
                         Policy::Fixed => LineKind::Solid,
                         Policy::Heuristic => LineKind::Dotted,
                         Policy::Adaptive => LineKind::Dashed,
@@ -112,6 +113,19 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
             points: auto,
         });
     }
+    // The colours in use, in palette order.
+    let mut colors: Vec<(usize, String)> = Vec::new();
+    for c in &curves {
+        if !colors.iter().any(|(i, _)| *i == c.color) {
+            let name = if c.color < integrators.len() {
+                crate::methods::integrator_label(integrators[c.color]).to_owned()
+            } else {
+                "auto (pilot rays choose)".to_owned()
+            };
+            colors.push((c.color, name));
+        }
+    }
+    colors.sort();
     let front_idx = pareto(&pts);
     let front = front_idx
         .iter()
@@ -132,7 +146,7 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
             None => notes.push((
                 p.evals_per_ray,
                 p.err_dir,
-                format!("  <= {target:.0e} rad: {}", point_name(p)),
+                format!("<= {target:.0e} rad: {}", point_name(p)),
             )),
         }
     }
@@ -146,6 +160,20 @@ pub fn case_chart(run: &AccuracyRun, case: &str, precision: Precision) -> Chart 
         curves,
         front,
         notes,
+        colors,
+        styles: vec![
+            (LineKind::Solid, "fixed step".into()),
+            (LineKind::Dotted, "the paper's gradient heuristic".into()),
+            (
+                LineKind::LongDash,
+                "the paper's method (heuristic, bisection exit)".into(),
+            ),
+            (LineKind::Dashed, "error control per step".into()),
+            (
+                LineKind::Thick,
+                "error control per length; auto (pilots choose)".into(),
+            ),
+        ],
     }
 }
 
