@@ -1507,3 +1507,44 @@ height = 8
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(first.exists());
 }
+
+/// A cache whose values overflow what a bake and the GPU carry (1e32 mapped to n): refused
+/// with the limit named and the voxel's place, no output (the CPU rendered OPD -inf and
+/// rays left after a few steps).
+#[test]
+fn values_no_bake_can_carry_are_refused_with_the_limit() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("huge.vdb");
+    run_openvdb_python(
+        dir.path(),
+        r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+g = vdb.FloatGrid()
+g.name = "density"
+a = np.zeros((4, 4, 4), dtype=np.float32)
+a[1:3, 1:3, 1:3] = 1e32
+g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
+g.transform = vdb.createLinearTransform(voxelSize=0.05)
+vdb.write(sys.argv[1], grids=[g])
+"#,
+        &file,
+    );
+    let scene = vdb_scene(
+        dir.path(),
+        &file,
+        "density",
+        "{ linear = { k = 1e-4 } }",
+        "",
+        1.0,
+    );
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).expect("out dir");
+    let out_file = out_dir.join("huge.grinf");
+    fails_cleanly(
+        &bake(&scene, &out_file),
+        "|n - ambient| must be at most 1000 (what a bake and the GPU can carry)",
+        Some(&out_file),
+    );
+}

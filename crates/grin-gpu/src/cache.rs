@@ -319,6 +319,53 @@ mod tests {
             .0
     }
 
+    /// Two writers storing different bakes under one key while a reader reads it: every
+    /// hit the reader gets pairs a grid with its own record (the bake's warnings come from
+    /// the record, its bounds from the grid), and every other read is a miss or a refusal,
+    /// never a mix.
+    #[test]
+    fn concurrent_writers_never_mix_an_entry() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let cache = BakeCache::new(dir.path());
+        let (a, b) = (small_bake(&lens(1.0)), small_bake(&lens(2.0)));
+        let (mut hits, mut refused, mut reads) = (0, 0, 0);
+        let finished = std::sync::atomic::AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for (bake, tag) in [(&a, "a"), (&b, "b")] {
+                let (cache, finished) = (&cache, &finished);
+                s.spawn(move || {
+                    for _ in 0..30 {
+                        cache.put("k", bake, &[tag.to_owned()]).expect("put");
+                    }
+                    finished.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                });
+            }
+            while finished.load(std::sync::atomic::Ordering::SeqCst) < 2 {
+                reads += 1;
+                match cache.get("k") {
+                    Ok(Some((baked, warnings))) => {
+                        hits += 1;
+                        let want = if warnings == ["a"] { &a } else { &b };
+                        assert!(warnings == ["a"] || warnings == ["b"], "{warnings:?}");
+                        assert_eq!(
+                            baked.bounds(),
+                            want.bounds(),
+                            "a grid with another's record"
+                        );
+                    }
+                    Ok(None) => {}
+                    Err(_) => refused += 1,
+                }
+            }
+        });
+        eprintln!("concurrent writers: {hits} hits, {refused} refused of {reads} reads");
+        assert!(hits > 0, "{reads} reads, none a hit");
+        // Whatever the last two writes left, one more put makes the entry whole again.
+        cache.put("k", &a, &["a".to_owned()]).expect("put");
+        let (_, warnings) = cache.get("k").expect("verifies").expect("hit");
+        assert_eq!(warnings, ["a"]);
+    }
+
     /// The cache verifies what it reads: another scene's valid bake put in place of an
     /// entry, or an entry copied under another key, is refused with the reason (and
     /// `gpu_bake_cached` bakes again with a warning); a bake of other bounds under the
