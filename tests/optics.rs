@@ -750,3 +750,80 @@ fn bos_images_go_through_the_lens() {
         .fold(0.0f64, f64::max);
     assert!(worst < 1e-9, "{worst}");
 }
+
+/// One scene, two outputs: `--beauty` renders the [optics] output and the beauty image of
+/// the same scene file in one run (a compositor kept two copies of a scene to get a plate
+/// and its ST map). The beauty equals a render of the scene without [optics], bit for bit.
+#[test]
+fn one_scene_gives_its_optics_output_and_its_beauty() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/optics/displacement.toml");
+    let (out, beauty) = (d.join("disp.exr"), d.join("plate.exr"));
+    let o = run(&[
+        "render",
+        scene.to_str().expect("utf8"),
+        "-o",
+        out.to_str().expect("utf8"),
+        "--beauty",
+        beauty.to_str().expect("utf8"),
+        "--backend",
+        "cpu",
+        "--size",
+        "48x48",
+        "--json",
+    ]);
+    ok(&o);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v.as_array().map(Vec::len), Some(2), "{v}");
+    assert!(d.join("disp.png").exists() && d.join("plate.png").exists());
+    let (_, disp) = channels(&out);
+    assert!(disp.contains_key("displacement_px.X"), "{:?}", disp.keys());
+    let (_, plate) = channels(&beauty);
+    // The same scene without its [optics] table, rendered alone.
+    let text = std::fs::read_to_string(&scene).expect("scene");
+    let bare = d.join("bare.toml");
+    std::fs::write(
+        &bare,
+        text.split("[optics]").next().expect("before [optics]"),
+    )
+    .expect("write");
+    let alone = d.join("alone.exr");
+    ok(&run(&[
+        "render",
+        bare.to_str().expect("utf8"),
+        "-o",
+        alone.to_str().expect("utf8"),
+        "--backend",
+        "cpu",
+        "--size",
+        "48x48",
+    ]));
+    let (_, want) = channels(&alone);
+    for ch in ["R", "G", "B", "aov.exit_dir.X", "aov.opd"] {
+        assert_eq!(plate[ch], want[ch], "channel {ch}");
+    }
+    // Refused: a scene with no [optics], and a beauty named as the output.
+    let lens = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/luneburg.toml");
+    let o = run(&[
+        "render",
+        lens.to_str().expect("utf8"),
+        "-o",
+        d.join("l.exr").to_str().expect("utf8"),
+        "--beauty",
+        d.join("lb.exr").to_str().expect("utf8"),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("has no [optics] output"));
+    let o = run(&[
+        "render",
+        scene.to_str().expect("utf8"),
+        "-o",
+        out.to_str().expect("utf8"),
+        "--beauty",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("needs a name of its own"));
+}

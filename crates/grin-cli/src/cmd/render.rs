@@ -65,6 +65,11 @@ pub struct Args {
     /// Frames per second of the sequence (default: the scene's [animation] fps, else 24).
     #[arg(long)]
     pub fps: Option<f64>,
+    /// With a scene that has an [optics] output: also render its beauty image (the scene
+    /// without [optics], at its spp) to this EXR (and its PNG), in the same run: a plate
+    /// and its ST map from one scene file. With --frames it holds a frame token too.
+    #[arg(long, value_name = "BEAUTY.exr")]
+    pub beauty: Option<PathBuf>,
 }
 
 /// Largest accepted image side: keeps `width * height * spp` and the frame buffer sane.
@@ -163,6 +168,12 @@ fn gpu_context(no_cache: bool) -> anyhow::Result<grin_gpu::GpuContext> {
     Ok(grin_gpu::GpuContext::new_headless_in(dir.as_deref())?)
 }
 
+/// The scene's beauty image: the scene without its [optics] output.
+fn without_optics(mut scene: grin_scene::Scene) -> grin_scene::Scene {
+    scene.optics = None;
+    scene
+}
+
 /// Where the EXR goes and the PNG preview beside it (`None` when the EXR goes to a
 /// stream: `-`, a device or a FIFO). Checked before any rendering.
 fn check_output(path: &Path) -> anyhow::Result<Option<PathBuf>> {
@@ -212,6 +223,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("--compare compares beauty renders; this scene has an [optics] output");
         }
     }
+    if let Some(b) = &args.beauty {
+        if scene.optics.is_none() {
+            bail!(
+                "--beauty: {} has no [optics] output: its render is the beauty image already",
+                args.scene.display()
+            );
+        }
+        check_output(b).with_context(|| "--beauty")?;
+        if b == &args.output || b.with_extension("png") == args.output.with_extension("png") {
+            bail!(
+                "--beauty {}: the beauty image needs a name of its own (not the output's)",
+                b.display()
+            );
+        }
+        if grin_scene::frames::has_frame_token(&b.to_string_lossy()) != args.frames.is_some() {
+            bail!(
+                "--beauty {}: holds a frame token exactly when --frames is given, as -o does",
+                b.display()
+            );
+        }
+    }
     let fps = args.fps.unwrap_or_else(|| scene.fps());
     if !(fps.is_finite() && fps > 0.0) {
         bail!("--fps must be a positive number of frames per second, got {fps}");
@@ -228,8 +260,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Some(a) => scene.at_frame(a.frames[0], fps),
             None => scene,
         };
-        let (summary, to_stream) = render_one(&args, scene, &args.output, None)?;
-        return print_summary(&summary, args.json, to_stream);
+        let Some(beauty) = &args.beauty else {
+            let (summary, to_stream) = render_one(&args, scene, &args.output, None)?;
+            return print_summary(&summary, args.json, to_stream);
+        };
+        // The [optics] output and the beauty image, on one device.
+        let ctx = match args.backend {
+            Backend::Gpu => Some(gpu_context(args.no_cache)?),
+            Backend::Cpu => None,
+        };
+        let mut summaries = Vec::new();
+        for (s, out) in [
+            (scene.clone(), &args.output),
+            (without_optics(scene), beauty),
+        ] {
+            let (summary, to_stream) = render_one(&args, s, out, ctx.as_ref())?;
+            if !args.json {
+                print_summary(&summary, false, to_stream)?;
+            }
+            summaries.push(summary);
+        }
+        if args.json {
+            outln!("{}", serde_json::to_string_pretty(&summaries)?);
+        }
+        return Ok(());
     };
     let pattern = args.output.to_string_lossy().into_owned();
     if !grin_scene::frames::has_frame_token(&pattern) {
@@ -269,6 +323,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             print_summary(&summary, false, to_stream)?;
         }
         summaries.push(summary);
+        if let Some(b) = &args.beauty {
+            let b = b.to_string_lossy();
+            let out = PathBuf::from(
+                grin_scene::frames::substitute_frame(&b, f).unwrap_or_else(|| b.to_string()),
+            );
+            let (summary, to_stream) = render_one(
+                &args,
+                without_optics(scene.at_frame(f, fps)),
+                &out,
+                ctx.as_ref(),
+            )
+            .with_context(|| format!("frame {f} (beauty)"))?;
+            if !args.json {
+                print_summary(&summary, false, to_stream)?;
+            }
+            summaries.push(summary);
+        }
     }
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&summaries)?);
