@@ -17,7 +17,10 @@ mod validate;
 pub use ambient::AmbientIndex;
 pub use error::SceneError;
 pub use load::{load_scene, locate_key, parse_scene};
-pub use optics::{Dots, Fringes, Knife, OpticsMode, OpticsSpec, PlaneSpec, Screen};
+pub use optics::{
+    AccuracyUnit, DEFAULT_OUTPUT_ACCURACY, Dots, Fringes, Knife, OpticsMode, OpticsSpec, PlaneSpec,
+    Screen,
+};
 pub use types::*;
 pub use validate::{
     MAX_IMAGE_SIDE, MAX_NOISE_OCTAVES, MAX_OBJECTS, MAX_PILOT_RAYS, MAX_STEPS, MAX_WORLD_COORDINATE,

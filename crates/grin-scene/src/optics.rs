@@ -24,6 +24,56 @@ pub struct OpticsSpec {
     pub dots: Dots,
     #[serde(default)]
     pub screen: Screen,
+    /// The accuracy `step = { auto }` targets for this output, in the output's own unit:
+    /// the landing point in pixels (displacement, ST map, BOS), the optical path
+    /// difference in waves (interferogram). Left out: [`DEFAULT_OUTPUT_ACCURACY`].
+    /// Schlieren and the shadowgraph keep the knob in radians (`step = { auto = RAD }`).
+    #[serde(default)]
+    pub accuracy: Option<f64>,
+}
+
+/// The default accuracy of a pixel or wave output: a hundredth of a pixel, of a wave.
+pub const DEFAULT_OUTPUT_ACCURACY: f64 = 0.01;
+
+/// What unit an output's accuracy is asked in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AccuracyUnit {
+    /// The exit direction, radians (the knob's own).
+    Radians,
+    /// Where the ray lands, in image pixels.
+    Pixels,
+    /// The optical path difference, in waves.
+    Waves,
+}
+
+impl AccuracyUnit {
+    pub fn name(self) -> &'static str {
+        match self {
+            AccuracyUnit::Radians => "rad",
+            AccuracyUnit::Pixels => "px",
+            AccuracyUnit::Waves => "waves",
+        }
+    }
+}
+
+impl OpticsSpec {
+    /// The unit this output's accuracy is asked in.
+    pub fn accuracy_unit(&self) -> AccuracyUnit {
+        match self.mode {
+            OpticsMode::Displacement | OpticsMode::Bos => AccuracyUnit::Pixels,
+            OpticsMode::Interferogram => AccuracyUnit::Waves,
+            OpticsMode::Schlieren | OpticsMode::Shadowgraph => AccuracyUnit::Radians,
+        }
+    }
+
+    /// The accuracy asked in [`OpticsSpec::accuracy_unit`] (`None` for radians: the
+    /// step's own `auto` value holds).
+    pub fn output_accuracy(&self) -> Option<f64> {
+        match self.accuracy_unit() {
+            AccuracyUnit::Radians => None,
+            _ => Some(self.accuracy.unwrap_or(DEFAULT_OUTPUT_ACCURACY)),
+        }
+    }
 }
 
 /// Which picture.

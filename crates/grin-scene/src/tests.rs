@@ -602,6 +602,24 @@ fn optics_errors_name_the_key() {
         e.contains("optics.wavelength_nm: must be in 10..=1e6 nm") && e.contains("got 1e-300"),
         "{e}"
     );
+    // The accuracy is asked in the output's unit: pixels or waves; not for schlieren.
+    let ok = parse_scene(
+        &with("mode = \"interferogram\"\naccuracy = 0.05"),
+        Path::new("s.toml"),
+    )
+    .expect("waves");
+    let o = ok.optics.expect("optics");
+    assert_eq!(
+        (o.accuracy_unit(), o.output_accuracy()),
+        (crate::AccuracyUnit::Waves, Some(0.05))
+    );
+    let e = err("mode = \"displacement\"\naccuracy = -1.0");
+    assert!(e.contains("optics.accuracy: must be > 0"), "{e}");
+    let e = err("mode = \"schlieren\"\naccuracy = 0.01");
+    assert!(
+        e.contains("optics.accuracy: is in the output's unit (pixels, waves)"),
+        "{e}"
+    );
     let e = err("mode = \"bos\"");
     assert!(e.contains("optics.plane: BOS needs the plane"), "{e}");
     let e = err("mode = \"schlieren\"\nknife = { cutoff = 1.0 }");

@@ -197,6 +197,16 @@ fn optics(o: &crate::OpticsSpec, has_medium: bool) -> Check {
             "an optical output needs a [medium] to look through",
         );
     }
+    if let Some(a) = o.accuracy {
+        positive("optics.accuracy", a)?;
+        if o.accuracy_unit() == crate::AccuracyUnit::Radians {
+            return fail(
+                "optics.accuracy",
+                "is in the output's unit (pixels, waves); schlieren and the shadowgraph \
+                 take theirs in radians: step = { auto = RAD } in [render]",
+            );
+        }
+    }
     if let Some(p) = &o.plane {
         finite3("optics.plane.point", p.point)?;
         nonzero3("optics.plane.normal", p.normal)?;

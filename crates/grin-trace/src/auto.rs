@@ -63,17 +63,128 @@ pub struct Candidate {
     pub integrator: &'static str,
     /// Fixed step (world length); `None`: per-length error control.
     pub fixed_step: Option<f64>,
-    /// Worst exit-direction error over the pilots, rad (infinite: a pilot ended with
+    /// Worst error over the pilots, in the choice's unit (infinite: a pilot ended with
     /// another status than the reference's).
     pub error: f64,
     pub evals_per_ray: f64,
 }
 
+/// What a pilot's error is measured in: the knob's unit for this output.
+#[derive(Debug, Clone)]
+pub enum Metric {
+    /// The exit direction, radians (images, ray tables, schlieren, the shadowgraph).
+    Direction,
+    /// Where the ray lands on `plane` (at infinity: its direction) as `cam` sees it, in
+    /// image pixels: what displacement, ST maps and BOS are made of.
+    Pixels {
+        cam: Box<grin_render::camera::PinholeCamera>,
+        plane: Option<grin_render::optics::Plane>,
+    },
+    /// The optical path difference, in waves of `wavelength` (metres), taken on to a
+    /// plane normal to the ray's entry direction beyond the medium (stationary in the
+    /// deflection, as the interferogram's).
+    Waves { wavelength: f64 },
+}
+
+impl Metric {
+    /// The unit's name in summaries.
+    pub fn unit(&self) -> &'static str {
+        match self {
+            Metric::Direction => "rad",
+            Metric::Pixels { .. } => "px",
+            Metric::Waves { .. } => "waves",
+        }
+    }
+
+    /// An exit-direction error (rad) for error control that keeps this metric's `asked`:
+    /// a pixel's angle as the camera sees it (a direction error at the medium moves the
+    /// landing point by less than that across the image), or the OPD over the medium's
+    /// `radius` (an OPL error accumulates along the path).
+    fn as_radians(&self, asked: f64, radius: f64) -> f64 {
+        match self {
+            Metric::Direction => asked,
+            Metric::Pixels { cam, .. } => {
+                asked * 2.0 * cam.tan_half_fov_y.atan() / f64::from(cam.height.max(1))
+            }
+            Metric::Waves { wavelength } => asked * wavelength / radius.max(f64::MIN_POSITIVE),
+        }
+    }
+
+    /// How large the output itself is for the pilot `(origin, dir)` traced as
+    /// `reference`, in this metric's unit: the landing point's displacement in pixels
+    /// (`None` for the other metrics, and where the ray does not land).
+    fn size(&self, reference: &RayResult, pilot: (DVec3, DVec3)) -> Option<f64> {
+        let Metric::Pixels { cam, plane } = self else {
+            return None;
+        };
+        let seen = |p: DVec3, d: DVec3| match plane {
+            Some(pl) => pl
+                .hit(p, d)
+                .and_then(|h| grin_render::optics::project_dir(cam, h - cam.origin)),
+            None => grin_render::optics::project_dir(cam, d),
+        };
+        let (a, b) = (
+            seen(reference.position, reference.direction)?,
+            seen(pilot.0, pilot.1)?,
+        );
+        Some(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+    }
+
+    /// The error of `run` against `reference` for the pilot `(origin, dir)`, in this
+    /// metric's unit (infinite where it cannot be measured).
+    fn error(
+        &self,
+        run: &RayResult,
+        reference: &RayResult,
+        pilot: (DVec3, DVec3),
+        far: f64,
+        n_amb: f64,
+    ) -> f64 {
+        match self {
+            Metric::Direction => angle(run.direction, reference.direction),
+            Metric::Pixels { cam, plane } => {
+                let seen = |r: &RayResult| match plane {
+                    Some(pl) => pl
+                        .hit(r.position, r.direction)
+                        .and_then(|p| grin_render::optics::project_dir(cam, p - cam.origin)),
+                    None => grin_render::optics::project_dir(cam, r.direction),
+                };
+                match (seen(run), seen(reference)) {
+                    (Some(a), Some(b)) => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
+                    (None, None) => 0.0,
+                    _ => f64::INFINITY,
+                }
+            }
+            Metric::Waves { wavelength } => {
+                // Each path on to the plane through origin + far d0, normal to d0.
+                let (o, d0) = (pilot.0, pilot.1.normalize_or_zero());
+                let to_plane = |r: &RayResult| {
+                    let c = r.direction.dot(d0);
+                    if c <= 1e-12 {
+                        return f64::NAN;
+                    }
+                    r.opl + n_amb * (o + d0 * far - r.position).dot(d0) / c
+                };
+                (to_plane(run) - to_plane(reference)).abs() / wavelength
+            }
+        }
+    }
+}
+
+/// A pixel output's accuracy is at most this fraction of the largest displacement the
+/// pilots' reference shows: heat haze that moves the background by a hundredth of a pixel
+/// is measured to 1e-5 px, not to the 0.01 px asked of a visible distortion.
+pub const RELATIVE_OUTPUT_ACCURACY: f64 = 1e-3;
+
 /// What the pilots chose.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AutoChoice {
-    /// The exit-direction error asked for, rad.
+    /// The error asked for, in `unit`.
     pub asked: f64,
+    /// `rad` (exit direction), `px` (landing point), `waves` (optical path difference).
+    pub unit: &'static str,
+    /// The exit-direction error the error-control candidates were held to for it, rad.
+    pub asked_rad: f64,
     #[serde(skip)]
     pub settings: TraceSettings,
     /// The chosen candidate (its error and cost on the pilots).
@@ -95,14 +206,14 @@ impl AutoChoice {
         let c = &self.chosen;
         let how = match (c.fixed_step, self.settings.step) {
             (Some(ds), _) => format!("fixed ds {ds:.4}"),
-            (None, StepSpec::Auto(tol)) if tol < self.asked => {
+            (None, StepSpec::Auto(tol)) if tol < self.asked_rad || self.unit != "rad" => {
                 format!("error control per length at {tol:.0e} rad")
             }
             (None, _) => "error control per length".into(),
         };
         format!(
-            "{}, {how} (worst of {} pilots: {:.1e} rad, {:.0} evals/ray)",
-            c.integrator, self.pilot_rays, c.error, c.evals_per_ray
+            "{}, {how} (worst of {} pilots: {:.1e} {}, {:.0} evals/ray)",
+            c.integrator, self.pilot_rays, c.error, self.unit, c.evals_per_ray
         )
     }
 }
@@ -112,8 +223,9 @@ impl AutoChoice {
     /// by pilot rays for N field evals`.
     pub fn summary_line(&self) -> String {
         format!(
-            "auto {:.0e} rad: {}, chosen by pilot rays for {} field evals",
+            "auto {:.0e} {}: {}, chosen by pilot rays for {} field evals",
             self.asked,
+            self.unit,
             self.describe(),
             self.spent_evals
         )
@@ -124,21 +236,28 @@ impl AutoChoice {
     pub fn unmet_warning(&self, verb: &str) -> Option<String> {
         (!self.met).then(|| {
             format!(
-                "auto {:.0e} rad: no method met it on the pilot rays within the steps tried; \
+                "auto {:.0e} {}: no method met it on the pilot rays within the steps tried; \
                  {verb} with the closest, {}",
                 self.asked,
+                self.unit,
                 self.describe()
             )
         })
     }
 }
 
-/// Worst angle between the exits of `runs` and `reference` (infinite where a status
-/// differs) and the mean evaluations per ray.
-fn measure(runs: &[RayResult], reference: &[RayResult]) -> (f64, f64) {
+/// Worst error (in `metric`) of the exits of `runs` against `reference` (infinite where
+/// a status differs) and the mean evaluations per ray.
+fn measure(
+    runs: &[RayResult],
+    reference: &[RayResult],
+    rays: &[(DVec3, DVec3)],
+    metric: &Metric,
+    (far, n_amb): (f64, f64),
+) -> (f64, f64) {
     let mut worst: f64 = 0.0;
     let mut evals = 0u64;
-    for (r, e) in runs.iter().zip(reference) {
+    for ((r, e), ray) in runs.iter().zip(reference).zip(rays) {
         evals += r.evals;
         // A `degraded` ray left as the reference did: its error is measured.
         if r.status != e.status && !(r.status.left() && e.status.left()) {
@@ -146,8 +265,8 @@ fn measure(runs: &[RayResult], reference: &[RayResult]) -> (f64, f64) {
             continue;
         }
         if r.status.left() {
-            let ang = angle(r.direction, e.direction);
-            worst = worst.max(if ang.is_nan() { f64::INFINITY } else { ang });
+            let err = metric.error(r, e, *ray, far, n_amb);
+            worst = worst.max(if err.is_nan() { f64::INFINITY } else { err });
         }
     }
     (worst, evals as f64 / runs.len().max(1) as f64)
@@ -182,10 +301,42 @@ pub fn choose<R: Real>(
     let StepSpec::Auto(asked) = settings.step else {
         return None;
     };
+    choose_in::<R>(
+        field,
+        settings,
+        free_integrator,
+        pilots,
+        &Metric::Direction,
+        asked,
+    )
+}
+
+/// [`choose`] for an error of `asked` in `metric`'s unit (the step's own `auto` value is
+/// then not used; it must still be `auto`).
+pub fn choose_in<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    free_integrator: bool,
+    pilots: &[(DVec3, DVec3)],
+    metric: &Metric,
+    asked: f64,
+) -> Option<AutoChoice> {
+    let StepSpec::Auto(_) = settings.step else {
+        return None;
+    };
     let radius = field.bounds().radius();
+    let asked_rad = metric.as_radians(asked, radius);
+    // The OPD's plane: beyond the medium along each pilot's entry direction.
+    let far = (pilots
+        .iter()
+        .map(|p| p.0.distance(field.bounds().center()))
+        .fold(0.0, f64::max)
+        + 2.0 * radius)
+        .max(radius);
+    let geometry = (far, field.ambient_index());
     let reference_settings = TraceSettings {
         integrator: IntegratorKind::Adaptive,
-        step: StepSpec::Auto(asked * REFERENCE_FRACTION),
+        step: StepSpec::Auto(asked_rad * REFERENCE_FRACTION),
         max_steps: settings.max_steps.min(grin_scene::DEFAULT_MAX_STEPS),
         ..*settings
     };
@@ -202,11 +353,33 @@ pub fn choose<R: Real>(
     if rays.is_empty() {
         return None;
     }
+    // A displacement far under a pixel is asked to a fraction of itself.
+    let largest = rays
+        .iter()
+        .zip(&reference)
+        .filter_map(|(ray, r)| metric.size(r, *ray))
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max);
+    let (asked, asked_rad, reference) =
+        if largest > 0.0 && RELATIVE_OUTPUT_ACCURACY * largest < asked {
+            let tighter = RELATIVE_OUTPUT_ACCURACY * largest;
+            let asked_rad = asked_rad * tighter / asked;
+            // The reference again, a hundredth of the tighter error.
+            let again = TraceSettings {
+                step: StepSpec::Auto(asked_rad * REFERENCE_FRACTION),
+                ..reference_settings
+            };
+            let reference = trace_all::<f64>(field, &again, &rays);
+            spent += reference.iter().map(|r| r.evals).sum::<u64>();
+            (tighter, asked_rad, reference)
+        } else {
+            (asked, asked_rad, reference)
+        };
     let mut tried = Vec::new();
     let mut run = |s: &TraceSettings, fixed_step: Option<f64>| {
         let out = trace_all::<R>(field, s, &rays);
         spent += out.iter().map(|r| r.evals).sum::<u64>();
-        let (error, evals_per_ray) = measure(&out, &reference);
+        let (error, evals_per_ray) = measure(&out, &reference, &rays, metric, geometry);
         let c = Candidate {
             integrator: label(s.integrator),
             fixed_step,
@@ -226,7 +399,7 @@ pub fn choose<R: Real>(
             closest = Some((c, s));
         }
     };
-    let mut tol = asked;
+    let mut tol = asked_rad;
     // While nothing meets the target, fixed steps costing more than this are not tried
     // (twice the tightest error control's cost: beyond it no step is worth its cost).
     let mut bound: f64 = 0.0;
@@ -286,6 +459,8 @@ pub fn choose<R: Real>(
     let (chosen, chosen_settings) = best.or(closest)?;
     Some(AutoChoice {
         asked,
+        unit: metric.unit(),
+        asked_rad,
         settings: chosen_settings,
         chosen,
         met,
@@ -390,17 +565,36 @@ pub fn scene_pilots(rs: &grin_render::scene::RenderScene) -> Vec<(DVec3, DVec3)>
 /// step policy, `pilot_rays = 0`, or no pilot met the medium); an unresolved `auto`
 /// runs error control per length.
 pub fn resolve_scene<R: Real>(rs: &mut grin_render::scene::RenderScene) -> Option<AutoChoice> {
+    resolve_scene_in::<R>(rs, None)
+}
+
+/// [`resolve_scene`] for an error of `asked` in `metric`'s unit (an optical output's),
+/// or in radians with `None`.
+pub fn resolve_scene_in<R: Real>(
+    rs: &mut grin_render::scene::RenderScene,
+    metric: Option<(Metric, f64)>,
+) -> Option<AutoChoice> {
     let pilots = scene_pilots(rs);
     let m = rs.medium.as_ref()?;
     if pilots.is_empty() {
         return None;
     }
-    let choice = choose::<R>(
-        m.field.as_ref(),
-        &m.trace,
-        rs.settings.integrator.is_none(),
-        &pilots,
-    )?;
+    let choice = match metric {
+        Some((metric, asked)) => choose_in::<R>(
+            m.field.as_ref(),
+            &m.trace,
+            rs.settings.integrator.is_none(),
+            &pilots,
+            &metric,
+            asked,
+        ),
+        None => choose::<R>(
+            m.field.as_ref(),
+            &m.trace,
+            rs.settings.integrator.is_none(),
+            &pilots,
+        ),
+    }?;
     apply(rs, &choice.settings);
     Some(choice)
 }

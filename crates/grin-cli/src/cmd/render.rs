@@ -376,9 +376,28 @@ fn render_one(
         .with_context(|| format!("{}", args.scene.display()))?;
     // `step = { auto = ... }`: pilot rays choose the integrator and step, in the
     // backend's precision, before anything is traced.
+    // An optical output asks its accuracy in its own unit: pixels of landing point,
+    // waves of OPD (`[optics] accuracy`, default 0.01).
+    let metric = scene.optics.as_ref().and_then(|o| {
+        let asked = o.output_accuracy()?;
+        let metric = match o.accuracy_unit() {
+            grin_scene::AccuracyUnit::Pixels => grin_trace::auto::Metric::Pixels {
+                cam: Box::new(rs.camera),
+                plane: o
+                    .plane
+                    .as_ref()
+                    .and_then(|p| grin_trace::render::optics::Plane::new(p, &rs.camera)),
+            },
+            grin_scene::AccuracyUnit::Waves => grin_trace::auto::Metric::Waves {
+                wavelength: o.wavelength_nm * 1e-9,
+            },
+            grin_scene::AccuracyUnit::Radians => return None,
+        };
+        Some((metric, asked))
+    });
     let auto = match args.backend {
-        Backend::Cpu => grin_trace::auto::resolve_scene::<f64>(&mut rs),
-        Backend::Gpu => grin_trace::auto::resolve_scene::<f32>(&mut rs),
+        Backend::Cpu => grin_trace::auto::resolve_scene_in::<f64>(&mut rs, metric),
+        Backend::Gpu => grin_trace::auto::resolve_scene_in::<f32>(&mut rs, metric),
     };
     let auto_warning = auto.as_ref().and_then(|a| a.unmet_warning("rendering"));
     if let Some(w) = &auto_warning {
