@@ -239,7 +239,8 @@ fn resolved(field: &dyn Enclosed, bounds: &Bounds, lo: DVec3, hi: DVec3) -> bool
         )
     });
     for p in corners.chain([(lo + hi) * 0.5]) {
-        let g = field.grad_at(bounds_clamp(bounds, p));
+        // (A sphere's box corners lie outside it, where a formula may not be defined.)
+        let g = field.grad_at(crate::interval::clamp_into(bounds, p));
         if !g.is_finite() {
             return false;
         }
@@ -252,23 +253,6 @@ fn resolved(field: &dyn Enclosed, bounds: &Bounds, lo: DVec3, hi: DVec3) -> bool
         0.0
     };
     width.iter().all(|w| *w <= OVERESTIMATE * seen + floor)
-}
-
-/// `p` moved into the bounds (a sphere's box corners lie outside it, where a formula may
-/// not be defined).
-fn bounds_clamp(bounds: &Bounds, p: DVec3) -> DVec3 {
-    match *bounds {
-        Bounds::Sphere { center, radius } => {
-            let d = p - center;
-            let l = d.length();
-            if l > radius {
-                center + d * (radius / l)
-            } else {
-                p
-            }
-        }
-        Bounds::Box { min, max } => p.clamp(min, max),
-    }
 }
 
 #[cfg(test)]

@@ -420,7 +420,7 @@ fn meets(bounds: &Bounds, a: DVec3, b: DVec3) -> bool {
 }
 
 /// `p`, or the nearest point of the bounds to it.
-fn clamp_into(bounds: &Bounds, p: DVec3) -> DVec3 {
+pub(crate) fn clamp_into(bounds: &Bounds, p: DVec3) -> DVec3 {
     match *bounds {
         Bounds::Sphere { center, radius } => {
             let d = p - center;
