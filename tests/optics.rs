@@ -858,3 +858,40 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("needs a name of its own"));
 }
+
+/// Errors of the optical outputs name the scene file, as every other error does: a
+/// shadowgraph beam too large for one GPU frame (it was a bare `[optics] ...` line).
+#[test]
+fn optics_errors_name_the_scene() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let example =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/optics/shadowgraph.toml");
+    let text = std::fs::read_to_string(example).expect("scene");
+    let scene = dir.path().join("beam.toml");
+    std::fs::write(
+        &scene,
+        text.replace("rays_per_pixel = 16", "rays_per_pixel = 1024"),
+    )
+    .expect("write");
+    let out = dir.path().join("beam.exr");
+    let o = run(&[
+        "render",
+        scene.to_str().expect("utf8"),
+        "-o",
+        out.to_str().expect("utf8"),
+        "--backend",
+        "gpu",
+        "--size",
+        "512x512",
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!(
+            "grin: error: {}: [optics] the shadowgraph's beam is",
+            scene.display()
+        )),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
