@@ -6,7 +6,8 @@
 //! the raw declarations in [`ffi`]. Every shim call returns a status code and message (the
 //! shim catches every C++ exception), so errors come back as [`VdbError`].
 //!
-//! Why one file of ~1000 lines: it is grin's only `unsafe` code; every FFI call and its
+//! Why one file of ~1000 lines: it holds all of grin's FFI `unsafe` (the only other
+//! `unsafe` is the driver's pipeline-cache load in grin-gpu); every FFI call and its
 //! safety argument stays in one place to be read (and reviewed) together.
 
 #![expect(

@@ -4,10 +4,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// Integrator codes (`FrameParams::integrator`).
 /// `aov.status` of a ray that ended `error` (the kernel's STATUS_ERROR, grin-trace's
 /// `RayStatus::Error`; tests/constants.rs holds all three equal).
 pub const STATUS_ERROR: u32 = 4;
+/// Integrator codes (`FrameParams::integrator`).
 pub const INTEGRATOR_EULER: u32 = 0;
 pub const INTEGRATOR_SYMPLECTIC_EULER: u32 = 1;
 pub const INTEGRATOR_VERLET: u32 = 2;
@@ -21,8 +21,8 @@ pub const STEP_HEURISTIC: u32 = 1;
 pub const STEP_ADAPTIVE: u32 = 2;
 
 /// Flag bits (`FrameParams::flags`). FLAG_JITTER scales the camera ray's first
-/// step in the medium by a per-pixel random fraction (the CPU renderer has no jitter:
-/// GPU-vs-CPU comparisons turn it off).
+/// step in the medium by a per-pixel random fraction (the CPU renderer's twin is
+/// grin-trace's `trace_ray_jittered`).
 pub const FLAG_HAS_MEDIUM: u32 = 1;
 pub const FLAG_MACRO_CELLS: u32 = 2;
 pub const FLAG_JITTER: u32 = 4;

@@ -1,5 +1,5 @@
-//! How a field is baked for the GPU marcher: trilinear f32 grids, no finer than the
-//! error budget needs ([`bake_for_gpu_auto`]), with a warning where even the default
+//! How a field is baked for the GPU marcher: f32 grids, trilinear or (where trilinear
+//! misses the budget) tricubic, no finer than the error budget needs ([`bake_for_gpu_auto`]), with a warning where even the default
 //! resolution under-resolves the field. The policy lives with the baker; grin-gpu only
 //! uploads what it is given or what this chooses.
 
