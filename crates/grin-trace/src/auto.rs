@@ -542,17 +542,55 @@ pub fn generic_pilots(bounds: &grin_field::Bounds, count: usize) -> Vec<(DVec3, 
 /// Fewer camera pilots than this meeting the medium, and generic ones are added.
 pub const MIN_CAMERA_PILOTS: usize = 8;
 
+/// Camera rays tried per pilot wanted: the pilots are picked among them, those whose
+/// straight path crosses a varying part of the medium first.
+pub const PILOT_CANDIDATES_PER_PILOT: usize = 8;
+/// Points sampled along a candidate's straight path through the bounds.
+const PILOT_PATH_SAMPLES: usize = 32;
+
+/// A path crosses variation where n differs from ambient by more than this fraction of
+/// the field's largest difference (a Gaussian's tail differs everywhere, by 1e-100).
+const VARIATION_FRACTION: f64 = 1e-3;
+
+/// Whether the straight ray `(o, d)` crosses a part of `field` where n varies (a sample
+/// off the ambient index by more than [`VARIATION_FRACTION`] of the field's range, at
+/// [`PILOT_PATH_SAMPLES`] points).
+fn crosses_variation(field: &dyn IndexField, o: DVec3, d: DVec3) -> bool {
+    let Some((s_in, s_out)) = field.bounds().intersect(o, d) else {
+        return false;
+    };
+    let (a, b) = (s_in.max(0.0), s_out.max(0.0));
+    let ambient = field.ambient_index();
+    let (lo, hi) = field.n_range();
+    let threshold = VARIATION_FRACTION * (ambient - lo).abs().max((hi - ambient).abs());
+    (0..PILOT_PATH_SAMPLES).any(|k| {
+        let p = o + d * (a + (b - a) * (k as f64 + 0.5) / PILOT_PATH_SAMPLES as f64);
+        (field.n(p) - ambient).abs() > threshold
+    })
+}
+
 /// The pilots of a render: camera rays that meet the medium (`[render] pilot_rays` of
-/// them at most), topped up with [`generic_pilots`] when the view barely sees it.
+/// them at most), picked from a grid [`PILOT_CANDIDATES_PER_PILOT`] times denser with the
+/// rays that cross where the index varies first (a cache whose smoke fills a corner of
+/// its bounds: a coarse grid of pilots saw mostly ambient air, measured a method on it,
+/// and the smoke's pixels got 2.3x the asked error), topped up with [`generic_pilots`]
+/// when the view barely sees the medium.
 pub fn scene_pilots(rs: &grin_render::scene::RenderScene) -> Vec<(DVec3, DVec3)> {
     let count = rs.settings.pilot_rays as usize;
     let Some(m) = &rs.medium else {
         return Vec::new();
     };
-    let mut pilots: Vec<(DVec3, DVec3)> = camera_pilots(&rs.camera, count)
-        .into_iter()
-        .filter(|&(o, d)| m.bounds.contains(o) || m.bounds.intersect(o, d).is_some())
-        .collect();
+    let candidates: Vec<(DVec3, DVec3)> =
+        camera_pilots(&rs.camera, count * PILOT_CANDIDATES_PER_PILOT)
+            .into_iter()
+            .filter(|&(o, d)| m.bounds.contains(o) || m.bounds.intersect(o, d).is_some())
+            .collect();
+    let (varying, flat): (Vec<_>, Vec<_>) = candidates
+        .iter()
+        .partition(|&&(o, d)| crosses_variation(m.field.as_ref(), o, d));
+    // Spread over the varying ones; flat ones fill what is left, spread too.
+    let mut pilots = spread(&varying, count);
+    pilots.extend(spread(&flat, count.saturating_sub(pilots.len())));
     if count > 0 && pilots.len() < MIN_CAMERA_PILOTS.min(count) {
         pilots.extend(generic_pilots(&m.bounds, count));
     }
@@ -628,6 +666,38 @@ mod tests {
         let field: Arc<dyn IndexField> =
             grin_field::build_field(medium, Path::new(".")).expect("field");
         RenderScene::new(&scene, Path::new("."), Some(field)).expect("render scene")
+    }
+
+    /// A plume in a corner of a large medium (a cache whose smoke fills a corner of its
+    /// bounds): most of a coarse grid of camera rays crosses only ambient air, so the
+    /// pilots are picked among rays that cross the plume first.
+    #[test]
+    fn pilots_go_where_the_index_varies() {
+        let text = "[camera]\nposition = [0.0, 0.0, -8.0]\nlook_at = [0.0, 0.0, 0.0]\n\
+             [medium]\nbounds = { box = { min = [-2.0, -2.0, -2.0], max = [2.0, 2.0, 2.0] } }\n\
+             field = { kind = \"plume\", plumes = [ { a = 1e-3, center = [1.4, 1.4, 0.0], s = 0.15 } ] }\n\
+             [render]\nwidth = 64\nheight = 64\n";
+        let scene = grin_scene::parse_scene(text, Path::new("corner.toml")).expect("scene");
+        let medium = scene.medium.as_ref().expect("medium");
+        let field: Arc<dyn IndexField> =
+            grin_field::build_field(medium, Path::new(".")).expect("field");
+        let rs = RenderScene::new(&scene, Path::new("."), Some(field.clone())).expect("scene");
+        let pilots = scene_pilots(&rs);
+        let crossing = pilots
+            .iter()
+            .filter(|&&(o, d)| crosses_variation(field.as_ref(), o, d))
+            .count();
+        // Of the plain 8x8 grid, few rays cross the plume's few percent of the view.
+        let grid = camera_pilots(&rs.camera, 64)
+            .into_iter()
+            .filter(|&(o, d)| crosses_variation(field.as_ref(), o, d))
+            .count();
+        eprintln!(
+            "pilots crossing the plume: {crossing} of {} (a plain grid: {grid} of 64)",
+            pilots.len()
+        );
+        assert!(pilots.len() >= 48, "{} pilots", pilots.len());
+        assert!(crossing > grid && crossing >= 4, "{crossing} vs {grid}");
     }
 
     #[test]
