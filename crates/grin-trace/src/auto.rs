@@ -156,14 +156,22 @@ impl Metric {
                 }
             }
             Metric::Waves { wavelength } => {
-                // Each path on to the plane through origin + far d0, normal to d0.
+                // Each path on to the plane through origin + far d0, normal to d0:
+                // opl + n_amb lag / c, lag the exit's distance to that plane along d0. The
+                // exit position of an f32 trace is rounded to ~1e-7 of its size, a fifth
+                // of a wave: the lag is taken from the path's own length instead (its
+                // `swept` projection, summed in f64; the part common to both runs of a
+                // pilot drops out of their difference), and the position enters only
+                // times 1/c - 1, as the GPU takes the OPD.
                 let (o, d0) = (pilot.0, pilot.1.normalize_or_zero());
                 let to_plane = |r: &RayResult| {
                     let c = r.direction.dot(d0);
                     if c <= 1e-12 {
                         return f64::NAN;
                     }
-                    r.opl + n_amb * (o + d0 * far - r.position).dot(d0) / c
+                    let lag = (o + d0 * far - r.position).dot(d0);
+                    let w = r.direction - d0;
+                    r.opl - n_amb * r.swept.dot(d0) + n_amb * lag * (0.5 * w.dot(w)) / c
                 };
                 (to_plane(run) - to_plane(reference)).abs() / wavelength
             }

@@ -395,9 +395,13 @@ fn render_one(
         };
         Some((metric, asked))
     });
+    // The GPU's pilots trace in f32 as it does, but for an OPD in waves: a CPU f32 trace
+    // holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre), where the
+    // GPU sums n - n_amb, so its OPD is as good as f64's.
+    let waves = matches!(metric, Some((grin_trace::auto::Metric::Waves { .. }, _)));
     let auto = match args.backend {
-        Backend::Cpu => grin_trace::auto::resolve_scene_in::<f64>(&mut rs, metric),
-        Backend::Gpu => grin_trace::auto::resolve_scene_in::<f32>(&mut rs, metric),
+        Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(&mut rs, metric),
+        _ => grin_trace::auto::resolve_scene_in::<f64>(&mut rs, metric),
     };
     let auto_warning = auto.as_ref().and_then(|a| a.unmet_warning("rendering"));
     if let Some(w) = &auto_warning {
