@@ -87,6 +87,9 @@ pub(crate) struct App {
     pub(crate) summary: Option<ViewSummary>,
     frames_seen: u32,
     image_px: (u32, u32),
+    /// Headless with a screenshot after an orbit: the orbit's frames were previews at the
+    /// moving resolution, so one more, still, at the size asked for, is the screenshot's.
+    final_still: bool,
     /// Something to show: a reply from the render thread, input, an egui animation.
     dirty: bool,
     last_redraw: Instant,
@@ -142,6 +145,7 @@ impl App {
             summary: None,
             frames_seen: 0,
             image_px,
+            final_still: false,
             dirty: true,
             last_redraw: Instant::now(),
             opts,
@@ -283,6 +287,17 @@ impl App {
                     if let Some(n) = self.opts.frames {
                         let done = self.frames_seen >= n
                             || self.frame.as_ref().is_some_and(|f| f.rendered.converged);
+                        // A screenshot is of the size asked for: after an orbit's preview
+                        // frames, one more still frame at that size.
+                        let preview = self.frame.as_ref().is_some_and(|f| {
+                            (f.rendered.frame.width, f.rendered.frame.height) != self.image_px
+                        });
+                        if done && preview && self.opts.screenshot.is_some() && !self.final_still {
+                            self.final_still = true;
+                            self.last_move = None;
+                            self.request_view(self.image_px);
+                            return;
+                        }
                         if done {
                             self.finish(el);
                             return;
@@ -355,8 +370,9 @@ impl App {
 
     /// The camera moved within MOVING_FOR (a headless orbit moves it every frame).
     fn moving(&self) -> bool {
-        (self.headless() && self.opts.orbit_deg != 0.0)
-            || self.last_move.is_some_and(|t| t.elapsed() < MOVING_FOR)
+        !self.final_still
+            && ((self.headless() && self.opts.orbit_deg != 0.0)
+                || self.last_move.is_some_and(|t| t.elapsed() < MOVING_FOR))
     }
 
     /// The image size in pixels: fixed (`--size`, headless) or the central area.
