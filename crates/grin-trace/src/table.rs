@@ -357,31 +357,19 @@ impl<R: io::Read> RayReader<R> {
     }
 }
 
-/// Read a whole ray table file, or standard input for `-` (a streaming trace uses
-/// [`RayReader`]).
-pub fn read_rays(path: &Path) -> Result<RayTable, TableError> {
-    RayReader::open(path)?.read_all()
-}
-
 /// Parse a ray table (`path` only names it in errors); see [`RayReader`].
 pub fn parse_rays(text: &str, path: &Path) -> Result<RayTable, TableError> {
     RayReader::new(text.as_bytes(), path)?.read_all()
 }
 
-/// Trace every row in parallel (rayon) in precision `R`; `tick` is called once per ray
-/// (progress bars).
+/// Trace every row in parallel (rayon) in precision `R`.
 pub fn trace_rows<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
     rows: &[RayRow],
-    tick: &(dyn Fn() + Sync),
 ) -> Vec<RayResult> {
     rows.par_iter()
-        .map(|row| {
-            let res = trace_ray::<R>(field, settings, row.origin, row.dir);
-            tick();
-            res
-        })
+        .map(|row| trace_ray::<R>(field, settings, row.origin, row.dir))
         .collect()
 }
 
@@ -406,13 +394,7 @@ pub struct TableSummary {
 }
 
 impl TableSummary {
-    pub fn of(results: &[RayResult]) -> Self {
-        let mut s = TableSummary::default();
-        s.add(results);
-        s
-    }
-
-    /// Count a further batch of results in.
+    /// Count a batch of results in.
     pub fn add(&mut self, results: &[RayResult]) {
         self.rays += results.len();
         for r in results {
@@ -605,17 +587,6 @@ pub fn write_table(
     let mut out = TableWriter::new(format, &table.extra_columns);
     out.rows(w, &table.rows, results)?;
     out.finish(w)
-}
-
-/// Write a traced table to `path` through grin-output: a failed write leaves no partial
-/// output, `-` is standard output, a device or FIFO is written into.
-pub fn write_table_file(
-    path: &Path,
-    format: TableFormat,
-    table: &RayTable,
-    results: &[RayResult],
-) -> Result<(), grin_output::OutputError> {
-    grin_output::write_file(path, |w| write_table(w, format, table, results))
 }
 
 #[cfg(test)]

@@ -257,9 +257,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         loop {
             let start = Instant::now();
             let results = if args.f32 {
-                table::trace_rows::<f32>(field.as_ref(), &settings, &rows, &|| {})
+                table::trace_rows::<f32>(field.as_ref(), &settings, &rows)
             } else {
-                table::trace_rows::<f64>(field.as_ref(), &settings, &rows, &|| {})
+                table::trace_rows::<f64>(field.as_ref(), &settings, &rows)
             };
             seconds += start.elapsed().as_secs_f64();
             s.add(&results);
