@@ -67,6 +67,21 @@ pub fn project_dir(cam: &PinholeCamera, d: DVec3) -> Option<[f64; 2]> {
     ])
 }
 
+/// Where a ray from `p` along `d` appears in the image (pixels, as [`project_dir`]): the
+/// point it lands on `plane`, or, with no plane, its direction (the plane at infinity).
+/// `None` where it misses the plane or lands behind the camera.
+pub fn landing_px(
+    cam: &PinholeCamera,
+    plane: Option<&Plane>,
+    p: DVec3,
+    d: DVec3,
+) -> Option<[f64; 2]> {
+    match plane {
+        Some(pl) => project_dir(cam, pl.hit(p, d)? - cam.origin),
+        None => project_dir(cam, d),
+    }
+}
+
 /// The angles (radians) of direction `d` from the camera's axis, along its right and up.
 pub fn camera_angles(cam: &PinholeCamera, d: DVec3) -> [f64; 2] {
     let z = d.dot(cam.forward);

@@ -117,12 +117,7 @@ impl Metric {
         let Metric::Pixels { cam, plane } = self else {
             return None;
         };
-        let seen = |p: DVec3, d: DVec3| match plane {
-            Some(pl) => pl
-                .hit(p, d)
-                .and_then(|h| grin_render::optics::project_dir(cam, h - cam.origin)),
-            None => grin_render::optics::project_dir(cam, d),
-        };
+        let seen = |p, d| grin_render::optics::landing_px(cam, plane.as_ref(), p, d);
         let (a, b) = (
             seen(reference.position, reference.direction)?,
             seen(pilot.0, pilot.1)?,
@@ -143,11 +138,8 @@ impl Metric {
         match self {
             Metric::Direction => angle(run.direction, reference.direction),
             Metric::Pixels { cam, plane } => {
-                let seen = |r: &RayResult| match plane {
-                    Some(pl) => pl
-                        .hit(r.position, r.direction)
-                        .and_then(|p| grin_render::optics::project_dir(cam, p - cam.origin)),
-                    None => grin_render::optics::project_dir(cam, r.direction),
+                let seen = |r: &RayResult| {
+                    grin_render::optics::landing_px(cam, plane.as_ref(), r.position, r.direction)
                 };
                 match (seen(run), seen(reference)) {
                     (Some(a), Some(b)) => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
