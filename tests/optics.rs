@@ -835,6 +835,33 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
     for ch in ["R", "G", "B", "aov.exit_dir.X", "aov.opd"] {
         assert_eq!(plate[ch], want[ch], "channel {ch}");
     }
+    // A sequence: each frame's output and its beauty beside it.
+    let o = run(&[
+        "render",
+        scene.to_str().expect("utf8"),
+        "-o",
+        d.join("st.####.exr").to_str().expect("utf8"),
+        "--beauty",
+        d.join("plate.####.exr").to_str().expect("utf8"),
+        "--frames",
+        "0..1",
+        "--backend",
+        "cpu",
+        "--size",
+        "16x16",
+        "--json",
+    ]);
+    ok(&o);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v.as_array().map(Vec::len), Some(4), "{v}");
+    for name in [
+        "st.0000.exr",
+        "plate.0000.exr",
+        "st.0001.exr",
+        "plate.0001.exr",
+    ] {
+        assert!(d.join(name).exists(), "{name}");
+    }
     // Refused: a scene with no [optics], and a beauty named as the output.
     let lens = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/luneburg.toml");
     let o = run(&[

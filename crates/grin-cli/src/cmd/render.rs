@@ -265,25 +265,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             return print_summary(&summary, args.json, to_stream);
         };
         // The [optics] output and the beauty image, on one device.
-        let ctx = match args.backend {
-            Backend::Gpu => Some(gpu_context(args.no_cache)?),
-            Backend::Cpu => None,
-        };
-        let mut summaries = Vec::new();
-        for (s, out) in [
-            (scene.clone(), &args.output),
-            (without_optics(scene), beauty),
-        ] {
-            let (summary, to_stream) = render_one(&args, s, out, ctx.as_ref())?;
-            if !args.json {
-                print_summary(&summary, false, to_stream)?;
-            }
-            summaries.push(summary);
-        }
-        if args.json {
-            outln!("{}", serde_json::to_string_pretty(&summaries)?);
-        }
-        return Ok(());
+        let jobs = [
+            (scene.clone(), args.output.clone(), String::new()),
+            (without_optics(scene), beauty.clone(), "beauty".into()),
+        ];
+        return render_all(&args, jobs.into_iter());
     };
     let pattern = args.output.to_string_lossy().into_owned();
     if !grin_scene::frames::has_frame_token(&pattern) {
@@ -308,38 +294,47 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
         .with_context(|| format!("{}", args.scene.display()))?;
+    // Each frame, and its beauty image beside it with --beauty.
+    let at = |path: &Path, f: i64| {
+        let p = path.to_string_lossy();
+        PathBuf::from(grin_scene::frames::substitute_frame(&p, f).unwrap_or_else(|| p.into()))
+    };
+    let jobs = (first..=last).flat_map(|f| {
+        let frame = scene.at_frame(f, fps);
+        let beauty = args.beauty.as_ref().map(|b| {
+            (
+                without_optics(frame.clone()),
+                at(b, f),
+                format!("frame {f} (beauty)"),
+            )
+        });
+        std::iter::once((frame, at(&args.output, f), format!("frame {f}"))).chain(beauty)
+    });
+    render_all(&args, jobs)
+}
+
+/// Render each (scene, output, what it is for error messages, or empty) on one device, printing
+/// each summary, or with `--json` all of them as one array at the end.
+fn render_all(
+    args: &Args,
+    jobs: impl Iterator<Item = (grin_scene::Scene, PathBuf, String)>,
+) -> anyhow::Result<()> {
     let ctx = match args.backend {
         Backend::Gpu => Some(gpu_context(args.no_cache)?),
         Backend::Cpu => None,
     };
     let mut summaries = Vec::new();
-    for f in first..=last {
-        let out = PathBuf::from(
-            grin_scene::frames::substitute_frame(&pattern, f).unwrap_or_else(|| pattern.clone()),
-        );
-        let (summary, to_stream) = render_one(&args, scene.at_frame(f, fps), &out, ctx.as_ref())
-            .with_context(|| format!("frame {f}"))?;
+    for (scene, out, what) in jobs {
+        let rendered = render_one(args, scene, &out, ctx.as_ref());
+        let (summary, to_stream) = if what.is_empty() {
+            rendered?
+        } else {
+            rendered.with_context(|| what)?
+        };
         if !args.json {
             print_summary(&summary, false, to_stream)?;
         }
         summaries.push(summary);
-        if let Some(b) = &args.beauty {
-            let b = b.to_string_lossy();
-            let out = PathBuf::from(
-                grin_scene::frames::substitute_frame(&b, f).unwrap_or_else(|| b.to_string()),
-            );
-            let (summary, to_stream) = render_one(
-                &args,
-                without_optics(scene.at_frame(f, fps)),
-                &out,
-                ctx.as_ref(),
-            )
-            .with_context(|| format!("frame {f} (beauty)"))?;
-            if !args.json {
-                print_summary(&summary, false, to_stream)?;
-            }
-            summaries.push(summary);
-        }
     }
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&summaries)?);
