@@ -1233,6 +1233,32 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
     );
 }
 
+/// A scene of a 4^3-voxel `density` grid (voxel 0.05, at index (-2, 8, -2)) whose values
+/// the python lines `fill` set in the zero array `a`, mapped by n = 1 + 1e-4 value:
+/// `dir/NAME.vdb` and the scene reading it.
+fn density_cube(dir: &Path, name: &str, fill: &str) -> PathBuf {
+    let file = dir.join(format!("{name}.vdb"));
+    run_openvdb_python(
+        dir,
+        &format!(
+            r#"
+import sys
+import numpy as np
+import pyopenvdb as vdb
+g = vdb.FloatGrid()
+g.name = "density"
+a = np.zeros((4, 4, 4), dtype=np.float32)
+{fill}
+g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
+g.transform = vdb.createLinearTransform(voxelSize=0.05)
+vdb.write(sys.argv[1], grids=[g])
+"#
+        ),
+        &file,
+    );
+    vdb_scene(dir, &file, "density", "{ linear = { k = 1e-4 } }", "", 1.0)
+}
+
 /// A blob a few voxels across with sharp edges (as a coarse smoke cache has): no grid up
 /// to 4x finer than its voxels reproduces the source's interpolation within the budget.
 /// The bake keeps the best grid, and the warning says the search ended 4x past the voxel
@@ -1240,31 +1266,10 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
 #[test]
 fn a_sharp_blob_the_budget_cannot_resolve_says_how_to_go_finer() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let file = dir.path().join("blob.vdb");
-    run_openvdb_python(
+    let scene = density_cube(
         dir.path(),
-        r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
-g = vdb.FloatGrid()
-g.name = "density"
-a = np.zeros((4, 4, 4), dtype=np.float32)
-a[1:3, 1:3, 1:3] = 1.0
-a[1, 1, 1] = 0.5
-g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
-g.transform = vdb.createLinearTransform(voxelSize=0.05)
-vdb.write(sys.argv[1], grids=[g])
-"#,
-        &file,
-    );
-    let scene = vdb_scene(
-        dir.path(),
-        &file,
-        "density",
-        "{ linear = { k = 1e-4 } }",
-        "",
-        1.0,
+        "blob",
+        "a[1:3, 1:3, 1:3] = 1.0\na[1, 1, 1] = 0.5",
     );
     let out_file = dir.path().join("blob.grinf");
     let out = run(&[
@@ -1514,31 +1519,7 @@ height = 8
 #[test]
 fn values_no_bake_can_carry_are_refused_with_the_limit() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let file = dir.path().join("huge.vdb");
-    run_openvdb_python(
-        dir.path(),
-        r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
-g = vdb.FloatGrid()
-g.name = "density"
-a = np.zeros((4, 4, 4), dtype=np.float32)
-a[1:3, 1:3, 1:3] = 1e32
-g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
-g.transform = vdb.createLinearTransform(voxelSize=0.05)
-vdb.write(sys.argv[1], grids=[g])
-"#,
-        &file,
-    );
-    let scene = vdb_scene(
-        dir.path(),
-        &file,
-        "density",
-        "{ linear = { k = 1e-4 } }",
-        "",
-        1.0,
-    );
+    let scene = density_cube(dir.path(), "huge", "a[1:3, 1:3, 1:3] = 1e32");
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).expect("out dir");
     let out_file = out_dir.join("huge.grinf");
