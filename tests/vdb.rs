@@ -448,6 +448,8 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
         max_steps: 100_000,
         exit: ExitMethod::Hermite,
         macro_cells: false,
+        accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+        estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
     };
     let (mut max_dp, mut max_dd, mut max_bend) = (0.0f64, 0.0f64, 0.0f64);
     for k in 0..7 {

@@ -15,12 +15,16 @@ struct Step {
     // The field at state.r when the step evaluated it anyway (verlet, dopri: FSAL).
     has_end: bool,
     end: FieldSample,
-    // Embedded local error estimate (e_r, e_T) of the adaptive pair.
+    // Local error estimate (e_r, e_T): the adaptive pair's embedded one, or Richardson's
+    // of a doubled step.
     err_r: vec3<f32>,
     err_t: vec3<f32>,
     // The increments (dr, dT) the state is the start plus: march_medium adds them with
     // compensation (add_compensated), as the CPU's tracer does.
     delta: RayState,
+    // rk4, sharma: the D their last stage used, for the third-order companion's error
+    // estimate h/6 (D(r1) - check) (Step::check).
+    check: vec3<f32>,
 }
 
 fn no_sample() -> FieldSample {
@@ -33,12 +37,12 @@ fn zero_state() -> RayState {
 
 // A state that is not a step's (a straight flight's end): no increments to compensate.
 fn plain_step(r: vec3<f32>, t: vec3<f32>, evals: u32) -> Step {
-    return Step(RayState(r, t), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0), zero_state());
+    return Step(RayState(r, t), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0), zero_state(), vec3<f32>(0.0));
 }
 
 // s + (dr, dT) (Step::plain).
 fn advance(s: RayState, dr: vec3<f32>, dt: vec3<f32>, evals: u32) -> Step {
-    return Step(RayState(s.r + dr, s.t + dt), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0), RayState(dr, dt));
+    return Step(RayState(s.r + dr, s.t + dt), evals, false, no_sample(), vec3<f32>(0.0), vec3<f32>(0.0), RayState(dr, dt), vec3<f32>(0.0));
 }
 
 // Knuth's TwoSum per component: a + b rounded (sum) and the roundoff it lost (lost).
@@ -87,7 +91,7 @@ fn verlet_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     let r1 = s.r + dr;
     let end = sample_field(r1);
     let dt = (d0 + end.grad_n * end.n) * half;
-    return Step(RayState(r1, s.t + dt), 1u, true, end, vec3<f32>(0.0), vec3<f32>(0.0), RayState(dr, dt));
+    return Step(RayState(r1, s.t + dt), 1u, true, end, vec3<f32>(0.0), vec3<f32>(0.0), RayState(dr, dt), vec3<f32>(0.0));
 }
 
 // Sharma, Kumar & Ghatak 1982 (the paper's Listing 2): A = h D(r),
@@ -95,11 +99,14 @@ fn verlet_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
 fn sharma_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     let a = d0 * h;
     let b = sample_d(s.r + s.t * (h * 0.5) + a * (h * 0.125)) * h;
-    let c = sample_d(s.r + s.t * h + b * (h * 0.5)) * h;
+    let d_c = sample_d(s.r + s.t * h + b * (h * 0.5));
+    let c = d_c * h;
     let sixth = 1.0 / 6.0;
     let dr = (s.t + (a + b * 2.0) * sixth) * h;
     let dt = (a + b * 4.0 + c) * sixth;
-    return advance(s, dr, dt, 2u);
+    var step = advance(s, dr, dt, 2u);
+    step.check = d_c;
+    return step;
 }
 
 // Classical RK4 on (r, T).
@@ -116,7 +123,9 @@ fn rk4_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
     let sixth = h * (1.0 / 6.0);
     let dr = (t1 + t2 * 2.0 + t3 * 2.0 + t4) * sixth;
     let dt = (d1 + d2 * 2.0 + d3 * 2.0 + d4) * sixth;
-    return advance(s, dr, dt, 3u);
+    var step = advance(s, dr, dt, 3u);
+    step.check = d4;
+    return step;
 }
 
 // Dormand & Prince (1980) tableau rows a_ij (i = 2..7, 6 entries each; row 7 = the
@@ -201,7 +210,7 @@ fn dopri_step(s: RayState, d0: vec3<f32>, h: f32) -> Step {
         er += k.t * e[i];
         et += k.d * e[i];
     }
-    return Step(RayState(k.r, k.t), 6u, true, k.f, er * h, et * h, k.delta);
+    return Step(RayState(k.r, k.t), 6u, true, k.f, er * h, et * h, k.delta, vec3<f32>(0.0));
 }
 
 // Order of accuracy of the integrator's position (integrate::order).

@@ -62,17 +62,18 @@ const STATUS_MAX_STEPS: u32 = 3u;
 const STATUS_ERROR: u32 = 4u;
 const STATUS_DEGRADED: u32 = 5u;
 
-// The ray's own error estimate for euler, symplectic-euler and verlet
-// (grin_trace::estimate::ErrorEstimate): a ray leaving with it above DEGRADED_RAD ends
+// The ray's own error estimate, for every integrator and step policy
+// (grin_trace::estimate::ErrorEstimate): a ray leaving with it above params.estimate_limit,
+// or with its crossings' n uncertainty above CROSSING_FACTOR x params.accuracy, ends
 // STATUS_DEGRADED, not STATUS_EXITED.
-const DEGRADED_RAD: f32 = 3e-3;
+const CROSSING_FACTOR: f32 = 10.0;
 const POSITION_SAFETY: f32 = 4.0;
 // The estimate of an exit that is itself uncertain (the CPU's is infinite; WGSL has no
 // infinity literal).
 const UNSURE_ESTIMATE: f32 = 3.0e38;
 
 struct ErrorEstimate {
-    // 1, 2, or 0 (no estimate: higher orders).
+    // The integrator's order (the difference formulas for 1 and 2).
     order: u32,
     sum: f32,
     bend: f32,
@@ -81,14 +82,35 @@ struct ErrorEstimate {
     has_prev: bool,
     prev_d: vec3<f32>,
     prev_h: f32,
+    // The last step's local errors (across the ray, position), for a step that reports
+    // none (a fourth-order step cut at the surface).
+    last_local: f32,
+    last_local_r: f32,
 }
 
 fn estimate_new() -> ErrorEstimate {
-    var order = integrator_order(INTEGRATOR);
-    if order > 2u {
-        order = 0u;
+    return ErrorEstimate(integrator_order(INTEGRATOR), 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0, 0.0, 0.0);
+}
+
+// The local error (e_r, e_T) a step reports, for estimate_step: the adaptive pair's
+// embedded one or a doubled step's Richardson's (`step.err_r`, `err_t`), a fourth-order
+// step's companion against D at its end `d1` (not for a step cut at the surface: `cut`),
+// or none (`reported` false).
+struct Reported {
+    reported: bool,
+    er: vec3<f32>,
+    et: vec3<f32>,
+}
+
+fn reported_error(step: Step, d1: vec3<f32>, h: f32, cut: bool) -> Reported {
+    if INTEGRATOR == INTEGRATOR_ADAPTIVE || STEP_POLICY == STEP_ADAPTIVE {
+        return Reported(true, step.err_r, step.err_t);
     }
-    return ErrorEstimate(order, 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0);
+    if (INTEGRATOR == INTEGRATOR_RK4 || INTEGRATOR == INTEGRATOR_SHARMA) && !cut {
+        let et = (d1 - step.check) * (h / 6.0);
+        return Reported(true, et * (0.5 * h), et);
+    }
+    return Reported(false, vec3<f32>(0.0), vec3<f32>(0.0));
 }
 
 // |v| across the unit direction u.
@@ -97,8 +119,8 @@ fn across(v: vec3<f32>, u: vec3<f32>) -> f32 {
 }
 
 // A step of t-length h from T = t0, D = d0 (index n0) to T = t1, D = d1.
-fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, d0: vec3<f32>, d1: vec3<f32>, h: f32, n0: f32) {
-    if (*e).order == 0u || !(h > 0.0) || !(n0 > 0.0) {
+fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, d0: vec3<f32>, d1: vec3<f32>, h: f32, n0: f32, rep: Reported) {
+    if !(h > 0.0) || !(n0 > 0.0) {
         return;
     }
     if dot(t0, t1) <= 0.0 {
@@ -107,20 +129,29 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
     let u = normalize_or_zero(t0);
     var local = 0.0;
     var local_r = 0.0;
-    if (*e).order == 1u {
+    if rep.reported {
+        local = across(rep.et, u);
+        local_r = across(rep.er, u);
+    } else if (*e).order == 1u {
         local = 0.5 * h * across(d1 - d0, u);
         local_r = 0.5 * h * h * across(d0, u);
-    } else {
+    } else if (*e).order == 2u {
         if (*e).has_prev && (*e).prev_h > 0.0 {
             let hp = (*e).prev_h;
             let second = 2.0 * ((d1 - d0) / h - (d0 - (*e).prev_d) / hp) / (h + hp);
             local = h * h * h / 12.0 * across(second, u);
         }
         local_r = h * h / 6.0 * across(d1 - d0, u);
+    } else {
+        local = (*e).last_local;
+        local_r = (*e).last_local_r;
     }
+    (*e).last_local = local;
+    (*e).last_local_r = local_r;
     (*e).bend += across(d0, u) * h / n0;
-    // The position error's feedback: D sampled e_r off turns T by |dD/dr| e_r h.
-    let feedback = length(d1 - d0) * (*e).pos / n0;
+    // The position error's feedback: D sampled e_r off turns T by |dD/dr| e_r h (the
+    // change of D across the ray only).
+    let feedback = across(d1 - d0, u) * (*e).pos / n0;
     if finite3(vec3<f32>(local, local_r, feedback)) {
         (*e).pos += local_r + (*e).sum * h * n0;
         (*e).sum += (local + feedback) / n0;
@@ -133,7 +164,7 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
 // At a step end inside, `depth` from the surface of outward unit `normal`: a near miss
 // if the path's closest approach is within the position error of the surface.
 fn estimate_check_approach(e: ptr<function, ErrorEstimate>, depth: f32, normal: vec3<f32>, t: vec3<f32>, n: f32, d: vec3<f32>) {
-    if (*e).order == 0u || (*e).near_miss || !(n > 0.0) {
+    if (*e).near_miss || !(n > 0.0) {
         return;
     }
     let v = dot(normalize_or_zero(t), normal);
@@ -149,7 +180,7 @@ fn estimate_check_approach(e: ptr<function, ErrorEstimate>, depth: f32, normal: 
 // The estimate at an exit through `normal` with T = t, index n, D = d (infinite where
 // the exit itself is uncertain).
 fn estimate_value(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: vec3<f32>) -> f32 {
-    if e.order == 0u || !(n > 0.0) {
+    if !(n > 0.0) {
         return 0.0;
     }
     let drift = abs(length(t) - n) / n * 2.0 * e.bend;
@@ -157,20 +188,18 @@ fn estimate_value(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: 
     let c = abs(dot(u, normal));
     let curvature = across(d, u) / (n * n);
     let reach = 2.0 * curvature * POSITION_SAFETY * e.pos;
-    if reach > c * c || e.near_miss {
+    if reach > c * c || e.near_miss || !(c > 0.0) {
         return UNSURE_ESTIMATE;
     }
-    return max(e.sum, drift);
+    // The position error moves the crossing along the path by pos / c.
+    let shift = curvature * e.pos / c;
+    return max(e.sum + shift, drift);
 }
 
-// STATUS_EXITED, or STATUS_DEGRADED where the estimate plus what the crossings of the
-// bounds added (`surface`) is above DEGRADED_RAD.
+// STATUS_EXITED, or STATUS_DEGRADED where the estimate is above its limit or what the
+// crossings of the bounds added (`surface`) is above CROSSING_FACTOR x the accuracy.
 fn exit_status(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: vec3<f32>, surface: f32) -> u32 {
-    var v = surface;
-    if e.order != 0u {
-        v += estimate_value(e, t, n, normal, d);
-    }
-    if v > DEGRADED_RAD {
+    if estimate_value(e, t, n, normal, d) > params.estimate_limit || surface > CROSSING_FACTOR * params.accuracy {
         return STATUS_DEGRADED;
     }
     return STATUS_EXITED;
@@ -688,7 +717,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         surface_err += refraction_uncertainty(d, bounds_normal(start), n_amb, s0.n, s0.n, params.n_uncertainty);
         let i = refract(d, bounds_normal(start), n_amb, s0.n);
         if !i.transmitted {
-            return march_end(END_EXITED, select(STATUS_EXITED, STATUS_DEGRADED, surface_err > DEGRADED_RAD), start, i.dir, transmittance);
+            return march_end(END_EXITED, select(STATUS_EXITED, STATUS_DEGRADED, surface_err > CROSSING_FACTOR * params.accuracy), start, i.dir, transmittance);
         }
         transmittance *= 1.0 - i.reflectance;
         d_in = i.dir;
@@ -791,10 +820,9 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 est.has_prev = false;
             } else {
                 seg = accumulate(stats, state, s0, next, s1, taken.h);
-                if est.order != 0u {
-                    estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, s1.n * s1.grad_n, taken.h, s0.n);
-                    estimate_check_approach(&est, -bounds_signed_distance(next.r), bounds_normal(next.r), next.t, s1.n, s1.n * s1.grad_n);
-                }
+                let d1 = s1.n * s1.grad_n;
+                estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, d1, taken.h, s0.n, reported_error(taken.step, d1, taken.h, false));
+                estimate_check_approach(&est, -bounds_signed_distance(next.r), bounds_normal(next.r), next.t, s1.n, d1);
             }
             (*stats).steps += 1u;
             hit = chord_hit(seg);
@@ -834,9 +862,8 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             (*stats).evals += 1u;
             s1 = sample_field(next.r);
             seg = accumulate(stats, state, s0, next, s1, h);
-            if est.order != 0u {
-                estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, s1.n * s1.grad_n, h, s0.n);
-            }
+            let d1 = s1.n * s1.grad_n;
+            estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, d1, h, s0.n, reported_error(taken.step, d1, h, true));
             (*stats).steps += 1u;
             hit = chord_hit(seg);
             if hit.found {

@@ -71,8 +71,15 @@ fn error_norm(ctrl: StepController, er: vec3<f32>, et: vec3<f32>, n: f32) -> f32
     return max(pos, dir);
 }
 
+struct Doubled {
+    // The two half steps, with Richardson's (e_r, e_T) as their error.
+    step: Step,
+    // Its norm (error_norm at the midpoint's n).
+    err: f32,
+}
+
 // Step doubling: one step of h and two of h/2; Richardson's error of the half steps.
-fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32) -> Taken {
+fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32) -> Doubled {
     let half = h * 0.5;
     let big = integrate_step(s, d0, h);
     let first = integrate_step(s, d0, half);
@@ -90,9 +97,10 @@ fn doubled_step(ctrl: StepController, s: RayState, d0: vec3<f32>, h: f32, p: u32
     second.evals = big.evals + first.evals + mid_evals + second.evals;
     // Both halves' increments from s (Controller::doubled).
     second.delta = RayState((first.state.r - s.r) + second.delta.r, (first.state.t - s.t) + second.delta.t);
-    // The error rides in err_r.x of the returned Taken's step (read by take_adaptive).
-    second.err_r = vec3<f32>(err, 0.0, 0.0);
-    return Taken(second, h, 0u);
+    second.err_r = er;
+    second.err_t = et;
+    second.check = vec3<f32>(0.0);
+    return Doubled(second, err);
 }
 
 // LENGTH_SCALE_STEP_FRACTION of n / |grad n| (infinite where grad n = 0).
@@ -126,7 +134,7 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
         } else {
             let d = doubled_step(*ctrl, s, d0, h, integrator_order(kind));
             step = d.step;
-            err = step.err_r.x;
+            err = d.err;
         }
         evals += step.evals;
         var tol = tol_asked;

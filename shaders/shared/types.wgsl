@@ -62,8 +62,12 @@ struct FrameParams {
     ortho_half_height: f32,
     // Always 1: see two_sum (integrate.wgsl).
     roundoff_one: f32,
-    _pad1: f32,
-    _pad2: f32,
+    // The exit-direction error asked for (rad) and the integration estimate's limit
+    // (TraceSettings::accuracy, estimate_limit): a ray whose own estimate is above the
+    // limit, or whose crossings' n uncertainty is above CROSSING_FACTOR x accuracy, ends
+    // STATUS_DEGRADED.
+    accuracy: f32,
+    estimate_limit: f32,
     _pad3: f32,
 }
 

@@ -266,6 +266,7 @@ pub fn gpu_result(g: &grin_gpu::march::GpuRay) -> RayResult {
         evals: u64::from(g.evals),
         transmittance: g.transmittance,
         error_estimate: 0.0,
+        crossing_uncertainty: 0.0,
     }
 }
 

@@ -134,12 +134,18 @@ impl Method {
             },
             Policy::PerLength | Policy::Auto => StepSpec::Auto(param),
         };
+        let accuracy = match step {
+            StepSpec::Auto(a) => a,
+            _ => grin_scene::DEFAULT_AUTO_ACCURACY,
+        };
         TraceSettings {
             integrator: self.integrator,
             step,
             max_steps: MAX_STEPS,
             exit: self.exit,
             macro_cells: true,
+            accuracy,
+            estimate_limit: accuracy,
         }
     }
 

@@ -244,6 +244,14 @@ pub struct AutoRow {
     pub best_fixed_evals: Option<f64>,
     /// Cheapest run of the paper's method with err_dir <= asked.
     pub paper_evals: Option<f64>,
+    /// Field evaluations the pilots spent choosing (reference and every candidate).
+    pub pilot_evals: u64,
+    /// `evals` with the pilots' spread over a 640x360 frame ([`FRAME_PIXELS`] rays).
+    pub evals_with_pilots: f64,
+    /// `evals_with_pilots` over `best_fixed_evals` (the cheapest in hindsight).
+    pub over_best: Option<f64>,
+    /// `paper_evals` over `evals_with_pilots`.
+    pub paper_over: Option<f64>,
 }
 
 pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
@@ -263,6 +271,9 @@ pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
             .copied()
             .filter(|q| q.method.is_paper())
             .collect();
+        let best_fixed_evals = cheapest_at(&fixed, p.param).map(|q| q.evals_per_ray);
+        let paper_evals = cheapest_at(&paper, p.param).map(|q| q.evals_per_ray);
+        let evals_with_pilots = p.evals_per_ray + p.pilot_evals as f64 / FRAME_PIXELS;
         rows.push(AutoRow {
             case: p.case.clone(),
             precision: p.precision,
@@ -272,8 +283,12 @@ pub fn auto_rows(run: &AccuracyRun) -> Vec<AutoRow> {
             delivered: p.err_dir,
             ratio: p.err_dir / p.param,
             evals: p.evals_per_ray,
-            best_fixed_evals: cheapest_at(&fixed, p.param).map(|q| q.evals_per_ray),
-            paper_evals: cheapest_at(&paper, p.param).map(|q| q.evals_per_ray),
+            best_fixed_evals,
+            paper_evals,
+            pilot_evals: p.pilot_evals,
+            evals_with_pilots,
+            over_best: best_fixed_evals.map(|b| evals_with_pilots / b),
+            paper_over: paper_evals.map(|x| x / evals_with_pilots),
         });
     }
     rows
@@ -475,8 +490,12 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
                 format!("{:.1e}", r.delivered),
                 format!("{:.2}", r.ratio),
                 format!("{:.0}", r.evals),
+                format!("{}", r.pilot_evals),
+                format!("{:.1}", r.evals_with_pilots),
                 opt(r.best_fixed_evals, |x| format!("{x:.0}")),
+                opt(r.over_best, |x| format!("{x:.2}x")),
                 opt(r.paper_evals, |x| format!("{x:.0}")),
+                opt(r.paper_over, |x| format!("{x:.1}x")),
             ]
         });
     table(
@@ -488,8 +507,12 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             "delivered",
             "delivered / asked",
             "evals/ray",
+            "pilot evals",
+            "evals/ray with the pilots over a 640x360 frame",
             "cheapest fixed step reaching it",
+            "that over the cheapest",
             "paper's method reaching it",
+            "paper's over that",
         ],
         knob,
     );

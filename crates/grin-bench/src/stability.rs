@@ -8,7 +8,9 @@
 //! - **failed**: a status other than the truth's (`max_steps`, `error`, `missed`), or NaN
 //!   anywhere in the result;
 //! - and, across all three, **silent**: a ray grin reported `exited` that is wrong by
-//!   more than [`WRONG_DIR`] rad or [`WRONG_POS`] of the scale, or reported `exited` where the
+//!   more than [`WRONG_FACTOR`] times the accuracy the cell asked for (its `auto` value;
+//!   for the other policies the default, 1e-4 rad) in direction or [`WRONG_POS`] of the
+//!   scale in position, or reported `exited` where the
 //!   truth is that it never leaves or meets an invalid field. A silent cell is a confident
 //!   wrong answer: the thing this matrix exists to find.
 //!
@@ -28,8 +30,9 @@ use crate::accuracy::{angle, choose_auto, trace};
 use crate::cases::{Exit, medium, rod_exit};
 use crate::methods::{Method, Policy, Precision};
 
-/// An `exited` ray off by more than this (rad) is a wrong answer, not a degraded one.
-pub const WRONG_DIR: f64 = 1e-2;
+/// An `exited` ray off by more than this many times the accuracy asked for (rad) is a
+/// wrong answer grin vouched for, not a degraded one.
+pub const WRONG_FACTOR: f64 = 10.0;
 /// ... or off by more than this fraction of the scale in position.
 pub const WRONG_POS: f64 = 1e-2;
 
@@ -485,7 +488,7 @@ impl Column {
     }
 }
 
-/// The columns: every integrator with a coarse and a fine fixed step, the heuristic, and
+/// The columns: every integrator with three fixed steps (R/4, R/16, R/256), the heuristic, and
 /// error control at 1e-6 (f64) and 1e-9 (f64 and f32).
 pub fn columns(quick: bool) -> Vec<Column> {
     let mut v = Vec::new();
@@ -503,6 +506,9 @@ pub fn columns(quick: bool) -> Vec<Column> {
         };
         add(Policy::Fixed, 1.0 / 16.0, Precision::F64);
         if !quick {
+            // Coarse: a quarter of the radius a step, where the fourth- and fifth-order
+            // methods step over features (they must then say `degraded`).
+            add(Policy::Fixed, 1.0 / 4.0, Precision::F64);
             add(Policy::Fixed, 1.0 / 256.0, Precision::F64);
             add(Policy::Heuristic, 1.0 / 16.0, Precision::F64);
         }
@@ -616,7 +622,15 @@ pub fn run_cell(case: &StabilityCase, col: &Column) -> Cell {
         .map(|&(o, d, _)| trace(case.field.as_ref(), &settings, col.method.precision, o, d))
         .collect();
     let seconds = start.elapsed().as_secs_f64();
-    classify(case, col, &results, seconds, case.warning.is_some())
+    let wrong_dir = WRONG_FACTOR * settings.accuracy;
+    classify(
+        case,
+        col,
+        &results,
+        seconds,
+        case.warning.is_some(),
+        wrong_dir,
+    )
 }
 
 /// Run one cell on the GPU, through `gpu` holding the case's field as the GPU bakes it;
@@ -633,7 +647,8 @@ pub fn run_gpu_cell(
     let rays: Vec<(DVec3, DVec3)> = case.rays.iter().map(|&(o, d, _)| (o, d)).collect();
     let (out, seconds) = gpu.trace(&settings, &rays, 1)?;
     let results: Vec<RayResult> = out.iter().map(crate::accuracy::gpu_result).collect();
-    Ok(classify(case, col, &results, seconds, warned))
+    let wrong_dir = WRONG_FACTOR * settings.accuracy;
+    Ok(classify(case, col, &results, seconds, warned, wrong_dir))
 }
 
 /// Classify a cell from its rays' results.
@@ -643,6 +658,7 @@ fn classify(
     results: &[RayResult],
     seconds: f64,
     warned: bool,
+    wrong_dir: f64,
 ) -> Cell {
     let mut cell = Cell {
         case: case.name,
@@ -675,7 +691,7 @@ fn classify(
                 cell.err_dir = cell.err_dir.max(ed);
                 cell.err_pos = cell.err_pos.max(ep);
                 // A `degraded` ray said it cannot be vouched for: not silent.
-                if r.status == RayStatus::Exited && (ed > WRONG_DIR || ep > WRONG_POS) {
+                if r.status == RayStatus::Exited && (ed > wrong_dir || ep > WRONG_POS) {
                     cell.silent = true;
                 }
             }
@@ -856,7 +872,7 @@ pub fn markdown(m: &Matrix, command: &str) -> String {
     let _ = writeln!(s, "# grin bench stability\n");
     let _ = writeln!(
         s,
-        "`{command}` — {} cells in {:.1} s. `ok` converged; `~e` degraded with worst error e (rad or of the scale); `FAIL s` a ray ended `s` against the truth; **(silent)** a ray reported `exited` with a wrong answer and nothing warned of it; (warned) grin said so before tracing. A ray that ends with the status `degraded` (its error estimate above 3 mrad: a low-order integrator's own, or a bake's n error amplified at a grazing crossing) is measured like an exited one but never silent.\n",
+        "`{command}` — {} cells in {:.1} s. `ok` converged; `~e` degraded with worst error e (rad or of the scale); `FAIL s` a ray ended `s` against the truth; **(silent)** a ray reported `exited` more than 10x the accuracy asked for off (the `auto` value; 1e-4 rad for the other policies) or 1e-2 of the scale, or where it never leaves, and nothing warned of it; (warned) grin said so before tracing. A ray that ends with the status `degraded` (its own error estimate above the accuracy asked for: the integrator's, or a bake's n error amplified at a grazing crossing) is measured like an exited one but never silent.\n",
         m.cells.len(),
         m.seconds
     );

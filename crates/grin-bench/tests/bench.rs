@@ -663,7 +663,12 @@ fn grazing_rays_through_a_bake_say_degraded_on_both_backends() {
     assert_eq!(cpu[0].status, grin_trace::RayStatus::Exited, "{:?}", cpu[0]);
     let last = cpu.last().unwrap();
     assert_eq!(last.status, grin_trace::RayStatus::Degraded, "{last:?}");
-    assert!(last.error_estimate > 3e-3);
+    // The crossings' bound on the bake's n error, amplified at 89 degrees, is above 10x
+    // the 1e-4 rad asked for (the ray is 2.4e-2 rad off).
+    assert!(
+        last.crossing_uncertainty > grin_trace::estimate::CROSSING_FACTOR * s.accuracy,
+        "{last:?}"
+    );
     let Ok(ctx) = grin_gpu::GpuContext::new_headless() else {
         assert_eq!(std::env::var("GRIN_ALLOW_NO_GPU").as_deref(), Ok("1"));
         eprintln!("*** SKIPPED the GPU half: no adapter");

@@ -190,8 +190,10 @@ pub struct FrameParams {
     /// WGSL cannot mark them: the compensated summation of the ray state was compiled
     /// away, and GPU rays drifted from their CPU twin by ~3e-8 rad a step.
     pub roundoff_one: f32,
-    pub _pad1: f32,
-    pub _pad2: f32,
+    /// The exit-direction error asked for (rad) and the integration estimate's limit
+    /// (`TraceSettings::accuracy`, `estimate_limit`).
+    pub accuracy: f32,
+    pub estimate_limit: f32,
     pub _pad3: f32,
 }
 const _: () = assert!(std::mem::size_of::<FrameParams>() == 24 * 16);
@@ -389,8 +391,8 @@ mod tests {
             plate_up,
             ortho_half_height,
             roundoff_one,
-            _pad1,
-            _pad2,
+            accuracy,
+            estimate_limit,
             _pad3,
         );
         same_layout!(

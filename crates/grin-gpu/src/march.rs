@@ -63,6 +63,8 @@ fn ray_scene(field: &Arc<BakedField>, trace: &TraceSettings) -> Result<RenderSce
         macro_cells: trace.macro_cells,
         jitter: false,
         pilot_rays: 0,
+        resolved_accuracy: Some(trace.accuracy),
+        resolved_estimate_limit: Some(trace.estimate_limit),
         ..RenderSettings::default()
     };
     let medium = SceneMedium::new(Arc::clone(field) as Arc<dyn IndexField>, &settings)

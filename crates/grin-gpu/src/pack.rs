@@ -21,6 +21,8 @@ pub(crate) fn frame_params(scene: &RenderScene) -> Result<FrameParams, GpuError>
     let cam = &scene.camera;
     let mut params = FrameParams::zeroed();
     params.roundoff_one = 1.0;
+    params.accuracy = s.accuracy() as f32;
+    params.estimate_limit = s.estimate_limit() as f32;
     params.cam_origin = f3(cam.origin);
     params.tan_half_fov_y = cam.tan_half_fov_y as f32;
     params.cam_forward = f3(cam.forward);

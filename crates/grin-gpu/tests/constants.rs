@@ -131,8 +131,8 @@ fn mirrored_constants_have_the_same_values() {
             "STATUS_DEGRADED",
             f64::from(status_code(RayStatus::Degraded)),
         ),
-        ("DEGRADED_RAD", grin_trace::estimate::DEGRADED_RAD),
         ("POSITION_SAFETY", grin_trace::estimate::POSITION_SAFETY),
+        ("CROSSING_FACTOR", grin_trace::estimate::CROSSING_FACTOR),
     ];
     let mut problems = Vec::new();
     for (name, rust) in &mirrored {

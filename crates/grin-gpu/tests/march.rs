@@ -47,6 +47,8 @@ fn settings(integrator: IntegratorKind, step: StepSpec, exit: ExitMethod) -> Tra
         max_steps: 100_000,
         exit,
         macro_cells: true,
+        accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+        estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
     }
 }
 
@@ -166,12 +168,16 @@ fn long_rays_are_not_cut_short_by_lavapipes_loop_limit() {
         let (out, _) = gpu.trace(&s, &rays, 1).unwrap();
         for ((o, d), g) in rays.iter().zip(&out) {
             let c = trace_ray::<f32>(lens.as_ref(), &s, *o, *d);
-            assert_eq!(c.status, RayStatus::Exited);
+            // Left the medium (`degraded` where thousands of f32 steps drift |T| from n
+            // by more than the 1e-4 rad asked for), the same on both backends.
+            assert!(c.status.left(), "{:?}", c.status);
             assert!(c.steps >= min_steps, "{} steps", c.steps);
             assert_eq!(
-                g.status, 1,
+                RayStatus::ALL[g.status as usize],
+                c.status,
                 "{s:?}: GPU status {} after {} steps",
-                g.status, g.steps
+                g.status,
+                g.steps
             );
             assert_eq!(g.steps, c.steps);
             assert!(g.direction.angle_between(c.direction) < 2e-5);

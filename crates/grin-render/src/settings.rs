@@ -14,6 +14,17 @@ pub struct TraceSettings {
     pub exit: ExitMethod,
     /// Fly straight where `IndexField::homogeneous_span` says the field is constant.
     pub macro_cells: bool,
+    /// The exit-direction error (rad) the trace is asked for: the `auto` value, or what
+    /// the pilots resolved an output's accuracy to; for a step the scene fixed,
+    /// [`grin_scene::DEFAULT_AUTO_ACCURACY`]. A ray ends `degraded`, not `exited`, where
+    /// its own integration error estimate is above `estimate_limit`, or where the bake's
+    /// n error amplified at its crossings of the bounds could be above
+    /// `grin_trace::estimate::CROSSING_FACTOR` x this (`grin_trace::estimate`).
+    pub accuracy: f64,
+    /// The integration error estimate (rad) above which a ray is `degraded`: `accuracy`,
+    /// or what the pilots' own estimates showed while they met it (at most
+    /// `grin_trace::auto::VOUCH_FACTOR` x `accuracy`).
+    pub estimate_limit: f64,
 }
 
 /// Settings that cannot drive a trace.
@@ -38,12 +49,20 @@ impl TraceSettings {
             max_steps: render.max_steps,
             exit: render.exit,
             macro_cells: render.macro_cells,
+            accuracy: render.accuracy(),
+            estimate_limit: render.estimate_limit(),
         }
     }
 
     /// Check that step lengths and tolerances are positive and finite.
     pub fn validate(&self) -> Result<(), TraceError> {
         let pos = |x: f64| x.is_finite() && x > 0.0;
+        if !pos(self.accuracy) || !pos(self.estimate_limit) {
+            return Err(TraceError::Step(format!(
+                "accuracy {} and estimate limit {} must be positive exit-direction errors in radians",
+                self.accuracy, self.estimate_limit
+            )));
+        }
         match self.step {
             StepSpec::Fixed(ds) if !pos(ds) => {
                 return Err(TraceError::Step(format!(

@@ -656,6 +656,23 @@ pub fn default_integrator(step: &StepSpec) -> IntegratorKind {
 }
 
 impl RenderSettings {
+    /// The exit-direction error (rad) a ray is asked for, above which its own error
+    /// estimate makes it `degraded`: what the pilots resolved, else the `auto` value,
+    /// else (a step the scene fixed) [`DEFAULT_AUTO_ACCURACY`].
+    pub fn accuracy(&self) -> f64 {
+        self.resolved_accuracy.unwrap_or(match self.step {
+            StepSpec::Auto(a) => a,
+            _ => DEFAULT_AUTO_ACCURACY,
+        })
+    }
+
+    /// The integration error estimate (rad) above which a ray is `degraded`: what the
+    /// pilots vouched for, else [`Self::accuracy`].
+    pub fn estimate_limit(&self) -> f64 {
+        self.resolved_estimate_limit
+            .unwrap_or_else(|| self.accuracy())
+    }
+
     /// The integrator the scene names, or [`default_integrator`] of its step.
     pub fn integrator(&self) -> IntegratorKind {
         self.integrator
@@ -700,6 +717,15 @@ pub struct RenderSettings {
     pub bend_shadow_rays: bool,
     /// Seed for jitter and sampling.
     pub seed: u64,
+    /// The exit-direction error (rad) rays are held to when the pilots resolved `auto`
+    /// (or an output's accuracy) into another step: not a key of its own, see
+    /// [`RenderSettings::accuracy`].
+    #[serde(skip)]
+    pub resolved_accuracy: Option<f64>,
+    /// ... and the integration error estimate the pilots vouch for
+    /// ([`RenderSettings::estimate_limit`]).
+    #[serde(skip)]
+    pub resolved_estimate_limit: Option<f64>,
 }
 
 /// Sampling of baked grids: trilinear (C0, 2nd order) or the prefiltered tricubic
@@ -732,6 +758,8 @@ impl Default for RenderSettings {
             jitter: true,
             bend_shadow_rays: false,
             seed: 0,
+            resolved_accuracy: None,
+            resolved_estimate_limit: None,
         }
     }
 }

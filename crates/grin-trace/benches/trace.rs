@@ -70,6 +70,8 @@ fn bench_field<R: Real>(c: &mut Criterion, name: &str, f: &dyn IndexField, preci
             max_steps: 1 << 20,
             exit: ExitMethod::Hermite,
             macro_cells: false,
+            accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+            estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
         };
         group.bench_function(BenchmarkId::new(kind.name(), policy), |b| {
             b.iter(|| {

@@ -19,7 +19,7 @@ use grin_field::{IndexField, Real};
 use grin_scene::{IntegratorKind, StepSpec};
 use rayon::prelude::*;
 
-use crate::trace::{RayResult, TraceSettings, trace_ray};
+use crate::trace::{RayResult, RayStatus, TraceSettings, trace_ray};
 
 /// The pilots' reference runs error control at this fraction of the asked error
 /// (tighter costs much more on baked grids, whose interpolant is only C2: at 1e-5 of
@@ -66,6 +66,9 @@ pub struct Candidate {
     /// Worst error over the pilots, in the choice's unit (infinite: a pilot ended with
     /// another status than the reference's).
     pub error: f64,
+    /// The largest of the pilots' own integration error estimates (rad,
+    /// `RayResult::error_estimate`) where they left the medium.
+    pub estimate: f64,
     pub evals_per_ray: f64,
 }
 
@@ -171,6 +174,15 @@ impl Metric {
     }
 }
 
+/// A ray traced with the pilots' choice is vouched for while its own error estimate is
+/// no larger than the largest the pilots showed, and never beyond this many times the
+/// asked error (rad). The estimates are bounds (errors summed without cancelling, the
+/// lower-order member's error for the embedded and companion estimates): on a plume at
+/// 1e-4 rad, euler's pilots measured 3.8e-5 rad while estimating up to 2.6e-4, and a
+/// limit of the asked error itself would have degraded rays as good as the pilots (or
+/// made the pilots pay 3x for a method whose estimate is tighter).
+pub const VOUCH_FACTOR: f64 = 10.0;
+
 /// A pixel output's accuracy is at most this fraction of the largest displacement the
 /// pilots' reference shows: heat haze that moves the background by a hundredth of a pixel
 /// is measured to 1e-5 px, not to the 0.01 px asked of a visible distortion.
@@ -187,6 +199,10 @@ pub struct AutoChoice {
     pub asked_rad: f64,
     #[serde(skip)]
     pub settings: TraceSettings,
+    /// Rays whose own error estimate is above this (rad) end `degraded`: the largest
+    /// estimate of the chosen candidate's pilots, within 1..[`VOUCH_FACTOR`] x
+    /// `asked_rad`.
+    pub vouched_to: f64,
     /// The chosen candidate (its error and cost on the pilots).
     pub chosen: Candidate,
     /// Whether the chosen candidate met the asked error on every pilot (false: none
@@ -223,11 +239,12 @@ impl AutoChoice {
     /// by pilot rays for N field evals`.
     pub fn summary_line(&self) -> String {
         format!(
-            "auto {:.0e} {}: {}, chosen by pilot rays for {} field evals",
+            "auto {:.0e} {}: {}, chosen by pilot rays for {} field evals; a ray whose own error estimate is above {:.1e} rad ends `degraded`",
             self.asked,
             self.unit,
             self.describe(),
-            self.spent_evals
+            self.spent_evals,
+            self.vouched_to
         )
     }
 
@@ -259,8 +276,11 @@ fn measure(
     let mut evals = 0u64;
     for ((r, e), ray) in runs.iter().zip(reference).zip(rays) {
         evals += r.evals;
-        // A `degraded` ray left as the reference did: its error is measured.
-        if r.status != e.status && !(r.status.left() && e.status.left()) {
+        // A ray the reference vouches for that this run cannot (its own estimate is
+        // above the asked error) does not meet it; a `degraded` ray left as a degraded
+        // reference did: its error is measured.
+        let unvouched = r.status == RayStatus::Degraded && e.status == RayStatus::Exited;
+        if unvouched || (r.status != e.status && !(r.status.left() && e.status.left())) {
             worst = f64::INFINITY;
             continue;
         }
@@ -326,6 +346,15 @@ pub fn choose_in<R: Real>(
     };
     let radius = field.bounds().radius();
     let asked_rad = metric.as_radians(asked, radius);
+    // The pilots' runs flag only rays whose own estimate is above VOUCH_FACTOR x the
+    // asked error (a candidate that leaves such rays where the reference did not does
+    // not meet it); the chosen one's limit is then set from what its pilots showed.
+    let base = TraceSettings {
+        accuracy: asked_rad,
+        estimate_limit: VOUCH_FACTOR * asked_rad,
+        ..*settings
+    };
+    let settings = &base;
     // The OPD's plane: beyond the medium along each pilot's entry direction.
     let far = (pilots
         .iter()
@@ -375,15 +404,27 @@ pub fn choose_in<R: Real>(
         } else {
             (asked, asked_rad, reference)
         };
+    let base = TraceSettings {
+        accuracy: asked_rad,
+        estimate_limit: VOUCH_FACTOR * asked_rad,
+        ..*settings
+    };
+    let settings = &base;
     let mut tried = Vec::new();
     let mut run = |s: &TraceSettings, fixed_step: Option<f64>| {
         let out = trace_all::<R>(field, s, &rays);
         spent += out.iter().map(|r| r.evals).sum::<u64>();
         let (error, evals_per_ray) = measure(&out, &reference, &rays, metric, geometry);
+        let estimate = out
+            .iter()
+            .filter(|r| r.status.left())
+            .map(|r| r.error_estimate)
+            .fold(0.0, f64::max);
         let c = Candidate {
             integrator: label(s.integrator),
             fixed_step,
             error,
+            estimate,
             evals_per_ray,
         };
         tried.push(c);
@@ -456,11 +497,16 @@ pub fn choose_in<R: Real>(
     }
     // Nothing met it: the closest candidate, and the choice says so.
     let met = best.is_some();
-    let (chosen, chosen_settings) = best.or(closest)?;
+    let (chosen, mut chosen_settings) = best.or(closest)?;
+    // Rays whose own estimate is no worse than the pilots' (measured within the asked
+    // error) are vouched for; beyond that, up to VOUCH_FACTOR x asked, they are unlike
+    // every pilot and end `degraded`.
+    chosen_settings.estimate_limit = chosen.estimate.clamp(asked_rad, VOUCH_FACTOR * asked_rad);
     Some(AutoChoice {
         asked,
         unit: metric.unit(),
         asked_rad,
+        vouched_to: chosen_settings.estimate_limit,
         settings: chosen_settings,
         chosen,
         met,
@@ -576,7 +622,7 @@ fn crosses_variation(field: &dyn IndexField, o: DVec3, d: DVec3) -> bool {
 /// and the smoke's pixels got 2.3x the asked error), topped up with [`generic_pilots`]
 /// when the view barely sees the medium.
 pub fn scene_pilots(rs: &grin_render::scene::RenderScene) -> Vec<(DVec3, DVec3)> {
-    let count = rs.settings.pilot_rays as usize;
+    let count = render_pilot_budget(rs);
     let Some(m) = &rs.medium else {
         return Vec::new();
     };
@@ -595,6 +641,37 @@ pub fn scene_pilots(rs: &grin_render::scene::RenderScene) -> Vec<(DVec3, DVec3)>
         pilots.extend(generic_pilots(&m.bounds, count));
     }
     pilots
+}
+
+/// The camera rays a render of `rs` traces (pixels x samples; its secondary rays are
+/// not counted).
+fn render_rays(rs: &grin_render::scene::RenderScene) -> usize {
+    let s = &rs.settings;
+    (u64::from(s.width) * u64::from(s.height) * u64::from(s.spp.max(1)))
+        .try_into()
+        .unwrap_or(usize::MAX)
+}
+
+/// The pilot rays a render of `rs` affords ([`affordable_pilots`] of `[render]
+/// pilot_rays` for its camera rays): 0 for a render too small for them to pay.
+pub fn render_pilot_budget(rs: &grin_render::scene::RenderScene) -> usize {
+    affordable_pilots(rs.settings.pilot_rays as usize, render_rays(rs))
+}
+
+/// Why `auto` runs error control per length without pilots on `rs` (a render too small
+/// for them), for the summary; `None` where pilots run or `auto` is not asked.
+pub fn render_pilot_note(rs: &grin_render::scene::RenderScene) -> Option<String> {
+    let StepSpec::Auto(rad) = rs.settings.step else {
+        return None;
+    };
+    (rs.medium.is_some() && rs.settings.pilot_rays > 0 && render_pilot_budget(rs) == 0).then(|| {
+        format!(
+            "auto {rad:.0e} rad: error control per length, no pilot rays (a render of {} camera \
+             rays: pilots pay from {} on)",
+            render_rays(rs),
+            MIN_PILOTS * JOB_RAYS_PER_PILOT
+        )
+    })
 }
 
 /// Resolve the `auto` step of `rs` (pilot rays from its camera, traced in precision
@@ -644,6 +721,8 @@ pub fn apply(rs: &mut grin_render::scene::RenderScene, settings: &TraceSettings)
     }
     rs.settings.integrator = Some(settings.integrator);
     rs.settings.step = settings.step;
+    rs.settings.resolved_accuracy = Some(settings.accuracy);
+    rs.settings.resolved_estimate_limit = Some(settings.estimate_limit);
 }
 
 #[cfg(test)]
@@ -676,7 +755,7 @@ mod tests {
         let text = "[camera]\nposition = [0.0, 0.0, -8.0]\nlook_at = [0.0, 0.0, 0.0]\n\
              [medium]\nbounds = { box = { min = [-2.0, -2.0, -2.0], max = [2.0, 2.0, 2.0] } }\n\
              field = { kind = \"plume\", plumes = [ { a = 1e-3, center = [1.4, 1.4, 0.0], s = 0.15 } ] }\n\
-             [render]\nwidth = 64\nheight = 64\n";
+             [render]\nwidth = 256\nheight = 256\n";
         let scene = grin_scene::parse_scene(text, Path::new("corner.toml")).expect("scene");
         let medium = scene.medium.as_ref().expect("medium");
         let field: Arc<dyn IndexField> =

@@ -302,6 +302,8 @@ impl StepController {
         let step = Step {
             evals: big.evals + first.evals + mid_evals + second.evals,
             delta,
+            error: Some((er, et)),
+            check: None,
             ..second
         };
         (step, err)

@@ -382,8 +382,10 @@ pub struct TableSummary {
     pub absorbed: usize,
     pub max_steps: usize,
     pub error: usize,
-    /// Left the medium with an error estimate above the limit (`degraded`).
+    /// Left the medium with an error estimate above the accuracy asked for (`degraded`).
     pub degraded: usize,
+    /// The largest error estimate (rad) of an `exited` ray: what the table vouches for.
+    pub worst_estimate: f64,
     /// Mean steps and field evaluations over the rays that entered the medium.
     pub mean_steps: f64,
     pub mean_evals: f64,
@@ -400,7 +402,10 @@ impl TableSummary {
         for r in results {
             match r.status {
                 RayStatus::Missed => self.missed += 1,
-                RayStatus::Exited => self.exited += 1,
+                RayStatus::Exited => {
+                    self.exited += 1;
+                    self.worst_estimate = self.worst_estimate.max(r.error_estimate);
+                }
                 RayStatus::Absorbed => self.absorbed += 1,
                 RayStatus::MaxSteps => self.max_steps += 1,
                 RayStatus::Error => self.error += 1,
@@ -609,6 +614,7 @@ mod tests {
             evals: 0,
             transmittance: 1.0,
             error_estimate: 0.0,
+            crossing_uncertainty: 0.0,
         }
     }
 

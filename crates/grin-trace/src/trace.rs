@@ -16,7 +16,7 @@ use crate::boundary::{
     EXCURSION_SLACK_TOLS, Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface,
     refract, refraction_uncertainty,
 };
-use crate::estimate::{DEGRADED_RAD, ErrorEstimate};
+use crate::estimate::{CROSSING_FACTOR, ErrorEstimate};
 use crate::integrate::{self, RayState, is_finite_v};
 use crate::step::{StepController, Taken};
 
@@ -61,9 +61,9 @@ pub enum RayStatus {
     /// Bad input (zero or non-finite direction, non-finite origin) or the field failed
     /// (non-finite state, n <= 0).
     Error,
-    /// Left the medium (position and direction as for `Exited`), but the low-order
-    /// integrator's own error estimate is above [`crate::estimate::DEGRADED_RAD`]: an
-    /// answer grin does not vouch for.
+    /// Left the medium (position and direction as for `Exited`), but the ray's own error
+    /// estimate ([`crate::estimate`]) is above the accuracy asked for
+    /// (`TraceSettings::accuracy`): an answer grin does not vouch for.
     Degraded,
 }
 
@@ -118,10 +118,14 @@ pub struct RayResult {
     pub evals: u64,
     /// Product of the Fresnel transmittances at the surface crossings.
     pub transmittance: f64,
-    /// The ray's own estimate of its exit-direction error (rad; low-order integrators,
-    /// [`crate::estimate`]), 0 where there is none, infinite where the exit itself is
-    /// uncertain (a grazing exit within the position error).
+    /// The ray's own estimate of its exit-direction error from the integration (rad,
+    /// [`crate::estimate`]), infinite where the exit itself is uncertain (a grazing exit
+    /// within the position error).
     pub error_estimate: f64,
+    /// The exit-direction error (rad) the field's n uncertainty (a bake's error against
+    /// its source) could add at the ray's crossings of the bounds, amplified by tan of
+    /// the refracted angle: a bound that ignores the cancelling of entry and exit.
+    pub crossing_uncertainty: f64,
 }
 
 /// Tell the tracer to keep going after a segment, or to stop the ray there (`absorbed`).
@@ -202,6 +206,7 @@ pub fn trace_ray_jittered<R: Real>(
         evals: 0,
         transmittance: 1.0,
         error_estimate: 0.0,
+        crossing_uncertainty: 0.0,
     };
     let len2 = dir.length_squared();
     if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
@@ -223,6 +228,8 @@ pub fn trace_ray_jittered<R: Real>(
         n_amb,
         dn: field.n_uncertainty(),
         error: 0.0,
+        accuracy: settings.accuracy,
+        estimate_limit: settings.estimate_limit,
     };
     // Entry (the field sampled where the ray enters is the march's first sample).
     let (start, d_in, s_entry) = if bounds.signed_distance(origin) < 0.0 {
@@ -251,8 +258,8 @@ pub fn trace_ray_jittered<R: Real>(
                 (p, dir, Some(entry))
             }
             Interface::Reflected { dir } => {
-                res.error_estimate = surface.error;
-                res.status = if surface.error > DEGRADED_RAD {
+                res.crossing_uncertainty = surface.error;
+                res.status = if surface.error > CROSSING_FACTOR * settings.accuracy {
                     RayStatus::Degraded
                 } else {
                     RayStatus::Exited
@@ -390,17 +397,28 @@ pub fn trace_ray_jittered<R: Real>(
             }
         };
         let seg = accumulate(&mut res, state, &s0, next, &s1, h);
-        // The low-order integrators' own error estimate (nothing to do for the others:
-        // no conversions on their hot path).
-        if estimate.is_active() {
+        // The ray's own error estimate: the step's reported local error, a fourth-order
+        // step's companion against D at its end (not where the step was cut at the
+        // surface: D there is not where its companion ends), or the low orders' formulas.
+        {
             let d1 = s1.n_grad_n().to_dvec3();
+            let h64 = h.to_f64();
+            let reported = match (taken.step.error, taken.step.check) {
+                (Some((er, et)), _) => Some((er.to_dvec3(), et.to_dvec3())),
+                (None, Some(check)) if !outside => {
+                    let et = (d1 - check.to_dvec3()) * (h64 / 6.0);
+                    Some((et * (0.5 * h64), et))
+                }
+                _ => None,
+            };
             estimate.step(
                 state.t.to_dvec3(),
                 next.t.to_dvec3(),
                 s0.n_grad_n().to_dvec3(),
                 d1,
-                h.to_f64(),
+                h64,
                 s0.n.to_f64(),
+                reported,
             );
             if !outside {
                 let p = next.r.to_dvec3();
@@ -445,11 +463,15 @@ struct Surface {
     n_amb: f64,
     dn: f64,
     error: f64,
+    /// The accuracy asked for (rad) and the integration estimate's limit
+    /// (`TraceSettings`).
+    accuracy: f64,
+    estimate_limit: f64,
 }
 
 /// At the surface point `p` with the inside state `state`: refract out (returns the
-/// finished result: `exited`, or `degraded` where the error `estimate` is above
-/// [`DEGRADED_RAD`]) or reflect totally back inside (updates `state`, returns None).
+/// finished result: `exited`, or `degraded` where the error `estimate` is above the
+/// accuracy asked for) or reflect totally back inside (updates `state`, returns None).
 fn leave<R: Real>(
     bounds: &Bounds,
     res: &mut RayResult,
@@ -473,8 +495,11 @@ fn leave<R: Real>(
                 n_in,
                 bounds.normal(p),
                 s.n_grad_n().to_dvec3(),
-            ) + surface.error;
-            res.status = if res.error_estimate > DEGRADED_RAD {
+            );
+            res.crossing_uncertainty = surface.error;
+            res.status = if res.error_estimate > surface.estimate_limit
+                || surface.error > CROSSING_FACTOR * surface.accuracy
+            {
                 RayStatus::Degraded
             } else {
                 RayStatus::Exited

@@ -25,6 +25,8 @@ fn settings(integrator: IntegratorKind, step: StepSpec, exit: ExitMethod) -> Tra
         max_steps: 1_000_000,
         exit,
         macro_cells: false,
+        accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+        estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
     }
 }
 
@@ -600,7 +602,8 @@ fn exit_distances<R: Real>(field: &TestField, rays: &[(DVec3, DVec3)]) -> f64 {
             let s = settings(kind, StepSpec::Fixed(0.03), exit);
             for (o, d) in rays {
                 let res = trace_ray::<R>(field, &s, *o, *d);
-                assert_eq!(res.status, RayStatus::Exited, "{kind:?} {exit:?}");
+                // Left (verlet at 0.03 may say `degraded`: its estimate is above 1e-4 rad).
+                assert!(res.status.left(), "{kind:?} {exit:?}: {:?}", res.status);
                 worst = worst.max(field.bounds().signed_distance(res.position).abs());
             }
         }

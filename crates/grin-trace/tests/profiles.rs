@@ -33,6 +33,8 @@ fn settings(integrator: IntegratorKind, step: StepSpec) -> TraceSettings {
         max_steps: 1_000_000,
         exit: ExitMethod::Hermite,
         macro_cells: true,
+        accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+        estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
     }
 }
 

@@ -138,6 +138,9 @@ struct Summary {
     /// `step = { auto = ... }`: what the pilot rays chose (and every candidate tried).
     #[serde(skip_serializing_if = "Option::is_none")]
     auto: Option<grin_trace::auto::AutoChoice>,
+    /// `step = { auto = ... }` resolved without pilots (a render too small for them): why.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    auto_note: Option<String>,
 }
 
 /// The field grid on the device.
@@ -398,6 +401,7 @@ fn render_one(
         Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(&mut rs, metric),
         _ => grin_trace::auto::resolve_scene_in::<f64>(&mut rs, metric),
     };
+    let auto_note = grin_trace::auto::render_pilot_note(&rs);
     let auto_warning = auto.as_ref().and_then(|a| a.unmet_warning("rendering"));
     if let Some(w) = &auto_warning {
         eprintln!("grin: warning: {w}");
@@ -535,6 +539,7 @@ fn render_one(
             comparison: None,
             optics: Some(optics),
             auto,
+            auto_note,
         };
         return Ok((summary, to_stream));
     }
@@ -699,6 +704,7 @@ fn render_one(
         gpu_field,
         optics,
         auto,
+        auto_note,
     };
     let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
     if stuck > 0 {
@@ -712,8 +718,8 @@ fn render_one(
     let degraded = summary.status_counts["degraded"];
     if degraded > 0 {
         let w = format!(
-            "{degraded} pixels left the medium `degraded`: their error estimate is above {} rad there (aov.status 5): a low-order integrator's own (a higher-order integrator, shorter steps or step = {{ auto = ... }} resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
-            grin_trace::estimate::DEGRADED_RAD
+            "{degraded} pixels left the medium `degraded`: their error estimate is above the {:.1e} rad asked for (aov.status 5): the integrator's own at these steps (shorter steps, or step = {{ auto = ... }} without an integrator, resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
+            rs.settings.accuracy()
         );
         eprintln!("grin: warning: {w}");
         summary.warnings.push(w);
@@ -881,6 +887,9 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
         ));
         if let Some(a) = &summary.auto {
             report(a.summary_line());
+        }
+        if let Some(note) = &summary.auto_note {
+            report(note.clone());
         }
         if let Some(c) = &summary.comparison {
             let wrote = c

@@ -121,8 +121,13 @@ struct Summary<'a> {
     precision: &'static str,
     rays: usize,
     exited: usize,
-    /// Left the medium with an error estimate above the limit.
+    /// Left the medium with an error estimate above `accuracy`.
     degraded: usize,
+    /// The exit-direction error asked for (rad): a ray whose own error estimate is above
+    /// it is `degraded`.
+    accuracy: f64,
+    /// The largest error estimate of an `exited` ray (rad).
+    worst_estimate: f64,
     missed: usize,
     absorbed: usize,
     max_steps: usize,
@@ -160,6 +165,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(s) = args.step {
         settings.step = s;
+        // `--step auto:RAD` asks for RAD: rays above it are `degraded`.
+        if let StepSpec::Auto(a) = s {
+            settings.accuracy = a;
+        }
     }
     if let Some(m) = args.max_steps {
         settings.max_steps = m;
@@ -308,6 +317,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(note) = &auto_note {
         eprintln!("{note}");
     }
+    eprintln!(
+        "exited rays' own error estimates: at most {:.1e} rad (asked {:.1e})",
+        s.worst_estimate, settings.accuracy
+    );
+    if s.degraded > 0 {
+        eprintln!(
+            "grin: warning: {} rays ended `degraded`: their own error estimate is above the {:.1e} rad asked for (steps too coarse for the field there, a grazing exit or near miss of the surface, or a bake's n error amplified at a grazing crossing); shorter steps or step = {{ auto = ... }} without an integrator resolve the first",
+            s.degraded, settings.accuracy
+        );
+    }
     if args.json {
         let summary = Summary {
             output: &args.output,
@@ -318,6 +337,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             rays: s.rays,
             exited: s.exited,
             degraded: s.degraded,
+            accuracy: settings.accuracy,
+            worst_estimate: s.worst_estimate,
             missed: s.missed,
             absorbed: s.absorbed,
             max_steps: s.max_steps,

@@ -89,5 +89,6 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
         evals: 6,
         end,
         error: Some((er * h, et * h)),
+        check: None,
     }
 }

@@ -40,8 +40,15 @@ pub struct Step<R: Real> {
     pub evals: u32,
     /// The field at `state.r`, when the step evaluated it anyway (verlet, dopri: FSAL).
     pub end: Option<FieldSample<R>>,
-    /// Embedded local error estimate (e_r, e_T) of the adaptive pair.
+    /// Local error estimate (e_r, e_T): the adaptive pair's embedded one, or Richardson's
+    /// of a doubled step (`StepController`).
     pub error: Option<(R::V3, R::V3)>,
+    /// For the fourth-order steps (rk4, sharma): the D their last stage used. With D at
+    /// the new point (the next step's first sample, so free) it gives a third-order
+    /// companion, and e_T = h/6 (D(r1) - check) estimates the step's local error (the
+    /// companion's: an overestimate by the ratio of their orders, as the adaptive pair's
+    /// is) ([`crate::estimate`]).
+    pub check: Option<R::V3>,
 }
 
 impl<R: Real> Step<R> {
@@ -56,6 +63,7 @@ impl<R: Real> Step<R> {
             evals,
             end: None,
             error: None,
+            check: None,
         }
     }
 }

@@ -1,5 +1,6 @@
 //! Classical fourth-order Runge-Kutta on the first-order system (r, T):
-//! 4 evaluations per step (the first is the start sample).
+//! 4 evaluations per step (the first is the start sample). The step carries D of its
+//! last stage for its error estimate (`Step::check`).
 
 use grin_field::{IndexField, Real};
 
@@ -22,5 +23,9 @@ pub fn rk4_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h: R
     let two = c::<R>(2.0);
     let dr = (t1 + t2 * two + t3 * two + t4) * sixth;
     let dt = (d1 + d2 * two + d3 * two + d4) * sixth;
-    Step::plain(s, dr, dt, 3)
+    // The companion y + h/6 (k1 + 2 k2 + 2 k3 + k5), k5 = D(r1): third order.
+    Step {
+        check: Some(d4),
+        ..Step::plain(s, dr, dt, 3)
+    }
 }

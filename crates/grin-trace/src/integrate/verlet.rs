@@ -19,5 +19,6 @@ pub fn verlet_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h
         evals: 1,
         end: Some(end),
         error: None,
+        check: None,
     }
 }
