@@ -22,8 +22,8 @@ pub struct TraceSettings {
     /// `grin_trace::estimate::CROSSING_FACTOR` x this (`grin_trace::estimate`).
     pub accuracy: f64,
     /// The integration error estimate (rad) above which a ray is `degraded`: `accuracy`,
-    /// or what the pilots' own estimates showed while they met it (at most
-    /// `grin_trace::auto::VOUCH_FACTOR` x `accuracy`).
+    /// or, where the pilots chose the method and measured it within `accuracy`,
+    /// `grin_trace::auto::VOUCH_FACTOR` x `accuracy`.
     pub estimate_limit: f64,
 }
 

@@ -25,15 +25,22 @@ pub struct OpticsSpec {
     #[serde(default)]
     pub screen: Screen,
     /// The accuracy `step = { auto }` targets for this output, in the output's own unit:
-    /// the landing point in pixels (displacement, ST map, BOS), the optical path
-    /// difference in waves (interferogram). Left out: [`DEFAULT_OUTPUT_ACCURACY`].
-    /// Schlieren and the shadowgraph keep the knob in radians (`step = { auto = RAD }`).
+    /// the landing point in pixels (displacement, ST map, BOS; for the shadowgraph, in
+    /// the screen's bins), the optical path difference in waves (interferogram). Left
+    /// out: [`DEFAULT_OUTPUT_ACCURACY`]. Schlieren's is the exit direction in radians,
+    /// by default [`SCHLIEREN_ACCURACY_FRACTION`] of the knife's `source_size_rad` (the
+    /// deflection that spans the signal's range).
     #[serde(default)]
     pub accuracy: Option<f64>,
 }
 
 /// The default accuracy of a pixel or wave output: a hundredth of a pixel, of a wave.
 pub const DEFAULT_OUTPUT_ACCURACY: f64 = 0.01;
+
+/// Schlieren's default accuracy, as a fraction of the knife's `source_size_rad`: a
+/// hundredth of the signal's range (a deflection error that small moves the knife-edge
+/// intensity by at most 1 % of its span).
+pub const SCHLIEREN_ACCURACY_FRACTION: f64 = 0.01;
 
 /// What unit an output's accuracy is asked in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,19 +67,22 @@ impl OpticsSpec {
     /// The unit this output's accuracy is asked in.
     pub fn accuracy_unit(&self) -> AccuracyUnit {
         match self.mode {
-            OpticsMode::Displacement | OpticsMode::Bos => AccuracyUnit::Pixels,
+            OpticsMode::Displacement | OpticsMode::Bos | OpticsMode::Shadowgraph => {
+                AccuracyUnit::Pixels
+            }
             OpticsMode::Interferogram => AccuracyUnit::Waves,
-            OpticsMode::Schlieren | OpticsMode::Shadowgraph => AccuracyUnit::Radians,
+            OpticsMode::Schlieren => AccuracyUnit::Radians,
         }
     }
 
-    /// The accuracy asked in [`OpticsSpec::accuracy_unit`] (`None` for radians: the
-    /// step's own `auto` value holds).
+    /// The accuracy asked in [`OpticsSpec::accuracy_unit`].
     pub fn output_accuracy(&self) -> Option<f64> {
-        match self.accuracy_unit() {
-            AccuracyUnit::Radians => None,
-            _ => Some(self.accuracy.unwrap_or(DEFAULT_OUTPUT_ACCURACY)),
-        }
+        Some(match self.accuracy_unit() {
+            AccuracyUnit::Radians => self
+                .accuracy
+                .unwrap_or(SCHLIEREN_ACCURACY_FRACTION * self.knife.source_size_rad),
+            _ => self.accuracy.unwrap_or(DEFAULT_OUTPUT_ACCURACY),
+        })
     }
 }
 

@@ -602,7 +602,7 @@ fn optics_errors_name_the_key() {
         e.contains("optics.wavelength_nm: must be in 10..=1e6 nm") && e.contains("got 1e-300"),
         "{e}"
     );
-    // The accuracy is asked in the output's unit: pixels or waves; not for schlieren.
+    // The accuracy is asked in the output's unit: pixels, waves, or (schlieren) radians.
     let ok = parse_scene(
         &with("mode = \"interferogram\"\naccuracy = 0.05"),
         Path::new("s.toml"),
@@ -615,10 +615,21 @@ fn optics_errors_name_the_key() {
     );
     let e = err("mode = \"displacement\"\naccuracy = -1.0");
     assert!(e.contains("optics.accuracy: must be > 0"), "{e}");
-    let e = err("mode = \"schlieren\"\naccuracy = 0.01");
+    let e = err("mode = \"schlieren\"\naccuracy = 2.0");
     assert!(
-        e.contains("optics.accuracy: is in the output's unit (pixels, waves)"),
+        e.contains("optics.accuracy: schlieren's is an exit-direction error in radians, below 1"),
         "{e}"
+    );
+    let ok = parse_scene(
+        &with("mode = \"schlieren\"\nknife = { source_size_rad = 5e-4 }"),
+        Path::new("s.toml"),
+    )
+    .expect("schlieren");
+    let o = ok.optics.expect("optics");
+    // A hundredth of the knife's range by default.
+    assert_eq!(
+        (o.accuracy_unit(), o.output_accuracy()),
+        (crate::AccuracyUnit::Radians, Some(5e-6))
     );
     let e = err("mode = \"bos\"");
     assert!(e.contains("optics.plane: BOS needs the plane"), "{e}");

@@ -199,11 +199,13 @@ fn optics(o: &crate::OpticsSpec, has_medium: bool) -> Check {
     }
     if let Some(a) = o.accuracy {
         positive("optics.accuracy", a)?;
-        if o.accuracy_unit() == crate::AccuracyUnit::Radians {
+        if o.accuracy_unit() == crate::AccuracyUnit::Radians && a >= 1.0 {
             return fail(
                 "optics.accuracy",
-                "is in the output's unit (pixels, waves); schlieren and the shadowgraph \
-                 take theirs in radians: step = { auto = RAD } in [render]",
+                format!(
+                    "schlieren's is an exit-direction error in radians, below 1 (pixels and \
+                     waves are for the other outputs), got {a}"
+                ),
             );
         }
     }

@@ -98,6 +98,20 @@ impl Beam {
         }
     }
 
+    /// Where a ray leaving the medium at `p` along `d` meets the screen's plane, in bins
+    /// from the screen's centre (right, up); `None` going away from it.
+    pub fn landing_bins(&self, p: DVec3, d: DVec3) -> Option<[f64; 2]> {
+        let den = d.dot(self.forward);
+        if den.is_nan() || den <= 0.0 {
+            return None;
+        }
+        let r = p + d * ((self.centre - p).dot(self.forward) / den) - self.centre;
+        Some([
+            r.dot(self.right) * f64::from(self.width) / self.size[0],
+            r.dot(self.up) * f64::from(self.height) / self.size[1],
+        ])
+    }
+
     /// The bin (index, row 0 at the top) where a ray leaving the medium at `p` along
     /// `d` meets the screen; `None` off the screen or going away from it.
     pub fn bin(&self, p: DVec3, d: DVec3) -> Option<usize> {

@@ -379,6 +379,15 @@ fn render_one(
     let metric = scene.optics.as_ref().and_then(|o| {
         let asked = o.output_accuracy()?;
         let metric = match o.accuracy_unit() {
+            // The shadowgraph's pixels are its screen's bins, its rays the beam's.
+            grin_scene::AccuracyUnit::Pixels if o.mode == grin_scene::OpticsMode::Shadowgraph => {
+                let medium = rs.medium.as_ref()?;
+                grin_trace::auto::Metric::Screen(Box::new(grin_trace::shadowgraph::Beam::new(
+                    &medium.bounds,
+                    &rs.camera,
+                    &o.screen,
+                )))
+            }
             grin_scene::AccuracyUnit::Pixels => grin_trace::auto::Metric::Pixels {
                 cam: Box::new(rs.camera),
                 plane: o
@@ -389,7 +398,8 @@ fn render_one(
             grin_scene::AccuracyUnit::Waves => grin_trace::auto::Metric::Waves {
                 wavelength: o.wavelength_nm * 1e-9,
             },
-            grin_scene::AccuracyUnit::Radians => return None,
+            // Schlieren: the exit direction, to a fraction of the knife's range.
+            grin_scene::AccuracyUnit::Radians => grin_trace::auto::Metric::Direction,
         };
         Some((metric, asked))
     });
@@ -397,11 +407,27 @@ fn render_one(
     // holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre), where the
     // GPU sums n - n_amb, so its OPD is as good as f64's.
     let waves = matches!(metric, Some((grin_trace::auto::Metric::Waves { .. }, _)));
-    let auto = match args.backend {
-        Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(&mut rs, metric),
-        _ => grin_trace::auto::resolve_scene_in::<f64>(&mut rs, metric),
+    // The shadowgraph's pilots are its beam's rays: resolved on a scene whose camera is
+    // the beam's, then applied to this one.
+    let beam_camera = match &metric {
+        Some((grin_trace::auto::Metric::Screen(beam), _)) => Some(beam.camera()),
+        _ => None,
     };
-    let auto_note = grin_trace::auto::render_pilot_note(&rs);
+    let mut pilot_rs = beam_camera.map(|cam| {
+        let mut p = rs.clone();
+        p.camera = cam;
+        (p.settings.width, p.settings.height) = (cam.width, cam.height);
+        p
+    });
+    let target = pilot_rs.as_mut().unwrap_or(&mut rs);
+    let auto = match args.backend {
+        Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(target, metric),
+        _ => grin_trace::auto::resolve_scene_in::<f64>(target, metric),
+    };
+    if let (Some(_), Some(a)) = (&pilot_rs, &auto) {
+        grin_trace::auto::apply(&mut rs, &a.settings);
+    }
+    let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(&rs));
     let auto_warning = auto.as_ref().and_then(|a| a.unmet_warning("rendering"));
     if let Some(w) = &auto_warning {
         eprintln!("grin: warning: {w}");
