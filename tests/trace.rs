@@ -348,8 +348,9 @@ fn the_default_method_is_auto_and_meets_its_error() {
     }
 }
 
-/// Euler at a coarse step through the lens: rays whose own error estimate is above
-/// 3 mrad end `degraded` (counted in the summary), not `exited` with a wrong answer.
+/// Euler at a coarse step through the lens: rays whose own error estimate is above the
+/// accuracy asked for (1e-4 rad for a fixed step) end `degraded` (counted in the
+/// summary), not `exited` with a wrong answer.
 #[test]
 fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
     let d = Dir::new();
@@ -365,8 +366,30 @@ fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
         serde_json::from_slice(&o.stdout).expect("json summary on stdout");
     assert_eq!(summary["degraded"], 12, "{summary}");
     assert!(summary.get("auto").is_none(), "{summary}");
+    assert_eq!(summary["accuracy"], 1e-4, "{summary}");
+    // The summary says how many and why.
+    assert!(
+        stderr(&o).contains(
+            "12 rays ended `degraded`: their own error estimate is above the 1.0e-4 rad asked for"
+        ),
+        "{}",
+        stderr(&o)
+    );
     let rows = read_output(&out);
     assert!(rows.iter().all(|r| r.0 == "degraded"));
+    // rk4 at a quarter of the radius vouches for the same rays (its third-order
+    // companion's estimate is under 1e-4): every one exited, and the largest estimate is
+    // reported.
+    let o = run(
+        &[&scene, &rays, &out],
+        &["--json", "--integrator", "rk4", "--step", "fixed=0.25"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(summary["exited"], 12, "{summary}");
+    let worst = summary["worst_estimate"].as_f64().expect("worst_estimate");
+    assert!(worst > 0.0 && worst <= 1e-4, "{summary}");
+    assert!(stderr(&o).contains("exited rays' own error estimates: at most"));
 }
 
 /// A table longer than a batch streams: every row comes back in order (the output is
