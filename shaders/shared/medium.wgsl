@@ -86,10 +86,18 @@ struct ErrorEstimate {
     // none (a fourth-order step cut at the surface).
     last_local: f32,
     last_local_r: f32,
+    // Symplectic Euler: T is half a kick off the leapfrog's (h/2 D at the last step end).
+    staggered: bool,
+    staggered_half: vec3<f32>,
 }
 
 fn estimate_new() -> ErrorEstimate {
-    return ErrorEstimate(integrator_order(INTEGRATOR), 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0, 0.0, 0.0);
+    let staggered = INTEGRATOR == INTEGRATOR_SYMPLECTIC_EULER;
+    var order = integrator_order(INTEGRATOR);
+    if staggered {
+        order = 2u;
+    }
+    return ErrorEstimate(order, 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0, 0.0, 0.0, staggered, vec3<f32>(0.0));
 }
 
 // The local error (e_r, e_T) a step reports, for estimate_step: the adaptive pair's
@@ -140,6 +148,9 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
             let hp = (*e).prev_h;
             let second = 2.0 * ((d1 - d0) / h - (d0 - (*e).prev_d) / hp) / (h + hp);
             local = h * h * h / 12.0 * across(second, u);
+        } else if (*e).staggered {
+            // Symplectic Euler's first kick of a sequence is a whole one.
+            local = 0.5 * h * across(d0, u);
         }
         local_r = h * h / 6.0 * across(d1 - d0, u);
     } else {
@@ -148,6 +159,7 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
     }
     (*e).last_local = local;
     (*e).last_local_r = local_r;
+    (*e).staggered_half = d1 * (0.5 * h);
     (*e).bend += across(d0, u) * h / n0;
     // The position error's feedback: D sampled e_r off turns T by |dD/dr| e_r h (the
     // change of D across the ray only).
@@ -193,7 +205,11 @@ fn estimate_value(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: 
     }
     // The position error moves the crossing along the path by pos / c.
     let shift = curvature * e.pos / c;
-    return max(e.sum + shift, drift);
+    var offset = 0.0;
+    if e.staggered {
+        offset = across(e.staggered_half, u) / n;
+    }
+    return max(e.sum + shift + offset, drift);
 }
 
 // STATUS_EXITED, or STATUS_DEGRADED where the estimate is above its limit or what the

@@ -295,7 +295,7 @@ pub fn trace_ray_jittered<R: Real>(
         .with_jitter(first_step_scale);
     let len_scale = bounds.radius();
     let exit_tol = exit_tolerance::<R>(&bounds);
-    let mut estimate = ErrorEstimate::new(integrate::order(settings.integrator));
+    let mut estimate = ErrorEstimate::for_integrator(settings.integrator);
     let min_flight =
         (MIN_SPAN_REL * len_scale).max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
 
