@@ -75,6 +75,7 @@ const UNSURE_ESTIMATE: f32 = 3.0e38;
 struct ErrorEstimate {
     // The integrator's order (the difference formulas for 1 and 2).
     order: u32,
+    // The position errors' feedback so far (the local errors are in vsum).
     sum: f32,
     bend: f32,
     pos: f32,
@@ -84,11 +85,14 @@ struct ErrorEstimate {
     prev_h: f32,
     // The last step's local errors (across the ray, position), for a step that reports
     // none (a fourth-order step cut at the surface).
-    last_local: f32,
+    last_local: vec3<f32>,
     last_local_r: f32,
     // Symplectic Euler: T is half a kick off the leapfrog's (h/2 D at the last step end).
     staggered: bool,
     staggered_half: vec3<f32>,
+    // The local direction errors summed as vectors (their leading terms telescope along
+    // a weakly bending ray).
+    vsum: vec3<f32>,
 }
 
 fn estimate_new() -> ErrorEstimate {
@@ -97,7 +101,7 @@ fn estimate_new() -> ErrorEstimate {
     if staggered {
         order = 2u;
     }
-    return ErrorEstimate(order, 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0, 0.0, 0.0, staggered, vec3<f32>(0.0));
+    return ErrorEstimate(order, 0.0, 0.0, 0.0, false, false, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, staggered, vec3<f32>(0.0), vec3<f32>(0.0));
 }
 
 // The local error (e_r, e_T) a step reports, for estimate_step: the adaptive pair's
@@ -121,9 +125,18 @@ fn reported_error(step: Step, d1: vec3<f32>, h: f32, cut: bool) -> Reported {
     return Reported(false, vec3<f32>(0.0), vec3<f32>(0.0));
 }
 
-// |v| across the unit direction u.
+// v across the unit direction u, and its length.
+fn across_v(v: vec3<f32>, u: vec3<f32>) -> vec3<f32> {
+    return v - u * dot(v, u);
+}
+
 fn across(v: vec3<f32>, u: vec3<f32>) -> f32 {
-    return length(v - u * dot(v, u));
+    return length(across_v(v, u));
+}
+
+// The direction error so far: the local errors' vector sum and the feedback.
+fn estimate_direction(e: ErrorEstimate) -> f32 {
+    return length(e.vsum) + e.sum;
 }
 
 // A step of t-length h from T = t0, D = d0 (index n0) to T = t1, D = d1.
@@ -135,22 +148,22 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
         (*e).near_miss = true;
     }
     let u = normalize_or_zero(t0);
-    var local = 0.0;
+    var local = vec3<f32>(0.0);
     var local_r = 0.0;
     if rep.reported {
-        local = across(rep.et, u);
+        local = across_v(rep.et, u);
         local_r = across(rep.er, u);
     } else if (*e).order == 1u {
-        local = 0.5 * h * across(d1 - d0, u);
+        local = 0.5 * h * across_v(d1 - d0, u);
         local_r = 0.5 * h * h * across(d0, u);
     } else if (*e).order == 2u {
         if (*e).has_prev && (*e).prev_h > 0.0 {
             let hp = (*e).prev_h;
             let second = 2.0 * ((d1 - d0) / h - (d0 - (*e).prev_d) / hp) / (h + hp);
-            local = h * h * h / 12.0 * across(second, u);
+            local = h * h * h / 12.0 * across_v(second, u);
         } else if (*e).staggered {
             // Symplectic Euler's first kick of a sequence is a whole one.
-            local = 0.5 * h * across(d0, u);
+            local = 0.5 * h * across_v(d0, u);
         }
         local_r = h * h / 6.0 * across(d1 - d0, u);
     } else {
@@ -164,9 +177,10 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
     // The position error's feedback: D sampled e_r off turns T by |dD/dr| e_r h (the
     // change of D across the ray only).
     let feedback = across(d1 - d0, u) * (*e).pos / n0;
-    if finite3(vec3<f32>(local, local_r, feedback)) {
-        (*e).pos += local_r + (*e).sum * h * n0;
-        (*e).sum += (local + feedback) / n0;
+    if finite3(local) && finite3(vec3<f32>(local_r, feedback, 0.0)) {
+        (*e).pos += local_r + estimate_direction(*e) * h * n0;
+        (*e).vsum += local / n0;
+        (*e).sum += feedback / n0;
     }
     (*e).has_prev = true;
     (*e).prev_d = d0;
@@ -209,7 +223,7 @@ fn estimate_value(e: ErrorEstimate, t: vec3<f32>, n: f32, normal: vec3<f32>, d: 
     if e.staggered {
         offset = across(e.staggered_half, u) / n;
     }
-    return max(e.sum + shift + offset, drift);
+    return max(estimate_direction(e) + shift + offset, drift);
 }
 
 // STATUS_EXITED, or STATUS_DEGRADED where the estimate is above its limit or what the
