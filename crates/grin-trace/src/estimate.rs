@@ -55,7 +55,8 @@ pub struct ErrorEstimate {
     /// the last step end, what T is off by there).
     staggered: bool,
     staggered_half: DVec3,
-    /// The direction error summed so far (rad).
+    /// The position errors' feedback on the direction, summed so far (rad; the local
+    /// direction errors are in `vsum`).
     sum: f64,
     /// The ray's bending so far, integral of |D across T| / n dt (rad).
     bend: f64,
@@ -71,7 +72,7 @@ pub struct ErrorEstimate {
     prev: Option<(DVec3, f64)>,
     /// The last local errors (direction across the ray, position) a step reported: a
     /// step that reports none (a fourth-order step cut at the surface, whose companion
-    /// needs D where the uncut step would have ended) is counted as large.
+    /// needs D where the uncut step would have ended) is counted as the one before it.
     last: (DVec3, f64),
     /// The local direction errors so far, summed as vectors (over n): a method's leading
     /// error terms along a weakly bending ray are differences of D that telescope (euler's

@@ -62,8 +62,10 @@ pub enum RayStatus {
     /// (non-finite state, n <= 0).
     Error,
     /// Left the medium (position and direction as for `Exited`), but the ray's own error
-    /// estimate ([`crate::estimate`]) is above the accuracy asked for
-    /// (`TraceSettings::accuracy`): an answer grin does not vouch for.
+    /// estimate ([`crate::estimate`]) is above what it is held to
+    /// (`TraceSettings::estimate_limit`), or a bake's n error at its crossings could be
+    /// above [`crate::estimate::CROSSING_FACTOR`] x the accuracy asked for: an answer
+    /// grin does not vouch for.
     Degraded,
 }
 
@@ -470,8 +472,9 @@ struct Surface {
 }
 
 /// At the surface point `p` with the inside state `state`: refract out (returns the
-/// finished result: `exited`, or `degraded` where the error `estimate` is above the
-/// accuracy asked for) or reflect totally back inside (updates `state`, returns None).
+/// finished result: `exited`, or `degraded` where the error `estimate` or the
+/// crossings' uncertainty is above its limit) or reflect totally back inside (updates
+/// `state`, returns None).
 fn leave<R: Real>(
     bounds: &Bounds,
     res: &mut RayResult,
