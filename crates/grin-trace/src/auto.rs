@@ -129,20 +129,22 @@ impl Metric {
     /// `reference`, in this metric's unit: the landing point's displacement in pixels
     /// (`None` for the other metrics, and where the ray does not land).
     fn size(&self, reference: &RayResult, pilot: (DVec3, DVec3)) -> Option<f64> {
-        if let Metric::Screen(beam) = self {
-            let a = beam.landing_bins(reference.position, reference.direction)?;
-            let b = beam.landing_bins(pilot.0, pilot.1)?;
-            return Some(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt());
+        let a = self.landing(reference.position, reference.direction)??;
+        let b = self.landing(pilot.0, pilot.1)??;
+        Some(px_distance(a, b))
+    }
+
+    /// Where a ray leaving at `p` along `d` lands, in pixels (the image's, or the
+    /// shadowgraph screen's bins): `Some(None)` where it does not land, `None` for the
+    /// metrics not made of a landing point.
+    fn landing(&self, p: DVec3, d: DVec3) -> Option<Option<[f64; 2]>> {
+        match self {
+            Metric::Pixels { cam, plane } => {
+                Some(grin_render::optics::landing_px(cam, plane.as_ref(), p, d))
+            }
+            Metric::Screen(beam) => Some(beam.landing_bins(p, d)),
+            Metric::Direction | Metric::Waves { .. } => None,
         }
-        let Metric::Pixels { cam, plane } = self else {
-            return None;
-        };
-        let seen = |p, d| grin_render::optics::landing_px(cam, plane.as_ref(), p, d);
-        let (a, b) = (
-            seen(reference.position, reference.direction)?,
-            seen(pilot.0, pilot.1)?,
-        );
-        Some(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
     }
 
     /// The error of `run` against `reference` for the pilot `(origin, dir)`, in this
@@ -157,20 +159,10 @@ impl Metric {
     ) -> f64 {
         match self {
             Metric::Direction => angle(run.direction, reference.direction),
-            Metric::Pixels { cam, plane } => {
-                let seen = |r: &RayResult| {
-                    grin_render::optics::landing_px(cam, plane.as_ref(), r.position, r.direction)
-                };
+            Metric::Pixels { .. } | Metric::Screen(_) => {
+                let seen = |r: &RayResult| self.landing(r.position, r.direction).flatten();
                 match (seen(run), seen(reference)) {
-                    (Some(a), Some(b)) => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
-                    (None, None) => 0.0,
-                    _ => f64::INFINITY,
-                }
-            }
-            Metric::Screen(beam) => {
-                let seen = |r: &RayResult| beam.landing_bins(r.position, r.direction);
-                match (seen(run), seen(reference)) {
-                    (Some(a), Some(b)) => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
+                    (Some(a), Some(b)) => px_distance(a, b),
                     (None, None) => 0.0,
                     _ => f64::INFINITY,
                 }
@@ -197,6 +189,11 @@ impl Metric {
             }
         }
     }
+}
+
+/// The distance between two points of an image, in its pixels.
+fn px_distance(a: [f64; 2], b: [f64; 2]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
 }
 
 /// A ray traced with the pilots' choice is vouched for while its own error estimate is
@@ -372,14 +369,15 @@ pub fn choose_in<R: Real>(
     };
     let radius = field.bounds().radius();
     let asked_rad = metric.as_radians(asked, radius);
-    // The pilots' runs flag only rays whose own estimate is above VOUCH_FACTOR x the
-    // asked error (a candidate that leaves such rays where the reference did not does
-    // not meet it); the chosen one's limit is then set from what its pilots showed.
-    let base = TraceSettings {
+    // Every run (the pilots' and the chosen one's) flags only rays whose own estimate is
+    // above VOUCH_FACTOR x the asked error; a candidate that leaves such rays where the
+    // reference did not does not meet it.
+    let held_to = |asked_rad: f64| TraceSettings {
         accuracy: asked_rad,
         estimate_limit: VOUCH_FACTOR * asked_rad,
         ..*settings
     };
+    let base = held_to(asked_rad);
     let settings = &base;
     // The OPD's plane: beyond the medium along each pilot's entry direction.
     let far = (pilots
@@ -430,11 +428,7 @@ pub fn choose_in<R: Real>(
         } else {
             (asked, asked_rad, reference)
         };
-    let base = TraceSettings {
-        accuracy: asked_rad,
-        estimate_limit: VOUCH_FACTOR * asked_rad,
-        ..*settings
-    };
+    let base = held_to(asked_rad);
     let settings = &base;
     let mut tried = Vec::new();
     let mut run = |s: &TraceSettings, fixed_step: Option<f64>| {
