@@ -370,7 +370,7 @@ fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
     // The summary says how many and why.
     assert!(
         stderr(&o).contains(
-            "12 rays ended `degraded`: their own error estimate is above the 1.0e-4 rad asked for"
+            "12 rays ended `degraded`: their own error estimate is above the 1.0e-4 rad they are held to (asked 1.0e-4)"
         ),
         "{}",
         stderr(&o)

@@ -744,7 +744,8 @@ fn render_one(
     let degraded = summary.status_counts["degraded"];
     if degraded > 0 {
         let w = format!(
-            "{degraded} pixels left the medium `degraded`: their error estimate is above the {:.1e} rad asked for (aov.status 5): the integrator's own at these steps (shorter steps, or step = {{ auto = ... }} without an integrator, resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
+            "{degraded} pixels left the medium `degraded`: their error estimate is above the {:.1e} rad they are held to (asked {:.1e}; aov.status 5): the integrator's own at these steps (shorter steps, or step = {{ auto = ... }} without an integrator, resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
+            rs.settings.estimate_limit(),
             rs.settings.accuracy()
         );
         eprintln!("grin: warning: {w}");

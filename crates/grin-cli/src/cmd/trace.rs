@@ -121,11 +121,13 @@ struct Summary<'a> {
     precision: &'static str,
     rays: usize,
     exited: usize,
-    /// Left the medium with an error estimate above `accuracy`.
+    /// Left the medium with an error estimate above `estimate_limit`.
     degraded: usize,
-    /// The exit-direction error asked for (rad): a ray whose own error estimate is above
-    /// it is `degraded`.
+    /// The exit-direction error asked for (rad).
     accuracy: f64,
+    /// A ray whose own error estimate is above this (rad) is `degraded`: `accuracy`, or
+    /// 10x it where the pilots measured their choice within it.
+    estimate_limit: f64,
     /// The largest error estimate of an `exited` ray (rad).
     worst_estimate: f64,
     missed: usize,
@@ -323,8 +325,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     if s.degraded > 0 {
         eprintln!(
-            "grin: warning: {} rays ended `degraded`: their own error estimate is above the {:.1e} rad asked for (steps too coarse for the field there, a grazing exit or near miss of the surface, or a bake's n error amplified at a grazing crossing); shorter steps or step = {{ auto = ... }} without an integrator resolve the first",
-            s.degraded, settings.accuracy
+            "grin: warning: {} rays ended `degraded`: their own error estimate is above the {:.1e} rad they are held to (asked {:.1e}) (steps too coarse for the field there, a grazing exit or near miss of the surface, or a bake's n error amplified at a grazing crossing); shorter steps or step = {{ auto = ... }} without an integrator resolve the first",
+            s.degraded, settings.estimate_limit, settings.accuracy
         );
     }
     if args.json {
@@ -338,6 +340,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             exited: s.exited,
             degraded: s.degraded,
             accuracy: settings.accuracy,
+            estimate_limit: settings.estimate_limit,
             worst_estimate: s.worst_estimate,
             missed: s.missed,
             absorbed: s.absorbed,
