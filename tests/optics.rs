@@ -656,6 +656,13 @@ fn shadowgraph_on_the_gpu_matches_the_cpu() {
     assert!(focus > 50.0 && focus > 2.0 * near, "{near} {focus}");
 }
 
+/// The BOS tests' `[optics]`: dots on a plane 6 m past the plume.
+const BOS_OPTICS: &str = r#"[optics]
+mode = "bos"
+plane = { point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }
+dots = { diameter = 0.05, density = 0.4, seed = 3 }
+"#;
+
 /// BOS on both backends: the GPU's distorted dot image and true displacement (its rays
 /// through the GPU's bake, f32) agree with the CPU's, both with the default accuracy (no
 /// integrator named): displacement within 0.01 px at the 99th percentile, dot images
@@ -671,18 +678,7 @@ fn bos_on_the_gpu_matches_the_cpu() {
     let scene = d.join("bos.toml");
     std::fs::write(
         &scene,
-        bos_plume_scene(
-            "fov_y_deg = 12.0",
-            96,
-            96,
-            0.01,
-            r#"[optics]
-mode = "bos"
-plane = { point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }
-dots = { diameter = 0.05, density = 0.4, seed = 3 }
-"#,
-        )
-        .replace("integrator = \"rk4\"\nstep = { fixed = 0.01 }\n", ""),
+        bos_plume_scene("fov_y_deg = 12.0", 96, 96, 0.0, BOS_OPTICS),
     )
     .expect("scene");
     let render = |backend: &str| {
@@ -738,17 +734,7 @@ fn bos_pair_round_trips_through_cross_correlation() {
     let scene = d.join("bos.toml");
     std::fs::write(
         &scene,
-        bos_plume_scene(
-            "fov_y_deg = 12.0",
-            160,
-            160,
-            0.01,
-            r#"[optics]
-mode = "bos"
-plane = { point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }
-dots = { diameter = 0.05, density = 0.4, seed = 3 }
-"#,
-        ),
+        bos_plume_scene("fov_y_deg = 12.0", 160, 160, 0.01, BOS_OPTICS),
     )
     .expect("scene");
     let out = d.join("bos.exr");

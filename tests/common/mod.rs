@@ -74,9 +74,15 @@ pub fn render_json(scene: &Path, out: &Path, backend: &str) -> serde_json::Value
 
 /// The BOS tests' set-up as scene text: a Gaussian plume of hot air (a = 2e-3, s = 0.3)
 /// in a 2 m box, seen from 6 m (`camera`: its lens lines, e.g. `fov_y_deg = 12.0`),
-/// `width` x `height`, rk4 at fixed `step`; `extra` is appended right after `[render]`'s
-/// lines (so it may set more of them, e.g. `spp = 32`, before its own tables).
+/// `width` x `height`, rk4 at fixed `step` (0: no integrator or step, grin's defaults);
+/// `extra` is appended right after `[render]`'s lines (so it may set more of them, e.g.
+/// `spp = 32`, before its own tables).
 pub fn bos_plume_scene(camera: &str, width: u32, height: u32, step: f64, extra: &str) -> String {
+    let method = if step == 0.0 {
+        String::new()
+    } else {
+        format!("integrator = \"rk4\"\nstep = {{ fixed = {step} }}")
+    };
     format!(
         r#"
 [camera]
@@ -89,8 +95,7 @@ field = {{ kind = "plume", plumes = [ {{ a = 2e-3, center = [0.0, 0.0, 0.0], s =
 [render]
 width = {width}
 height = {height}
-integrator = "rk4"
-step = {{ fixed = {step} }}
+{method}
 {extra}
 "#
     )
