@@ -376,37 +376,37 @@ pub fn cases() -> anyhow::Result<Vec<StabilityCase>> {
 
     // 12. A feature narrower than any default step in a formula (which, unlike a plume,
     // names no scale of its own): a tall bump 1/100 of the box wide, off the axis.
-    {
-        let field = medium(
-            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-field = { kind = \"expr\", n = \"1 + 0.05*exp(-((x-0.3)^2 + (y+0.2)^2 + (z-0.1)^2)/0.0001)\" }",
-        )?;
-        let reference = fine_reference(field.clone());
-        let rays = parallel_rays(
-            &reference,
-            &[(0.3, -0.2), (0.305, -0.195), (0.29, -0.21), (0.312, -0.2)],
-        );
-        v.push(
-            StabilityCase::new("narrow bump in an expression", "a bump 1/100 of the box wide (a = 0.05) in an `expr` formula, which names no feature size: only the formula's own interval bounds say a step must not pass over it", field, rays, 3f64.sqrt()),
-        );
-    }
+    v.push(expr_case(
+        "narrow bump in an expression",
+        "a bump 1/100 of the box wide (a = 0.05) in an `expr` formula, which names no feature size: only the formula's own interval bounds say a step must not pass over it",
+        "1 + 0.05*exp(-((x-0.3)^2 + (y+0.2)^2 + (z-0.1)^2)/0.0001)",
+        &[(0.3, -0.2), (0.305, -0.195), (0.29, -0.21), (0.312, -0.2)],
+    )?);
 
     // 13. A pocket where n falls near 0 (0.05), off the axis, in a formula.
-    {
-        let field = medium(
-            "bounds = { box = { min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] } }
-field = { kind = \"expr\", n = \"1 - 0.95*exp(-((x-0.2)^2 + (y-0.1)^2 + z^2)/0.01)\" }",
-        )?;
-        let reference = fine_reference(field.clone());
-        let rays = parallel_rays(
-            &reference,
-            &[(0.2, 0.1), (0.25, 0.1), (0.3, 0.15), (0.1, 0.0)],
-        );
-        v.push(
-            StabilityCase::new("near-zero pocket", "a pocket 0.1 wide where n falls to 0.05: a fixed world step is a long step in t = s/n there, and the ray bends hard around it", field, rays, 3f64.sqrt()),
-        );
-    }
+    v.push(expr_case(
+        "near-zero pocket",
+        "a pocket 0.1 wide where n falls to 0.05: a fixed world step is a long step in t = s/n there, and the ray bends hard around it",
+        "1 - 0.95*exp(-((x-0.2)^2 + (y-0.1)^2 + z^2)/0.01)",
+        &[(0.2, 0.1), (0.25, 0.1), (0.3, 0.15), (0.1, 0.0)],
+    )?);
     Ok(v)
+}
+
+/// A case of the `expr` formula `n` in the box [-1, 1]^3, rays along +z at `offsets`
+/// against a fine RK4 reference on the same field.
+fn expr_case(
+    name: &'static str,
+    why: &'static str,
+    n: &str,
+    offsets: &[(f64, f64)],
+) -> anyhow::Result<StabilityCase> {
+    let field = medium(&format!(
+        "bounds = {{ box = {{ min = [-1.0, -1.0, -1.0], max = [1.0, 1.0, 1.0] }} }}\nfield = {{ kind = \"expr\", n = \"{n}\" }}"
+    ))?;
+    let reference = fine_reference(field.clone());
+    let rays = parallel_rays(&reference, offsets);
+    Ok(StabilityCase::new(name, why, field, rays, 3f64.sqrt()))
 }
 
 /// Converged for the 1e-5 plume: 1 % of its rays' deflection (1.0e-5 .. 1.4e-5 rad).
