@@ -1,6 +1,12 @@
-//! Compiles the C++17 OpenVDB shim (shim/grin_vdb.cpp) and links OpenVDB, TBB and Imath.
+//! Compiles the C++17 OpenVDB shim (shim/grin_vdb.cpp) into a shared library linked
+//! against OpenVDB, TBB and Imath, which the crate embeds and loads at run time (see
+//! src/ffi.rs): binaries that use vdb-sys do not link OpenVDB themselves. Also links the
+//! checker executable (shim/grin_vdb_check.cpp).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// The shared library build.rs links into `OUT_DIR`; src/ffi.rs embeds it by this name.
+const SHIM_FILE: &str = "libgrin_vdb_shim.so";
 
 /// Debian packages that provide the headers and libraries the shim needs.
 const APT_PACKAGES: &str = "libopenvdb-dev libboost-dev libtbb-dev";
@@ -75,6 +81,12 @@ fn main() {
         );
     }
 
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let mut link_dirs: Vec<String> = std::env::var("OPENVDB_LIB_DIR").into_iter().collect();
+    link_dirs.extend(published.lib_dirs.iter().cloned());
+
+    // One position-independent object, linked twice: into the shared library the crate
+    // embeds, and into the checker executable.
     let mut build = cc::Build::new();
     for d in &published.include_dirs {
         build.include(d);
@@ -82,6 +94,7 @@ fn main() {
     build
         .cpp(true)
         .std("c++17")
+        .pic(true)
         .file("shim/grin_vdb.cpp")
         .include("shim")
         .warnings(false)
@@ -90,20 +103,69 @@ fn main() {
     for d in &include_dirs {
         build.include(d);
     }
-    build.compile("grin_vdb_shim");
-    let lib_dir = std::env::var("OPENVDB_LIB_DIR").ok();
-    build_checker(&build, lib_dir.as_deref(), &libs);
+    let objects = build.compile_intermediates();
+    let compiler = build.get_compiler();
+    let link = |cmd: &mut std::process::Command| {
+        cmd.args(link_dirs.iter().map(|d| format!("-L{d}")))
+            .args(libs.iter().map(|l| format!("-l{l}")))
+            .arg("-lstdc++");
+    };
+    build_shared(&compiler, &objects, &out_dir, &link);
+    build_checker(&compiler, &objects, &out_dir, &link);
+    println!(
+        "cargo:rustc-env=GRIN_VDB_OPENVDB={}",
+        openvdb_soname(&lib_dirs)
+    );
+    // Nothing is linked into the crate's users: the shim and OpenVDB behind it are
+    // loaded at run time by the first VDB call (src/ffi.rs), so a grin command that
+    // reads no VDB file never pays for binding OpenVDB's symbols.
+}
 
-    if let Ok(dir) = std::env::var("OPENVDB_LIB_DIR") {
-        println!("cargo:rustc-link-search=native={dir}");
+/// Link the shim into `$OUT_DIR/libgrin_vdb_shim.so` (stripped), the library src/ffi.rs
+/// embeds and loads on first use; its id (length and FNV-1a hash of its bytes) reaches the
+/// crate as `GRIN_VDB_SHIM_ID`, for the name of the copy written where memfd is refused.
+fn build_shared(
+    compiler: &cc::Tool,
+    objects: &[PathBuf],
+    out_dir: &Path,
+    link: &dyn Fn(&mut std::process::Command),
+) {
+    let lib = out_dir.join(SHIM_FILE);
+    let mut cmd = compiler.to_command();
+    cmd.arg("-shared")
+        .arg("-s")
+        .arg("-Wl,--no-undefined")
+        .arg("-o")
+        .arg(&lib)
+        .args(objects);
+    link(&mut cmd);
+    match cmd.status() {
+        Ok(s) if s.success() => {}
+        other => panic!(
+            "vdb-sys: linking the OpenVDB shim {} failed ({other:?}); install \
+             `{APT_PACKAGES}` (or run scripts/setup.sh)",
+            lib.display()
+        ),
     }
-    for dir in &published.lib_dirs {
-        println!("cargo:rustc-link-search=native={dir}");
-    }
-    for lib in &libs {
-        println!("cargo:rustc-link-lib=dylib={lib}");
-    }
-    println!("cargo:rustc-link-lib=dylib=stdc++");
+    let bytes = std::fs::read(&lib).expect("vdb-sys: the shim just linked is readable");
+    let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    println!(
+        "cargo:rustc-env=GRIN_VDB_SHIM_ID={}-{hash:016x}",
+        bytes.len()
+    );
+}
+
+/// The name the dynamic linker looks OpenVDB up by (`libopenvdb.so.10.0` on Debian 12,
+/// where `libopenvdb.so` links to it), for the message shown where it cannot be loaded.
+fn openvdb_soname(lib_dirs: &[String]) -> String {
+    lib_dirs
+        .iter()
+        .filter_map(|d| std::fs::read_link(Path::new(d).join("libopenvdb.so")).ok())
+        .filter_map(|target| Some(target.file_name()?.to_str()?.to_owned()))
+        .find(|name| name.starts_with("libopenvdb.so."))
+        .unwrap_or_else(|| "libopenvdb.so".to_owned())
 }
 
 /// What the system says about TBB and Imath (pkg-config) and where the dynamic linker
@@ -176,29 +238,27 @@ fn command_output(program: &str, args: &[&str]) -> Option<String> {
         .then(|| String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
-/// Link shim/grin_vdb_check.cpp against the shim into `$OUT_DIR/grin-vdb-check`, the child
-/// process vdb-sys uses to try a file before reading it in-process (see `VdbFile::open`).
-/// Its path reaches the crate as `GRIN_VDB_CHECK`.
-fn build_checker(build: &cc::Build, lib_dir: Option<&str>, libs: &[String]) {
-    let out_dir = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
-    let exe = Path::new(&out_dir).join("grin-vdb-check");
-    let compiler = build.get_compiler();
+/// Link shim/grin_vdb_check.cpp with the shim's object into `$OUT_DIR/grin-vdb-check`, the
+/// child process vdb-sys uses to try a file before reading it in-process (see
+/// `VdbFile::open`). It links OpenVDB directly (it runs from the build tree, where the
+/// libraries were found). Its path reaches the crate as `GRIN_VDB_CHECK`.
+fn build_checker(
+    compiler: &cc::Tool,
+    objects: &[PathBuf],
+    out_dir: &Path,
+    link: &dyn Fn(&mut std::process::Command),
+) {
+    let exe = out_dir.join("grin-vdb-check");
     let mut cmd = compiler.to_command();
     cmd.arg("-std=c++17")
         .arg("-O1")
         .arg("-Ishim")
         .arg("shim/grin_vdb_check.cpp")
+        .args(objects)
         .arg("-o")
-        .arg(&exe)
-        .arg(format!("-L{out_dir}"))
-        .arg("-lgrin_vdb_shim");
-    if let Some(dir) = lib_dir {
-        cmd.arg(format!("-L{dir}"));
-    }
-    cmd.args(libs.iter().map(|l| format!("-l{l}")));
-    cmd.arg("-lstdc++");
-    let status = cmd.status();
-    match status {
+        .arg(&exe);
+    link(&mut cmd);
+    match cmd.status() {
         Ok(s) if s.success() => {
             println!("cargo:rustc-env=GRIN_VDB_CHECK={}", exe.display());
         }

@@ -3,8 +3,14 @@
 //! `world_from_index` transform, and write float/vec3 grids with metadata.
 //!
 //! This crate is the only place in grin with `unsafe` code; all of it is in this file and
-//! the raw declarations in [`ffi`]. Every shim call returns a status code and message (the
+//! in [`ffi`], which loads the shim. Every shim call returns a status code and message (the
 //! shim catches every C++ exception), so errors come back as [`VdbError`].
+//!
+//! OpenVDB is not linked into the program: build.rs links the shim as a shared library
+//! against it, the crate embeds that library, and [`ffi`] loads it (and OpenVDB with it) at
+//! the first [`VdbFile::open`] or [`VdbWriter::new`]. Programs start without binding
+//! OpenVDB's symbols, and a machine without OpenVDB gets [`VdbError::Unavailable`] from
+//! those two calls rather than a program that cannot start.
 //!
 //! Why one file of ~1000 lines: it holds all of grin's FFI `unsafe` (the only other
 //! `unsafe` is the driver's pipeline-cache load in grin-gpu); every FFI call and its
@@ -186,6 +192,9 @@ pub enum VdbError {
     },
     #[error("{path}: cannot write: {message}")]
     Write { path: String, message: String },
+    /// The shim or OpenVDB could not be loaded (the message says why and what to install).
+    #[error("{message}")]
+    Unavailable { message: String },
     #[error(
         "{path}: not enough memory to read grid `{grid}`: {bytes} bytes could not be allocated"
     )]
@@ -206,6 +215,11 @@ fn try_zeros(len: usize, path: &Path, grid: &str) -> Result<Vec<f32>, VdbError> 
     })?;
     v.resize(len, 0f32);
     Ok(v)
+}
+
+/// Load the shim and OpenVDB (once per process; see [`ffi`]).
+fn loaded() -> Result<(), VdbError> {
+    ffi::load().map_err(|message| VdbError::Unavailable { message })
 }
 
 impl VdbError {
@@ -497,6 +511,7 @@ impl VdbFile {
             });
         }
         let c = c_path(path)?;
+        loaded()?;
         if check {
             check_in_child(path)?;
         }
@@ -883,6 +898,7 @@ fn cstring(s: &str, what: &str) -> Result<CString, VdbError> {
 
 impl VdbWriter {
     pub fn new() -> Result<Self, VdbError> {
+        loaded()?;
         // SAFETY: no arguments; null means the shim could not allocate.
         let raw = unsafe { ffi::grin_vdb_writer_new() };
         NonNull::new(raw)
