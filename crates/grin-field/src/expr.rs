@@ -21,6 +21,8 @@ use glam::DVec3;
 
 use crate::bounds::Bounds;
 use crate::check::{CHECK_RESOLUTION, sample_stats};
+use crate::expr_jit::Native;
+use crate::expr_tape::Tape;
 use crate::features::{Enclosed, FeatureMap};
 use crate::field::{FieldError, FieldSample, IndexField};
 use crate::interval::{Interval, IntervalFlat, Positivity, certify_positive};
@@ -108,6 +110,9 @@ pub struct ExprField {
     positivity: Option<String>,
     /// d n / d(x, y, z); `None` where the formula does not use that coordinate.
     grad: [Option<Compiled>; 3],
+    /// The formula and its gradient as machine code (crate::expr_jit), where the
+    /// compiler reads the formula; the interpreter above stays the reference.
+    native: Option<std::sync::Arc<Native>>,
     bounds: Bounds,
     ambient: f64,
     n_range: (f64, f64),
@@ -375,6 +380,9 @@ impl ExprField {
             features: std::sync::OnceLock::new(),
             positivity: None,
             grad,
+            native: Tape::new(text)
+                .and_then(|tape| Native::compile(&tape))
+                .map(std::sync::Arc::new),
             bounds,
             ambient,
             n_range: (0.0, 0.0),
@@ -511,8 +519,10 @@ impl Enclosed for ExprField {
     }
 }
 
-impl IndexField for ExprField {
-    fn sample(&self, p: DVec3) -> FieldSample<f64> {
+impl ExprField {
+    /// n and grad n by the interpreter (exmex and its symbolic derivatives): the
+    /// reference the compiled code is tested against.
+    pub fn sample_interpreted(&self, p: DVec3) -> FieldSample<f64> {
         let xyzt = [p.x, p.y, p.z, self.t];
         let d = |g: &Option<Compiled>| g.as_ref().map_or(0.0, |c| c.eval(&xyzt));
         FieldSample {
@@ -520,8 +530,31 @@ impl IndexField for ExprField {
             grad_n: DVec3::new(d(&self.grad[0]), d(&self.grad[1]), d(&self.grad[2])),
         }
     }
+
+    /// Whether the formula runs as machine code (else it is interpreted).
+    pub fn is_compiled(&self) -> bool {
+        self.native.is_some()
+    }
+}
+
+impl IndexField for ExprField {
+    fn sample(&self, p: DVec3) -> FieldSample<f64> {
+        match &self.native {
+            Some(code) => {
+                let [n, gx, gy, gz] = code.sample([p.x, p.y, p.z, self.t]);
+                FieldSample {
+                    n,
+                    grad_n: DVec3::new(gx, gy, gz),
+                }
+            }
+            None => self.sample_interpreted(p),
+        }
+    }
     fn n(&self, p: DVec3) -> f64 {
-        self.n.eval(&[p.x, p.y, p.z, self.t])
+        match &self.native {
+            Some(code) => code.n([p.x, p.y, p.z, self.t]),
+            None => self.n.eval(&[p.x, p.y, p.z, self.t]),
+        }
     }
     fn bounds(&self) -> Bounds {
         self.bounds
@@ -811,5 +844,115 @@ mod tests {
         let m = e.to_string();
         assert!(!m.contains(" ops and "), "{m}");
         assert!(m.contains("does not parse"), "{m}");
+    }
+
+    /// Formulas from grin's scenes, tests and benches, and the forms people write.
+    const CORPUS: &[&str] = &[
+        "1.6 - 0.05*(x^2 + y^2)",
+        "1 + 0.05*exp(-(x*x + (y-0.5)^2 + z*z)/0.1)",
+        "sqrt(2 - (x^2 + (y - 0.5)^2 + z^2) / 3.6)",
+        "1 + 0.12*(1 - (x*x + (y - 0.6)*(y - 0.6) + (z + 0.6)*(z + 0.6))/3.6)",
+        "1.0003 - 5e-3*exp(-((x*x+y*y-0.12)^2)/0.005)*(1+0.5*sin(3*z))",
+        "1.25 - 0.25*tanh((x*x+y*y+z*z - 0.25)/0.002)",
+        "1 - 0.3*exp(-((x-0.0833)^2 + (y-0.0833)^2 + (z-0.0833)^2)/0.0004)",
+        "1 + 0.5*sin(x + t)",
+        "1.2 + 0.01*sin(x - t)",
+        "3 - 2*(y - 0.5) + 0.3*x*y/2*z",
+        "20 + 2*x*3 + 4*(y + 1)*5 - 2*3/(4 + x^2) + 1 + 2 + 3*y",
+        "2 + 0.1*(x + 2)^y + 0.1*x^3 - 0.01*y^4 + 0.1*(1.5 + z)^0.5 - -x*0.01",
+        "1.3 + 0.1*cosh(x/3) - 0.1*sinh(y/3) + 0.1*ln(3 + z) + 0.1*log10(3 + x) + 0.1*asinh(y + 4) + 0.1*acosh(2 + x*y)",
+        "PI/3 + 0.1*E*sin(TAU*x) + 0.01*log2(4 + y^2)",
+    ];
+
+    /// A small generator of well-conditioned formulas for fuzzing the compiler: sums of
+    /// smooth terms around 1.5 (no cancellation that would make any rounding order
+    /// look wrong).
+    fn fuzz_formula(next: &mut impl FnMut() -> f64) -> String {
+        let mut pick = |k: usize| ((next() * 0.5 + 0.5) * k as f64) as usize % k;
+        let var = ["x", "y", "z", "t"];
+        let funcs = ["sin", "cos", "tanh", "atan", "exp", "sqrt", "ln", "asinh"];
+        let mut text = String::from("1.5");
+        for _ in 0..(1 + pick(5)) {
+            let c = format!("{:.3}", 0.05 + 0.2 * (pick(100) as f64 / 100.0));
+            let a = var[pick(4)];
+            let b = var[pick(4)];
+            let f = funcs[pick(funcs.len())];
+            let inner = match pick(6) {
+                0 => format!("{a}*{b}"),
+                1 => format!("({a} - {b}/2)^2"),
+                2 => format!("{a}^3*0.1 + {b}"),
+                3 => format!("{a}/(2 + {b}^2)"),
+                4 => format!("-({a}^2)*2 + 0.5*{b}"),
+                _ => format!("({a} + 3)^({b}/2) - {a}/(1 + {b}^2)*0.01"),
+            };
+            let inner = if f == "sqrt" || f == "ln" {
+                format!("1 + ({inner})^2")
+            } else if f == "exp" {
+                format!("-(({inner})^2)")
+            } else {
+                inner
+            };
+            let op = ["+", "-", "+"][pick(3)];
+            text.push_str(&format!(" {op} {c}*{f}({inner})"));
+            if pick(3) == 0 {
+                text.push_str(&format!("*{}", var[pick(4)]));
+            }
+        }
+        text
+    }
+
+    /// The compiled formula against the interpreter: n within 2 ulp of the largest of
+    /// |n| and 1 (the same arithmetic but for integer powers as products; measured: bit
+    /// for bit at 95% of the points, 1.4 ulp at worst), the gradient (forward
+    /// differentiation against exmex's symbolic derivative) within 1e-15 of the largest
+    /// of |grad n| and 1 (measured: 2.2e-16 at worst).
+    #[test]
+    fn compiled_formula_matches_the_interpreter() {
+        let bounds = Bounds::Box {
+            min: DVec3::splat(-1.0),
+            max: DVec3::splat(1.0),
+        };
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut texts: Vec<String> = CORPUS.iter().map(|s| (*s).to_owned()).collect();
+        for _ in 0..300 {
+            texts.push(fuzz_formula(&mut next));
+        }
+        let (mut worst_n, mut worst_g, mut identical, mut total) = (0.0f64, 0.0f64, 0usize, 0usize);
+        for text in &texts {
+            let f =
+                ExprField::new(text, bounds, 1.0, 0.3).unwrap_or_else(|e| panic!("{text}: {e}"));
+            assert!(f.is_compiled(), "{text} is not compiled");
+            for _ in 0..200 {
+                let p = DVec3::new(next(), next(), next()) * 0.99;
+                let (c, i) = (f.sample(p), f.sample_interpreted(p));
+                let ulp = f64::EPSILON * i.n.abs().max(1.0);
+                let dn = (c.n - i.n).abs() / ulp;
+                let dg = (c.grad_n - i.grad_n).abs().max_element()
+                    / i.grad_n.abs().max_element().max(1.0);
+                assert!(dn <= 2.0, "{text} at {p}: n {} vs {} ({dn} ulp)", c.n, i.n);
+                assert!(
+                    dg <= 1e-15,
+                    "{text} at {p}: grad {} vs {} ({dg:e})",
+                    c.grad_n,
+                    i.grad_n
+                );
+                assert_eq!(f.n(p).to_bits(), c.n.to_bits(), "{text}: n() and sample()");
+                worst_n = worst_n.max(dn);
+                worst_g = worst_g.max(dg);
+                identical += usize::from(c.n.to_bits() == i.n.to_bits());
+                total += 1;
+            }
+        }
+        eprintln!(
+            "{} formulas, {total} points: n bit for bit at {identical}, worst {worst_n} ulp; \
+             gradient worst {worst_g:e} relative",
+            texts.len()
+        );
     }
 }

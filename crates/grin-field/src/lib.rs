@@ -11,6 +11,8 @@ pub mod build;
 pub mod check;
 pub mod export;
 pub mod expr;
+pub mod expr_jit;
+pub mod expr_tape;
 pub mod features;
 pub mod field;
 pub mod grinf;
