@@ -304,6 +304,7 @@ impl StepController {
             delta,
             error: Some((er, et)),
             check: None,
+            quad: None,
             ..second
         };
         (step, err)

@@ -383,12 +383,14 @@ pub fn trace_ray_jittered<R: Real>(
         }
         let mut next = integrate::add_compensated(state, taken.step.delta, &mut comp);
         let mut h = taken.h;
+        let mut quad = taken.step.quad;
         if outside && is_finite_v::<R>(next.r) {
-            let (exit_state, exit_h, evals) =
-                exit_medium(field, settings, &bounds, state, &s0, &taken, exit_tol);
+            let (exit_state, exit_h, evals, exit_quad) =
+                exit_medium_quad(field, settings, &bounds, state, &s0, &taken, exit_tol);
             res.evals += u64::from(evals);
             next = exit_state;
             h = exit_h;
+            quad = exit_quad;
             comp = RayState::zero();
         }
         let s1 = match taken.step.end {
@@ -398,7 +400,7 @@ pub fn trace_ray_jittered<R: Real>(
                 R::sample_field(field, next.r)
             }
         };
-        let seg = accumulate(&mut res, state, &s0, next, &s1, h);
+        let seg = accumulate(&mut res, state, &s0, next, &s1, h, quad);
         // The ray's own error estimate: the step's reported local error, a fourth-order
         // step's companion against D at its end (not where the step was cut at the
         // surface: D there is not where its companion ends), or the low orders' formulas.
@@ -523,8 +525,9 @@ fn leave<R: Real>(
 }
 
 /// Add one step's length, optical path and swept vector (n, n^2 and n u integrated over t
-/// by the cubic Hermite rule: h/2 (f0 + f1) + h^2/12 (f0' - f1'), f' from n' = grad n . T
-/// and u' = grad n - u (u . grad n)) and return its segment.
+/// by the step's own quadrature where it has one (dopri: [`integrate::Quad`]), else by the
+/// cubic Hermite rule: h/2 (f0 + f1) + h^2/12 (f0' - f1'), f' from n' = grad n . T and
+/// u' = grad n - u (u . grad n)) and return its segment.
 fn accumulate<R: Real>(
     res: &mut RayResult,
     a: RayState<R>,
@@ -532,10 +535,25 @@ fn accumulate<R: Real>(
     b: RayState<R>,
     sb: &FieldSample<R>,
     h: R,
+    quad: Option<integrate::Quad>,
 ) -> Segment {
     let h = h.to_f64();
     let (n0, n1) = (sa.n.to_f64(), sb.n.to_f64());
     let (t0, t1) = (a.t.to_dvec3(), b.t.to_dvec3());
+    let segment = Segment {
+        r0: a.r.to_dvec3(),
+        t0,
+        r1: b.r.to_dvec3(),
+        t1,
+        h,
+    };
+    if let Some(q) = quad {
+        let (opl, length, swept) = q.with_start(n0, t0, h);
+        res.opl += opl;
+        res.length += length;
+        res.swept += swept;
+        return segment;
+    }
     let dn0 = sa.grad_n.to_dvec3().dot(t0);
     let dn1 = sb.grad_n.to_dvec3().dot(t1);
     let h2 = h * h / 12.0;
@@ -546,13 +564,7 @@ fn accumulate<R: Real>(
     let d_swept = |n: f64, dn: f64, u: DVec3, g: DVec3| u * dn + (g - u * u.dot(g)) * n;
     res.swept += (u0 * n0 + u1 * n1) * (0.5 * h)
         + (d_swept(n0, dn0, u0, g0) - d_swept(n1, dn1, u1, g1)) * h2;
-    Segment {
-        r0: a.r.to_dvec3(),
-        t0,
-        r1: b.r.to_dvec3(),
-        t1,
-        h,
-    }
+    segment
 }
 
 /// The step from `s` that `taken` made, as a segment (its Hermite cubic in f64).
@@ -612,6 +624,21 @@ pub fn exit_medium<R: Real>(
     taken: &Taken<R>,
     tol: f64,
 ) -> (RayState<R>, R, u32) {
+    let (state, h, evals, _) = exit_medium_quad(field, settings, bounds, s, s0, taken, tol);
+    (state, h, evals)
+}
+
+/// [`exit_medium`], with the quadrature of the step that reaches the surface where the
+/// integrator has one (the Hermite search's last re-step).
+pub fn exit_medium_quad<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    bounds: &Bounds,
+    s: RayState<R>,
+    s0: &FieldSample<R>,
+    taken: &Taken<R>,
+    tol: f64,
+) -> (RayState<R>, R, u32, Option<integrate::Quad>) {
     let kind = settings.integrator;
     let d0 = s0.n_grad_n();
     let sd = |p: DVec3| bounds.signed_distance(p);
@@ -633,7 +660,7 @@ pub fn exit_medium<R: Real>(
                     best = (st.state, hm);
                 }
                 if dist.abs() <= tol {
-                    return (st.state, hm, evals);
+                    return (st.state, hm, evals, st.quad);
                 }
                 if dist > 0.0 {
                     hi = mid;
@@ -647,7 +674,7 @@ pub fn exit_medium<R: Real>(
             // Precision exhausted (f32): the last point inside, on the surface.
             let (mut st, hm) = best;
             st.r = R::V3::from_dvec3(project_to_surface(bounds, st.r.to_dvec3()));
-            (st, hm, evals)
+            (st, hm, evals, None)
         }
         ExitMethod::Hermite => {
             let seg = segment_of_step(s, taken);
@@ -680,7 +707,7 @@ pub fn exit_medium<R: Real>(
             }
             let mut state = st.state;
             state.r = R::V3::from_dvec3(project_to_surface(bounds, state.r.to_dvec3()));
-            (state, R::from_f64(tau), evals)
+            (state, R::from_f64(tau), evals, st.quad)
         }
     }
 }

@@ -3,9 +3,10 @@
 //! so an accepted step costs 6 evaluations. The step returns the fifth-order solution and
 //! the difference to the fourth-order one as its local error estimate.
 
-use grin_field::{IndexField, Real};
+use glam::DVec3;
+use grin_field::{IndexField, Real, Vec3Like};
 
-use super::{RayState, Step, c};
+use super::{Quad, RayState, Step, c};
 
 /// Dormand & Prince (1980) tableau, rows a_ij (i = 2..7); row 7 equals the 5th-order weights.
 const A: [[f64; 6]; 6] = [
@@ -57,6 +58,9 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
     let mut r_end = s.r;
     let mut delta = RayState::zero();
     let mut end = None;
+    // The quadrature of n^2, n and n u over the stages 2..6 (the first is the caller's;
+    // the seventh has weight 0), in f64.
+    let (mut opl, mut length, mut swept) = (0.0, 0.0, DVec3::ZERO);
     for i in 1..7 {
         let row = &A[i - 1];
         let mut dr = s.t * c::<R>(row[0]);
@@ -73,6 +77,15 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
         ts[i] = s.t + delta.t;
         let sample = R::sample_field(field, ri);
         ds[i] = sample.n_grad_n();
+        // The fifth-order weights b_i are the last row of A (b_7 = 0).
+        let b = A[5].get(i).copied().unwrap_or(0.0);
+        if b != 0.0 {
+            let n = sample.n.to_f64();
+            let u = ts[i].to_dvec3().normalize_or_zero();
+            opl += b * n * n;
+            length += b * n;
+            swept += u * (b * n);
+        }
         // Stage 7 sits at the new point: r7 = r1, T7 = T1 (FSAL).
         r_end = ri;
         end = Some(sample);
@@ -90,5 +103,11 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
         end,
         error: Some((er * h, et * h)),
         check: None,
+        quad: Some(Quad {
+            b0: A[5][0],
+            opl: opl * h.to_f64(),
+            length: length * h.to_f64(),
+            swept: swept * h.to_f64(),
+        }),
     }
 }

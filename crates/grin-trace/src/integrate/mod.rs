@@ -49,6 +49,36 @@ pub struct Step<R: Real> {
     /// companion's: an overestimate by the ratio of their orders, as the adaptive pair's
     /// is) ([`crate::estimate`]).
     pub check: Option<R::V3>,
+    /// For dopri: the step's quadrature of the optical path, length and swept vector
+    /// with its own fifth-order weights, all stages but the first ([`Quad`]).
+    pub quad: Option<Quad>,
+}
+
+/// A step's integrals of n^2 (optical path), n (length) and n u (swept vector) over t,
+/// by the integrator's own weights b_i at its stages, without the first stage's term:
+/// the caller, who holds n and T at the start, adds it ([`Quad::with_start`]). With
+/// dopri's fifth-order weights the optical path is as accurate as the position; the cubic
+/// Hermite rule the tracer uses otherwise is fourth order, and at dopri's long steps its
+/// optical path was 20-370x less accurate than the exit position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quad {
+    pub b0: f64,
+    pub opl: f64,
+    pub length: f64,
+    pub swept: glam::DVec3,
+}
+
+impl Quad {
+    /// The whole step's integrals: the first stage's term (n0, T0, over `h`) added.
+    pub fn with_start(self, n0: f64, t0: glam::DVec3, h: f64) -> (f64, f64, glam::DVec3) {
+        let w = self.b0 * h;
+        let u0 = t0.normalize_or_zero();
+        (
+            self.opl + w * n0 * n0,
+            self.length + w * n0,
+            self.swept + u0 * (w * n0),
+        )
+    }
 }
 
 impl<R: Real> Step<R> {
@@ -64,6 +94,7 @@ impl<R: Real> Step<R> {
             end: None,
             error: None,
             check: None,
+            quad: None,
         }
     }
 }

@@ -20,5 +20,6 @@ pub fn verlet_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h
         end: Some(end),
         error: None,
         check: None,
+        quad: None,
     }
 }
