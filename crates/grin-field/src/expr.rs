@@ -862,6 +862,7 @@ mod tests {
         "2 + 0.1*(x + 2)^y + 0.1*x^3 - 0.01*y^4 + 0.1*(1.5 + z)^0.5 - -x*0.01",
         "1.3 + 0.1*cosh(x/3) - 0.1*sinh(y/3) + 0.1*ln(3 + z) + 0.1*log10(3 + x) + 0.1*asinh(y + 4) + 0.1*acosh(2 + x*y)",
         "PI/3 + 0.1*E*sin(TAU*x) + 0.01*log2(4 + y^2)",
+        "1.1 + 1e-4*x^0*y + 1e-4*x^1*y + 1e-4*x^2*y + 1e-4*x^3*y + 1e-4*x^4*y",
     ];
 
     /// A small generator of well-conditioned formulas for fuzzing the compiler: sums of

@@ -312,6 +312,19 @@ impl Builder {
             }
             Tree::Bin(f, a, b) => {
                 let (a, ga) = self.emit(a);
+                // powf(a, 0) is 1 and powf(a, 1) is a, exactly and for every a (the
+                // rule below would give 0 * a^-1 = NaN at a = 0, where exmex's symbolic
+                // derivative has 0).
+                if *f == Bin::Pow
+                    && let Tree::Num(k) = **b
+                    && (k == 0.0 || k == 1.0)
+                {
+                    return if k == 0.0 {
+                        (self.c(1.0), [None; 3])
+                    } else {
+                        (a, ga)
+                    };
+                }
                 // An integer power 2..=4 is a product (the interpreter's powf, within 1
                 // ulp per power).
                 if *f == Bin::Pow
@@ -729,6 +742,9 @@ mod tests {
         assert_eq!(eval("2 ^ -x", p)[0], 0.25);
         assert_eq!(eval("max(x, y) - min(x, y)", p)[0], 1.0);
         assert_eq!(eval("1e-2*x + .5 + 3.", p)[0], 0.02 + 3.5);
+        // x^0 and x^1 at x = 0: gradient 0 and 1, not NaN.
+        let g = eval("x^0*y + x^1*y", [0.0, 2.0, 0.0, 0.0]);
+        assert_eq!(g, [2.0, 2.0, 1.0, 0.0]);
     }
 
     #[test]
