@@ -550,6 +550,20 @@ impl IndexField for ExprField {
             None => self.sample_interpreted(p),
         }
     }
+    fn sample4(&self, p: [[f64; 4]; 3], out: &mut [[f64; 4]; 4]) {
+        match &self.native {
+            Some(code) => code.sample4(p, self.t, out),
+            None => {
+                for i in 0..4 {
+                    let s = self.sample_interpreted(DVec3::new(p[0][i], p[1][i], p[2][i]));
+                    out[0][i] = s.n;
+                    out[1][i] = s.grad_n.x;
+                    out[2][i] = s.grad_n.y;
+                    out[3][i] = s.grad_n.z;
+                }
+            }
+        }
+    }
     fn n(&self, p: DVec3) -> f64 {
         match &self.native {
             Some(code) => code.n([p.x, p.y, p.z, self.t]),

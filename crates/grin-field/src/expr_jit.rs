@@ -28,6 +28,10 @@ pub struct Native {
     module: Option<JITModule>,
     sample: Entry,
     n_only: Entry,
+    /// Four points at once in two-lane vectors (inputs x[4], y[4], z[4], t[4]; outputs
+    /// n[4], dn/dx[4], dn/dy[4], dn/dz[4]); `None` where the host's vector instructions
+    /// cannot express the formula (then the scalar entry runs four times).
+    sample4: Option<Entry>,
 }
 
 // SAFETY: after `finalize_definitions` the module is never touched again but by `Drop`
@@ -74,9 +78,15 @@ impl Native {
         let mut module = JITModule::new(jb);
         let sample = define(&mut module, tape, "grin_expr_sample", &tape.outputs)?;
         let n_only = define(&mut module, tape, "grin_expr_n", &tape.outputs[..1])?;
+        let sample4 = define_x2(&mut module, tape, "grin_expr_sample4");
         module.finalize_definitions().ok()?;
         let sample_ptr = module.get_finalized_function(sample);
         let n_ptr = module.get_finalized_function(n_only);
+        let sample4 = sample4.map(|id| {
+            let ptr = module.get_finalized_function(id);
+            // SAFETY: defined by `define_x2` with the signature `Entry` describes, final.
+            unsafe { std::mem::transmute::<*const u8, Entry>(ptr) }
+        });
         // SAFETY: both functions were defined above with the signature `Entry` describes
         // (two pointer arguments, no result, the platform's C convention) and are final.
         let (sample, n_only) = unsafe {
@@ -89,7 +99,28 @@ impl Native {
             module: Some(module),
             sample,
             n_only,
+            sample4,
         })
+    }
+
+    /// n, dn/dx, dn/dy, dn/dz at four points (x, y, z per lane; one time t), as four
+    /// lanes each: the same values as [`Self::sample`] at each point, bit for bit.
+    #[inline]
+    pub fn sample4(&self, p: [[f64; 4]; 3], t: f64, out: &mut [[f64; 4]; 4]) {
+        match self.sample4 {
+            Some(f) => {
+                let inp = [p[0], p[1], p[2], [t; 4]];
+                f(inp.as_ptr().cast(), out.as_mut_ptr().cast());
+            }
+            None => {
+                for i in 0..4 {
+                    let s = self.sample([p[0][i], p[1][i], p[2][i], t]);
+                    for (o, v) in out.iter_mut().zip(s) {
+                        o[i] = v;
+                    }
+                }
+            }
+        }
     }
 
     /// n, dn/dx, dn/dy, dn/dz at (x, y, z) and time t.
@@ -211,6 +242,119 @@ fn define(
     module.define_function(id, &mut ctx).ok()?;
     module.clear_context(&mut ctx);
     Some(id)
+}
+
+/// Define the four-point function: the tape twice (points 0-1, then 2-3) in two-lane
+/// vectors. Arithmetic, square roots and rounding are vector instructions; the calls and
+/// comparisons run lane by lane. `None` where a vector instruction does not compile on
+/// this host.
+fn define_x2(module: &mut JITModule, tape: &Tape, name: &str) -> Option<cranelift_module::FuncId> {
+    let ptr = module.target_config().pointer_type();
+    let mut ctx = module.make_context();
+    ctx.func.signature.params.push(AbiParam::new(ptr));
+    ctx.func.signature.params.push(AbiParam::new(ptr));
+    let id = module
+        .declare_function(name, Linkage::Local, &ctx.func.signature)
+        .ok()?;
+    let mut fctx = FunctionBuilderContext::new();
+    let x2 = types::F64X2;
+    {
+        let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
+        let block = b.create_block();
+        b.append_block_params_for_function_params(block);
+        b.switch_to_block(block);
+        b.seal_block(block);
+        let (inp, out) = (b.block_params(block)[0], b.block_params(block)[1]);
+        let flags = MemFlagsData::trusted();
+        for half in 0..2i32 {
+            let mut vals: Vec<Option<Value>> = vec![None; tape.ops.len()];
+            for (i, op) in tape.ops.iter().enumerate() {
+                let arg = |k: u32| vals[k as usize];
+                let v = match *op {
+                    Op::Const(c) => {
+                        let s = b.ins().f64const(c);
+                        b.ins().splat(x2, s)
+                    }
+                    Op::Var(k) => b.ins().load(x2, flags, inp, i32::from(k) * 32 + half * 16),
+                    Op::Un(f, a) => {
+                        let a = arg(a)?;
+                        match f {
+                            Un::Neg => b.ins().fneg(a),
+                            Un::Abs => b.ins().fabs(a),
+                            Un::Sqrt => b.ins().sqrt(a),
+                            Un::Floor => b.ins().floor(a),
+                            Un::Ceil => b.ins().ceil(a),
+                            Un::Trunc => b.ins().trunc(a),
+                            Un::Fract => {
+                                let t = b.ins().trunc(a);
+                                b.ins().fsub(a, t)
+                            }
+                            _ => {
+                                let sym = unary_symbol(f);
+                                per_lane(&mut b, &[a], |b, s| call(module, b, sym, s))?
+                            }
+                        }
+                    }
+                    Op::Bin(f, a, c) => {
+                        let (a, c) = (arg(a)?, arg(c)?);
+                        match f {
+                            Bin::Add => b.ins().fadd(a, c),
+                            Bin::Sub => b.ins().fsub(a, c),
+                            Bin::Mul => b.ins().fmul(a, c),
+                            Bin::Div => b.ins().fdiv(a, c),
+                            Bin::Le => per_lane(&mut b, &[a, c], |b, s| {
+                                let cond = b.ins().fcmp(FloatCC::LessThanOrEqual, s[0], s[1]);
+                                let one = b.ins().f64const(1.0);
+                                let zero = b.ins().f64const(0.0);
+                                Some(b.ins().select(cond, one, zero))
+                            })?,
+                            Bin::Pow => per_lane(&mut b, &[a, c], |b, s| {
+                                call(module, b, "grin_expr_pow", s)
+                            })?,
+                            Bin::Atan2 => per_lane(&mut b, &[a, c], |b, s| {
+                                call(module, b, "grin_expr_atan2", s)
+                            })?,
+                            Bin::Min => per_lane(&mut b, &[a, c], |b, s| {
+                                call(module, b, "grin_expr_min", s)
+                            })?,
+                            Bin::Max => per_lane(&mut b, &[a, c], |b, s| {
+                                call(module, b, "grin_expr_max", s)
+                            })?,
+                        }
+                    }
+                };
+                vals[i] = Some(v);
+            }
+            for (k, &o) in tape.outputs.iter().enumerate() {
+                let v = vals[o as usize]?;
+                let offset = i32::try_from(k * 32).ok()? + half * 16;
+                b.ins().store(flags, v, out, offset);
+            }
+        }
+        b.ins().return_(&[]);
+        b.finalize(module.target_config());
+    }
+    module.define_function(id, &mut ctx).ok()?;
+    module.clear_context(&mut ctx);
+    Some(id)
+}
+
+/// `f` on each lane of the two-lane vectors `args`, the results put back together.
+fn per_lane(
+    b: &mut FunctionBuilder<'_>,
+    args: &[Value],
+    mut f: impl FnMut(&mut FunctionBuilder<'_>, &[Value]) -> Option<Value>,
+) -> Option<Value> {
+    let mut lanes = [None; 2];
+    for (lane, slot) in lanes.iter_mut().enumerate() {
+        let scalars: Vec<Value> = args
+            .iter()
+            .map(|&a| b.ins().extractlane(a, lane as u8))
+            .collect();
+        *slot = Some(f(b, &scalars)?);
+    }
+    let v = b.ins().scalar_to_vector(types::F64X2, lanes[0]?);
+    Some(b.ins().insertlane(v, lanes[1]?, 1))
 }
 
 /// A call of the Rust function registered as `sym` (f64 arguments, one f64 result).
@@ -352,6 +496,25 @@ mod tests {
                     );
                 }
                 assert_eq!(native.n(p).to_bits(), want[0].to_bits(), "{text}");
+            }
+            assert!(native.sample4.is_some(), "{text}: no four-point code");
+            for _ in 0..500 {
+                let pts: [[f64; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| next()));
+                let t = next();
+                let mut out = [[0.0; 4]; 4];
+                native.sample4(pts, t, &mut out);
+                for i in 0..4 {
+                    let want = tape.eval([pts[0][i], pts[1][i], pts[2][i], t]);
+                    for k in 0..4 {
+                        assert!(
+                            want[k].to_bits() == out[k][i].to_bits()
+                                || (want[k].is_nan() && out[k][i].is_nan()),
+                            "{text}: four-point lane {i} output {k}: {} vs {}",
+                            want[k],
+                            out[k][i]
+                        );
+                    }
+                }
             }
         }
     }

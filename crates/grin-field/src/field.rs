@@ -39,6 +39,20 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         }
     }
 
+    /// n and grad n at four points at once, as lanes: `p` holds the points' x, y and z,
+    /// `out` receives n, dn/dx, dn/dy, dn/dz. The same values as [`Self::sample`] at each
+    /// point, bit for bit; fields that compute several points faster together override it
+    /// (an `expr` formula's compiled code works in two-lane vectors).
+    fn sample4(&self, p: [[f64; 4]; 3], out: &mut [[f64; 4]; 4]) {
+        for i in 0..4 {
+            let s = self.sample(DVec3::new(p[0][i], p[1][i], p[2][i]));
+            out[0][i] = s.n;
+            out[1][i] = s.grad_n.x;
+            out[2][i] = s.grad_n.y;
+            out[3][i] = s.grad_n.z;
+        }
+    }
+
     /// n alone (cheaper for fields that can skip the gradient).
     fn n(&self, p: DVec3) -> f64 {
         self.sample(p).n

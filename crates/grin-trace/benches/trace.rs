@@ -86,6 +86,49 @@ fn bench_field<R: Real>(c: &mut Criterion, name: &str, f: &dyn IndexField, preci
     group.finish();
 }
 
+/// rk4 at fixed steps of 0.01 R, the same beam ray by ray and in packets
+/// (grin_trace::packet: the same results bit for bit), one thread.
+fn bench_packets(c: &mut Criterion, name: &str, f: &dyn IndexField) {
+    let (lo, hi) = f.bounds().aabb();
+    let c0 = (lo + hi) * 0.5;
+    let half = (hi - lo) * 0.5;
+    // The beam scaled to the medium, along its longest axis (z for all three here).
+    let rays: Vec<(DVec3, DVec3)> = beam()
+        .into_iter()
+        .map(|(o, d)| {
+            let o = DVec3::new(c0.x + o.x * half.x, c0.y + o.y * half.y, lo.z - 1.0);
+            (o, d)
+        })
+        .collect();
+    let settings = TraceSettings {
+        integrator: IntegratorKind::Rk4,
+        step: StepSpec::Fixed(0.01 * f.bounds().radius()),
+        max_steps: 1 << 20,
+        exit: ExitMethod::Hermite,
+        macro_cells: true,
+        accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+        estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+    };
+    let mut group = c.benchmark_group(format!("packets/{name}"));
+    group.throughput(Throughput::Elements(rays.len() as u64));
+    group.bench_function("ray-by-ray", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for (o, d) in &rays {
+                acc += trace_ray::<f64>(f, &settings, *o, *d).opl;
+            }
+            std::hint::black_box(acc)
+        })
+    });
+    group.bench_function("packets", |b| {
+        b.iter(|| {
+            let out = grin_trace::packet::trace_packets(f, &settings, &rays);
+            std::hint::black_box(out.iter().map(|r| r.opl).sum::<f64>())
+        })
+    });
+    group.finish();
+}
+
 fn benches(c: &mut Criterion) {
     let luneburg = field(
         FieldSpec::Luneburg { radius: None },
@@ -109,6 +152,19 @@ fn benches(c: &mut Criterion) {
             max: [1.0; 3],
         },
     );
+    bench_packets(c, "luneburg", luneburg.as_ref());
+    bench_packets(c, "plume", plume.as_ref());
+    let rod = grin_field::expr::ExprField::new(
+        "1.6 - 0.05*(x^2 + y^2)",
+        grin_field::Bounds::Box {
+            min: DVec3::new(-2.0, -2.0, 0.0),
+            max: DVec3::new(2.0, 2.0, 10.0),
+        },
+        1.0,
+        0.0,
+    )
+    .expect("rod");
+    bench_packets(c, "expr-rod", &rod);
     bench_field::<f64>(c, "luneburg", luneburg.as_ref(), "f64");
     bench_field::<f32>(c, "luneburg", luneburg.as_ref(), "f32");
     bench_field::<f64>(c, "plume", plume.as_ref(), "f64");

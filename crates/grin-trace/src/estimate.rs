@@ -50,35 +50,35 @@ pub const POSITION_SAFETY: f64 = 4.0;
 #[derive(Debug, Clone, Copy)]
 pub struct ErrorEstimate {
     /// The integrator's order (the difference formulas for 1 and 2).
-    order: u32,
+    pub(crate) order: u32,
     /// Symplectic Euler: T is staggered half a step from r (`staggered_half`: h/2 D at
     /// the last step end, what T is off by there).
-    staggered: bool,
-    staggered_half: DVec3,
+    pub(crate) staggered: bool,
+    pub(crate) staggered_half: DVec3,
     /// The position errors' feedback on the direction, summed so far (rad; the local
     /// direction errors are in `vsum`).
-    sum: f64,
+    pub(crate) sum: f64,
     /// The ray's bending so far, integral of |D across T| / n dt (rad).
-    bend: f64,
+    pub(crate) bend: f64,
     /// The position error so far (world length): each step's own, plus the direction
     /// error so far carried over the step's length.
-    pos: f64,
+    pub(crate) pos: f64,
     /// The path came closer to the surface than its position error without leaving (a
     /// near miss), or a step turned T by more than a right angle: where it leaves is
     /// uncertain, wherever that is.
-    near_miss: bool,
+    pub(crate) near_miss: bool,
     /// D and the t-step of the previous step (order 2), while the samples are a smooth
     /// sequence (reset at flights and reflections).
-    prev: Option<(DVec3, f64)>,
+    pub(crate) prev: Option<(DVec3, f64)>,
     /// The last local errors (direction across the ray, position) a step reported: a
     /// step that reports none (a fourth-order step cut at the surface, whose companion
     /// needs D where the uncut step would have ended) is counted as the one before it.
-    last: (DVec3, f64),
+    pub(crate) last: (DVec3, f64),
     /// The local direction errors so far, summed as vectors (over n): a method's leading
     /// error terms along a weakly bending ray are differences of D that telescope (euler's
     /// h/2 (D1 - D0) sums to h/2 (D_end - D_start)), which a sum of magnitudes counts as
     /// if each added.
-    vsum: DVec3,
+    pub(crate) vsum: DVec3,
 }
 
 impl ErrorEstimate {

@@ -5,6 +5,7 @@ pub mod auto;
 pub mod boundary;
 pub mod estimate;
 pub mod integrate;
+pub mod packet;
 pub mod step;
 pub mod table;
 pub mod trace;

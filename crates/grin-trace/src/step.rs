@@ -135,6 +135,21 @@ impl StepController {
         self
     }
 
+    /// The fixed step (world length) the next [`Self::take`] takes before its caps, when
+    /// the policy is a fixed step and the first step's jitter is spent.
+    pub(crate) fn fixed_ds(&self) -> Option<f64> {
+        match self.spec {
+            StepSpec::Fixed(ds) if self.jitter == 1.0 => Some(ds),
+            _ => None,
+        }
+    }
+
+    /// No step is longer than this ([`FEATURE_STEP_FRACTION`] of the field's feature
+    /// size; infinite without one).
+    pub(crate) fn feature_cap(&self) -> f64 {
+        self.feature_cap
+    }
+
     /// The error-controlled step the next [`Self::take`] tries first.
     pub fn current_ds(&self) -> f64 {
         self.ds_adapt

@@ -362,12 +362,27 @@ pub fn parse_rays(text: &str, path: &Path) -> Result<RayTable, TableError> {
     RayReader::new(text.as_bytes(), path)?.read_all()
 }
 
-/// Trace every row in parallel (rayon) in precision `R`.
+/// Rows a packet tracer takes from the table at a time (crate::packet).
+const PACKET_CHUNK: usize = 256;
+
+/// Trace every row in parallel (rayon) in precision `R`: in packets
+/// ([`crate::packet::trace_packets`], the same results) where the settings and the
+/// precision (f64) allow, else ray by ray.
 pub fn trace_rows<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
     rows: &[RayRow],
 ) -> Vec<RayResult> {
+    if R::EPS.to_f64() == f64::EPSILON && crate::packet::packets_apply(settings) {
+        return rows
+            .par_chunks(PACKET_CHUNK)
+            .flat_map_iter(|chunk| {
+                let rays: Vec<(DVec3, DVec3)> =
+                    chunk.iter().map(|row| (row.origin, row.dir)).collect();
+                crate::packet::trace_packets(field, settings, &rays)
+            })
+            .collect();
+    }
     rows.par_iter()
         .map(|row| trace_ray::<R>(field, settings, row.origin, row.dir))
         .collect()

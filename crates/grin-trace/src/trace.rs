@@ -197,272 +197,333 @@ pub fn trace_ray_jittered<R: Real>(
     first_step_scale: f64,
     observer: &mut dyn FnMut(&Segment) -> Control,
 ) -> RayResult {
-    let mut res = RayResult {
-        status: RayStatus::Error,
-        position: origin,
-        direction: DVec3::ZERO,
-        opl: 0.0,
-        length: 0.0,
-        swept: DVec3::ZERO,
-        steps: 0,
-        evals: 0,
-        transmittance: 1.0,
-        error_estimate: 0.0,
-        crossing_uncertainty: 0.0,
-    };
-    let len2 = dir.length_squared();
-    if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
-        res.direction = if dir.is_finite() && len2 > 0.0 {
-            dir.normalize()
-        } else {
-            DVec3::ZERO
-        };
-        return res;
-    }
-    let d = dir / len2.sqrt();
-    res.direction = d;
-    let bounds = field.bounds();
-    let n_amb = field.ambient_index();
-
-    // Direction error the crossings of the bounds add (the field's n uncertainty,
-    // amplified at grazing angles): the entry's here, the exit's in `leave`.
-    let mut surface = Surface {
-        n_amb,
-        dn: field.n_uncertainty(),
-        error: 0.0,
-        accuracy: settings.accuracy,
-        estimate_limit: settings.estimate_limit,
-    };
-    // Entry (the field sampled where the ray enters is the march's first sample).
-    let (start, d_in, s_entry) = if bounds.signed_distance(origin) < 0.0 {
-        (origin, d, None)
-    } else {
-        let Some((s_in, s_out)) = bounds.intersect(origin, d) else {
-            res.status = RayStatus::Missed;
-            return res;
-        };
-        if s_out < 0.0 || s_out <= s_in {
-            res.status = RayStatus::Missed;
-            return res;
-        }
-        let p = origin + d * s_in.max(0.0);
-        let entry = R::sample_field(field, R::V3::from_dvec3(p));
-        let n_in = entry.n.to_f64();
-        res.evals += 1;
-        if !(n_in.is_finite() && n_in > 0.0) {
-            res.position = p;
-            return res;
-        }
-        surface.error += refraction_uncertainty(d, bounds.normal(p), n_amb, n_in, n_in, surface.dn);
-        match refract(d, bounds.normal(p), n_amb, n_in) {
-            Interface::Transmitted { dir, reflectance } => {
-                res.transmittance *= 1.0 - reflectance;
-                (p, dir, Some(entry))
-            }
-            Interface::Reflected { dir } => {
-                res.crossing_uncertainty = surface.error;
-                res.status = if surface.error > CROSSING_FACTOR * settings.accuracy {
-                    RayStatus::Degraded
-                } else {
-                    RayStatus::Exited
-                };
-                res.position = p;
-                res.direction = dir;
-                return res;
-            }
-        }
-    };
-
-    let (mut r, skip) = if s_entry.is_some() {
-        nudge_inside::<R>(&bounds, start, d_in)
-    } else {
-        (R::V3::from_dvec3(start), 0.0)
-    };
-    let mut s0 = match s_entry {
-        Some(s) => s,
-        None => {
-            res.evals += 1;
-            R::sample_field(field, r)
-        }
-    };
-    // The field's pull over the skipped length (one Euler step of dT/ds = grad n).
-    let mut state = RayState {
-        r,
-        t: R::V3::from_dvec3(d_in) * s0.n + s0.grad_n * R::from_f64(skip),
-    };
-    // Roundoff of the state updates not yet added in (compensated summation, reset at
-    // every jump of the state: straight flights, surface hits, reflections).
-    let mut comp = RayState::<R>::zero();
-    let mut ctrl = StepController::new(settings.step, settings.integrator, field)
-        .with_jitter(first_step_scale);
-    let len_scale = bounds.radius();
-    let exit_tol = exit_tolerance::<R>(&bounds);
-    let mut estimate = ErrorEstimate::for_integrator(settings.integrator);
-    let min_flight =
-        (MIN_SPAN_REL * len_scale).max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
-
-    loop {
-        r = state.r;
-        res.position = r.to_dvec3();
-        res.direction = Vec3Like::to_dvec3(state.t).normalize_or_zero();
-        let n_ok = s0.n.is_finite() && s0.n > R::zero();
-        if !is_finite_v::<R>(r) || !is_finite_v::<R>(state.t) || !n_ok {
-            res.status = RayStatus::Error;
-            return res;
-        }
-        if res.steps >= settings.max_steps {
-            res.status = RayStatus::MaxSteps;
-            return res;
-        }
-
-        // Straight flight through a homogeneous macro cell.
-        if settings.macro_cells
-            && let Some(span) = field.homogeneous_span(res.position, res.direction)
-            && span > min_flight
-        {
-            let p = res.position;
-            let dir_w = res.direction;
-            let to_exit = bounds
-                .intersect(p, dir_w)
-                .map_or(0.0, |(_, s_out)| s_out.max(0.0));
-            let fly = span.min(to_exit);
-            let exits = span >= to_exit;
-            let mut p1 = p + dir_w * fly;
-            if exits {
-                p1 = project_to_surface(&bounds, p1);
-            }
-            let n = s0.n.to_f64();
-            res.length += fly;
-            res.opl += n * fly;
-            res.swept += dir_w * fly;
-            res.steps += 1;
-            let seg = Segment {
-                r0: p,
-                t0: dir_w * n,
-                r1: p1,
-                t1: dir_w * n,
-                h: fly / n,
-            };
-            if observer(&seg) == Control::Stop {
-                res.status = RayStatus::Absorbed;
-                res.position = p1;
-                return res;
-            }
-            state.r = R::V3::from_dvec3(p1);
-            comp = RayState::zero();
-            s0 = R::sample_field(field, state.r);
-            res.evals += 1;
-            estimate.break_sequence();
-            if exits {
-                match leave(
-                    &bounds,
-                    &mut res,
-                    &mut state,
-                    &s0,
-                    p1,
-                    &mut estimate,
-                    &mut surface,
-                ) {
-                    Some(done) => return done,
-                    None => continue,
-                }
-            }
-            continue;
-        }
-
-        let mut taken: Taken<R> = ctrl.take(field, state, &s0);
-        res.evals += u64::from(taken.evals);
-        let mut outside = bounds.signed_distance(taken.step.state.r.to_dvec3()) > 0.0;
-        if !outside && let Some(cut) = excursion_step(field, settings, &bounds, state, &s0, &taken)
-        {
-            // The step left the medium and came back between its ends: cut it where it
-            // is outside, so the exit search below finds the first crossing (no tunnel).
-            res.evals += u64::from(cut.evals);
-            taken = cut;
-            outside = true;
-        }
-        let mut next = integrate::add_compensated(state, taken.step.delta, &mut comp);
-        let mut h = taken.h;
-        let mut quad = taken.step.quad;
-        if outside && is_finite_v::<R>(next.r) {
-            let (exit_state, exit_h, evals, exit_quad) =
-                exit_medium_quad(field, settings, &bounds, state, &s0, &taken, exit_tol);
-            res.evals += u64::from(evals);
-            next = exit_state;
-            h = exit_h;
-            quad = exit_quad;
-            comp = RayState::zero();
-        }
-        let s1 = match taken.step.end {
-            Some(e) if !outside => e,
-            _ => {
-                res.evals += 1;
-                R::sample_field(field, next.r)
-            }
-        };
-        let seg = accumulate(&mut res, state, &s0, next, &s1, h, quad);
-        // The ray's own error estimate: the step's reported local error, a fourth-order
-        // step's companion against D at its end (not where the step was cut at the
-        // surface: D there is not where its companion ends), or the low orders' formulas.
-        {
-            let d1 = s1.n_grad_n().to_dvec3();
-            let h64 = h.to_f64();
-            let reported = match (taken.step.error, taken.step.check) {
-                (Some((er, et)), _) => Some((er.to_dvec3(), et.to_dvec3())),
-                (None, Some(check)) if !outside => {
-                    let et = (d1 - check.to_dvec3()) * (h64 / 6.0);
-                    Some((et * (0.5 * h64), et))
-                }
-                _ => None,
-            };
-            estimate.step(
-                state.t.to_dvec3(),
-                next.t.to_dvec3(),
-                s0.n_grad_n().to_dvec3(),
-                d1,
-                h64,
-                s0.n.to_f64(),
-                reported,
-            );
-            if !outside {
-                let p = next.r.to_dvec3();
-                estimate.check_approach(
-                    -bounds.signed_distance(p),
-                    bounds.normal(p),
-                    next.t.to_dvec3(),
-                    s1.n.to_f64(),
-                    d1,
-                );
-            }
-        }
-        res.steps += 1;
-        if observer(&seg) == Control::Stop {
-            res.status = RayStatus::Absorbed;
-            res.position = seg.r1;
-            res.direction = seg.t1.normalize_or_zero();
-            return res;
-        }
-        state = next;
-        s0 = s1;
-        if outside {
-            let p = state.r.to_dvec3();
-            if let Some(done) = leave(
-                &bounds,
-                &mut res,
-                &mut state,
-                &s0,
-                p,
-                &mut estimate,
-                &mut surface,
-            ) {
+    match March::<R>::begin(field, settings, origin, dir, first_step_scale) {
+        Err(done) => done,
+        Ok(mut march) => loop {
+            if let Some(done) = march.advance(field, settings, observer) {
                 return done;
             }
+        },
+    }
+}
+
+/// A ray on its way through the medium: everything the step loop carries from one step
+/// to the next. [`March::begin`] enters the medium, [`March::advance`] takes one step (or
+/// straight flight) and says when the ray is done; the packet tracer
+/// (crate::packet) takes the plain steps inside of several rays at once between them.
+#[derive(Debug, Clone)]
+pub struct March<R: Real> {
+    pub(crate) res: RayResult,
+    pub(crate) state: RayState<R>,
+    pub(crate) s0: FieldSample<R>,
+    /// Roundoff of the state updates not yet added in (compensated summation, reset at
+    /// every jump of the state: straight flights, surface hits, reflections).
+    pub(crate) comp: RayState<R>,
+    pub(crate) ctrl: StepController,
+    pub(crate) estimate: ErrorEstimate,
+    surface: Surface,
+    pub(crate) bounds: Bounds,
+    exit_tol: f64,
+    pub(crate) min_flight: f64,
+}
+
+impl<R: Real> March<R> {
+    /// Enter the medium: the march inside, or the finished result of a ray that never
+    /// gets there (missed, bad input, reflected at the entry).
+    // `Err` is the ray's result (as large as any result), not an error value to box.
+    #[allow(clippy::result_large_err)]
+    pub fn begin(
+        field: &dyn IndexField,
+        settings: &TraceSettings,
+        origin: DVec3,
+        dir: DVec3,
+        first_step_scale: f64,
+    ) -> Result<Self, RayResult> {
+        let mut res = RayResult {
+            status: RayStatus::Error,
+            position: origin,
+            direction: DVec3::ZERO,
+            opl: 0.0,
+            length: 0.0,
+            swept: DVec3::ZERO,
+            steps: 0,
+            evals: 0,
+            transmittance: 1.0,
+            error_estimate: 0.0,
+            crossing_uncertainty: 0.0,
+        };
+        let len2 = dir.length_squared();
+        if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
+            res.direction = if dir.is_finite() && len2 > 0.0 {
+                dir.normalize()
+            } else {
+                DVec3::ZERO
+            };
+            return Err(res);
         }
+        let d = dir / len2.sqrt();
+        res.direction = d;
+        let bounds = field.bounds();
+        let n_amb = field.ambient_index();
+
+        // Direction error the crossings of the bounds add (the field's n uncertainty,
+        // amplified at grazing angles): the entry's here, the exit's in `leave`.
+        let mut surface = Surface {
+            n_amb,
+            dn: field.n_uncertainty(),
+            error: 0.0,
+            accuracy: settings.accuracy,
+            estimate_limit: settings.estimate_limit,
+        };
+        // Entry (the field sampled where the ray enters is the march's first sample).
+        let (start, d_in, s_entry) = if bounds.signed_distance(origin) < 0.0 {
+            (origin, d, None)
+        } else {
+            let Some((s_in, s_out)) = bounds.intersect(origin, d) else {
+                res.status = RayStatus::Missed;
+                return Err(res);
+            };
+            if s_out < 0.0 || s_out <= s_in {
+                res.status = RayStatus::Missed;
+                return Err(res);
+            }
+            let p = origin + d * s_in.max(0.0);
+            let entry = R::sample_field(field, R::V3::from_dvec3(p));
+            let n_in = entry.n.to_f64();
+            res.evals += 1;
+            if !(n_in.is_finite() && n_in > 0.0) {
+                res.position = p;
+                return Err(res);
+            }
+            surface.error +=
+                refraction_uncertainty(d, bounds.normal(p), n_amb, n_in, n_in, surface.dn);
+            match refract(d, bounds.normal(p), n_amb, n_in) {
+                Interface::Transmitted { dir, reflectance } => {
+                    res.transmittance *= 1.0 - reflectance;
+                    (p, dir, Some(entry))
+                }
+                Interface::Reflected { dir } => {
+                    res.crossing_uncertainty = surface.error;
+                    res.status = if surface.error > CROSSING_FACTOR * settings.accuracy {
+                        RayStatus::Degraded
+                    } else {
+                        RayStatus::Exited
+                    };
+                    res.position = p;
+                    res.direction = dir;
+                    return Err(res);
+                }
+            }
+        };
+
+        let (r, skip) = if s_entry.is_some() {
+            nudge_inside::<R>(&bounds, start, d_in)
+        } else {
+            (R::V3::from_dvec3(start), 0.0)
+        };
+        let s0 = match s_entry {
+            Some(s) => s,
+            None => {
+                res.evals += 1;
+                R::sample_field(field, r)
+            }
+        };
+        // The field's pull over the skipped length (one Euler step of dT/ds = grad n).
+        let state = RayState {
+            r,
+            t: R::V3::from_dvec3(d_in) * s0.n + s0.grad_n * R::from_f64(skip),
+        };
+        let comp = RayState::<R>::zero();
+        let ctrl = StepController::new(settings.step, settings.integrator, field)
+            .with_jitter(first_step_scale);
+        let len_scale = bounds.radius();
+        let exit_tol = exit_tolerance::<R>(&bounds);
+        let estimate = ErrorEstimate::for_integrator(settings.integrator);
+        let min_flight = (MIN_SPAN_REL * len_scale)
+            .max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
+
+        Ok(March {
+            res,
+            state,
+            s0,
+            comp,
+            ctrl,
+            estimate,
+            surface,
+            bounds,
+            exit_tol,
+            min_flight,
+        })
+    }
+
+    /// One step (or straight flight) of the march; the finished result when the ray is
+    /// done (left, stopped, failed).
+    pub fn advance(
+        &mut self,
+        field: &dyn IndexField,
+        settings: &TraceSettings,
+        observer: &mut dyn FnMut(&Segment) -> Control,
+    ) -> Option<RayResult> {
+        let (bounds, exit_tol, min_flight) = (self.bounds, self.exit_tol, self.min_flight);
+        let (mut state, mut s0, mut comp) = (self.state, self.s0, self.comp);
+        let res = &mut self.res;
+        let ctrl = &mut self.ctrl;
+        let estimate = &mut self.estimate;
+        let surface = &mut self.surface;
+        let out = 'step: {
+            let r = state.r;
+            res.position = r.to_dvec3();
+            res.direction = Vec3Like::to_dvec3(state.t).normalize_or_zero();
+            let n_ok = s0.n.is_finite() && s0.n > R::zero();
+            if !is_finite_v::<R>(r) || !is_finite_v::<R>(state.t) || !n_ok {
+                res.status = RayStatus::Error;
+                break 'step Some(*res);
+            }
+            if res.steps >= settings.max_steps {
+                res.status = RayStatus::MaxSteps;
+                break 'step Some(*res);
+            }
+
+            // Straight flight through a homogeneous macro cell.
+            if settings.macro_cells
+                && let Some(span) = field.homogeneous_span(res.position, res.direction)
+                && span > min_flight
+            {
+                let p = res.position;
+                let dir_w = res.direction;
+                let to_exit = bounds
+                    .intersect(p, dir_w)
+                    .map_or(0.0, |(_, s_out)| s_out.max(0.0));
+                let fly = span.min(to_exit);
+                let exits = span >= to_exit;
+                let mut p1 = p + dir_w * fly;
+                if exits {
+                    p1 = project_to_surface(&bounds, p1);
+                }
+                let n = s0.n.to_f64();
+                res.length += fly;
+                res.opl += n * fly;
+                res.swept += dir_w * fly;
+                res.steps += 1;
+                let seg = Segment {
+                    r0: p,
+                    t0: dir_w * n,
+                    r1: p1,
+                    t1: dir_w * n,
+                    h: fly / n,
+                };
+                if observer(&seg) == Control::Stop {
+                    res.status = RayStatus::Absorbed;
+                    res.position = p1;
+                    break 'step Some(*res);
+                }
+                state.r = R::V3::from_dvec3(p1);
+                comp = RayState::zero();
+                s0 = R::sample_field(field, state.r);
+                res.evals += 1;
+                estimate.break_sequence();
+                if exits {
+                    match leave(&bounds, res, &mut state, &s0, p1, estimate, surface) {
+                        Some(done) => break 'step Some(done),
+                        None => return None,
+                    }
+                }
+                break 'step None;
+            }
+
+            let mut taken: Taken<R> = ctrl.take(field, state, &s0);
+            res.evals += u64::from(taken.evals);
+            let mut outside = bounds.signed_distance(taken.step.state.r.to_dvec3()) > 0.0;
+            if !outside
+                && let Some(cut) = excursion_step(field, settings, &bounds, state, &s0, &taken)
+            {
+                // The step left the medium and came back between its ends: cut it where it
+                // is outside, so the exit search below finds the first crossing (no tunnel).
+                res.evals += u64::from(cut.evals);
+                taken = cut;
+                outside = true;
+            }
+            let mut next = integrate::add_compensated(state, taken.step.delta, &mut comp);
+            let mut h = taken.h;
+            let mut quad = taken.step.quad;
+            if outside && is_finite_v::<R>(next.r) {
+                let (exit_state, exit_h, evals, exit_quad) =
+                    exit_medium_quad(field, settings, &bounds, state, &s0, &taken, exit_tol);
+                res.evals += u64::from(evals);
+                next = exit_state;
+                h = exit_h;
+                quad = exit_quad;
+                comp = RayState::zero();
+            }
+            let s1 = match taken.step.end {
+                Some(e) if !outside => e,
+                _ => {
+                    res.evals += 1;
+                    R::sample_field(field, next.r)
+                }
+            };
+            let seg = accumulate(res, state, &s0, next, &s1, h, quad);
+            // The ray's own error estimate: the step's reported local error, a fourth-order
+            // step's companion against D at its end (not where the step was cut at the
+            // surface: D there is not where its companion ends), or the low orders' formulas.
+            {
+                let d1 = s1.n_grad_n().to_dvec3();
+                let h64 = h.to_f64();
+                let reported = match (taken.step.error, taken.step.check) {
+                    (Some((er, et)), _) => Some((er.to_dvec3(), et.to_dvec3())),
+                    (None, Some(check)) if !outside => {
+                        let et = (d1 - check.to_dvec3()) * (h64 / 6.0);
+                        Some((et * (0.5 * h64), et))
+                    }
+                    _ => None,
+                };
+                estimate.step(
+                    state.t.to_dvec3(),
+                    next.t.to_dvec3(),
+                    s0.n_grad_n().to_dvec3(),
+                    d1,
+                    h64,
+                    s0.n.to_f64(),
+                    reported,
+                );
+                if !outside {
+                    let p = next.r.to_dvec3();
+                    estimate.check_approach(
+                        -bounds.signed_distance(p),
+                        bounds.normal(p),
+                        next.t.to_dvec3(),
+                        s1.n.to_f64(),
+                        d1,
+                    );
+                }
+            }
+            res.steps += 1;
+            if observer(&seg) == Control::Stop {
+                res.status = RayStatus::Absorbed;
+                res.position = seg.r1;
+                res.direction = seg.t1.normalize_or_zero();
+                break 'step Some(*res);
+            }
+            state = next;
+            s0 = s1;
+            if outside {
+                let p = state.r.to_dvec3();
+                if let Some(done) = leave(&bounds, res, &mut state, &s0, p, estimate, surface) {
+                    break 'step Some(done);
+                }
+            }
+            None
+        };
+        self.state = state;
+        self.s0 = s0;
+        self.comp = comp;
+        out
     }
 }
 
 /// The medium's surface as a ray crosses it: the ambient index, the field's n
 /// uncertainty there, and the direction error the crossings so far added.
+#[derive(Debug, Clone, Copy)]
 struct Surface {
     n_amb: f64,
     dn: f64,

@@ -1,0 +1,808 @@
+//! Ray packets: the plain steps inside the medium of [`LANES`] rays at once, in lane
+//! vectors the compiler turns into SIMD instructions (f64 lanes, no target-specific code).
+//!
+//! A ray enters the medium, leaves it, flies straight, meets a surface or anything else
+//! out of the ordinary one ray at a time, in the scalar tracer ([`March::advance`]); a
+//! packet takes over only the steps that cannot be any of those: a fourth-order
+//! Runge-Kutta step of fixed length (f64) that starts and ends farther from the surface
+//! than the step reaches. Each such step computes exactly what the scalar tracer computes,
+//! operation for operation (the state with its compensated sums, the optical path and
+//! length by the cubic Hermite rule, the ray's own error estimate, the near-miss check),
+//! so a table traced in packets is bit for bit the table traced ray by ray (tested). A
+//! ray that leaves a packet hands its lane to the next ray of the queue.
+
+use std::array;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+use glam::DVec3;
+use grin_field::{Bounds, FieldSample, IndexField};
+use grin_scene::{IntegratorKind, StepSpec};
+
+use crate::estimate::POSITION_SAFETY;
+use crate::step::StepController;
+use crate::trace::{Control, March, RayResult, TraceSettings};
+
+/// Rays a packet advances together.
+pub const LANES: usize = 4;
+
+/// Packet steps between moving the lanes' state into lane vectors and back.
+const STEPS_PER_GATHER: usize = 32;
+
+/// Whether `settings` are ones the packets take: fourth-order Runge-Kutta at fixed steps
+/// (the packets trace in f64).
+pub fn packets_apply(settings: &TraceSettings) -> bool {
+    settings.integrator == IntegratorKind::Rk4 && matches!(settings.step, StepSpec::Fixed(_))
+}
+
+/// One f64 per lane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct L([f64; LANES]);
+
+impl L {
+    fn splat(v: f64) -> L {
+        L([v; LANES])
+    }
+    fn map(self, f: impl Fn(f64) -> f64) -> L {
+        L(array::from_fn(|i| f(self.0[i])))
+    }
+    fn zip(self, o: L, f: impl Fn(f64, f64) -> f64) -> L {
+        L(array::from_fn(|i| f(self.0[i], o.0[i])))
+    }
+    fn sqrt(self) -> L {
+        self.map(f64::sqrt)
+    }
+}
+
+macro_rules! lane_op {
+    ($tr:ident, $m:ident, $op:tt) => {
+        impl $tr for L {
+            type Output = L;
+            #[inline]
+            fn $m(self, o: L) -> L {
+                L(array::from_fn(|i| self.0[i] $op o.0[i]))
+            }
+        }
+    };
+}
+lane_op!(Add, add, +);
+lane_op!(Sub, sub, -);
+lane_op!(Mul, mul, *);
+lane_op!(Div, div, /);
+
+impl Neg for L {
+    type Output = L;
+    fn neg(self) -> L {
+        self.map(|v| -v)
+    }
+}
+
+/// A 3-vector per lane, with glam's DVec3 arithmetic (the same operations in the same
+/// order, so every lane rounds as the scalar tracer does).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct V {
+    x: L,
+    y: L,
+    z: L,
+}
+
+impl V {
+    fn zero() -> V {
+        V {
+            x: L::splat(0.0),
+            y: L::splat(0.0),
+            z: L::splat(0.0),
+        }
+    }
+    fn lane(&self, i: usize) -> DVec3 {
+        DVec3::new(self.x.0[i], self.y.0[i], self.z.0[i])
+    }
+    fn set(&mut self, i: usize, v: DVec3) {
+        self.x.0[i] = v.x;
+        self.y.0[i] = v.y;
+        self.z.0[i] = v.z;
+    }
+    fn scale(self, s: L) -> V {
+        V {
+            x: self.x * s,
+            y: self.y * s,
+            z: self.z * s,
+        }
+    }
+    fn over(self, s: L) -> V {
+        V {
+            x: self.x / s,
+            y: self.y / s,
+            z: self.z / s,
+        }
+    }
+    fn dot(self, o: V) -> L {
+        (self.x * o.x) + (self.y * o.y) + (self.z * o.z)
+    }
+    fn length(self) -> L {
+        self.dot(self).sqrt()
+    }
+    /// glam's `normalize_or_zero`: times 1/length where that is finite and positive.
+    fn normalize_or_zero(self) -> V {
+        let rcp = L::splat(1.0) / self.length();
+        let n = self.scale(rcp);
+        let keep = |i: usize| rcp.0[i].is_finite() && rcp.0[i] > 0.0;
+        V {
+            x: L(array::from_fn(|i| if keep(i) { n.x.0[i] } else { 0.0 })),
+            y: L(array::from_fn(|i| if keep(i) { n.y.0[i] } else { 0.0 })),
+            z: L(array::from_fn(|i| if keep(i) { n.z.0[i] } else { 0.0 })),
+        }
+    }
+    fn finite(&self, i: usize) -> bool {
+        self.x.0[i].is_finite() && self.y.0[i].is_finite() && self.z.0[i].is_finite()
+    }
+}
+
+impl Add for V {
+    type Output = V;
+    fn add(self, o: V) -> V {
+        V {
+            x: self.x + o.x,
+            y: self.y + o.y,
+            z: self.z + o.z,
+        }
+    }
+}
+
+impl Sub for V {
+    type Output = V;
+    fn sub(self, o: V) -> V {
+        V {
+            x: self.x - o.x,
+            y: self.y - o.y,
+            z: self.z - o.z,
+        }
+    }
+}
+
+/// Knuth's TwoSum per component (crate::integrate::add_compensated, lane by lane).
+fn two_sum(a: V, b: V) -> (V, V) {
+    let sum = a + b;
+    let b_virtual = sum - a;
+    let lost = (a - (sum - b_virtual)) + (b - b_virtual);
+    (sum, lost)
+}
+
+/// The signed distance to the bounds, per lane (Bounds::signed_distance's arithmetic).
+fn signed_distance(bounds: &Bounds, p: V) -> L {
+    match *bounds {
+        Bounds::Sphere { center, radius } => {
+            let c = V {
+                x: L::splat(center.x),
+                y: L::splat(center.y),
+                z: L::splat(center.z),
+            };
+            (p - c).length() - L::splat(radius)
+        }
+        Bounds::Box { min, max } => {
+            let c = (min + max) * 0.5;
+            let h = (max - min) * 0.5;
+            let q = |p: L, c: f64, h: f64| (p - L::splat(c)).map(f64::abs) - L::splat(h);
+            let (qx, qy, qz) = (q(p.x, c.x, h.x), q(p.y, c.y, h.y), q(p.z, c.z, h.z));
+            let pos = |v: L| v.map(|a| a.max(0.0));
+            let outside = V {
+                x: pos(qx),
+                y: pos(qy),
+                z: pos(qz),
+            }
+            .length();
+            let inside = qx.zip(qy, f64::max).zip(qz, f64::max).map(|a| a.min(0.0));
+            outside + inside
+        }
+    }
+}
+
+/// The lanes' march state as lane vectors.
+#[derive(Debug, Clone, Copy)]
+struct Soa {
+    r: V,
+    t: V,
+    comp_r: V,
+    comp_t: V,
+    n0: L,
+    g0: V,
+    opl: L,
+    length: L,
+    swept: V,
+    // The error estimate (crate::estimate::ErrorEstimate).
+    near_miss: [bool; LANES],
+    last_local: V,
+    last_r: L,
+    staggered_half: V,
+    bend: L,
+    pos: L,
+    vsum: V,
+    sum: L,
+    prev_d: V,
+    prev_h: L,
+    steps: [u32; LANES],
+    evals: [u64; LANES],
+}
+
+impl Soa {
+    fn gather(lanes: &[Option<(usize, March<f64>)>; LANES]) -> Soa {
+        let mut s = Soa {
+            r: V::zero(),
+            t: V::zero(),
+            comp_r: V::zero(),
+            comp_t: V::zero(),
+            n0: L::splat(1.0),
+            g0: V::zero(),
+            opl: L::splat(0.0),
+            length: L::splat(0.0),
+            swept: V::zero(),
+            near_miss: [true; LANES],
+            last_local: V::zero(),
+            last_r: L::splat(0.0),
+            staggered_half: V::zero(),
+            bend: L::splat(0.0),
+            pos: L::splat(0.0),
+            vsum: V::zero(),
+            sum: L::splat(0.0),
+            prev_d: V::zero(),
+            prev_h: L::splat(0.0),
+            steps: [0; LANES],
+            evals: [0; LANES],
+        };
+        for (i, lane) in lanes.iter().enumerate() {
+            let Some((_, m)) = lane else { continue };
+            s.r.set(i, m.state.r);
+            s.t.set(i, m.state.t);
+            s.comp_r.set(i, m.comp.r);
+            s.comp_t.set(i, m.comp.t);
+            s.n0.0[i] = m.s0.n;
+            s.g0.set(i, m.s0.grad_n);
+            s.opl.0[i] = m.res.opl;
+            s.length.0[i] = m.res.length;
+            s.swept.set(i, m.res.swept);
+            s.steps[i] = m.res.steps;
+            s.evals[i] = m.res.evals;
+            let e = &m.estimate;
+            s.near_miss[i] = e.near_miss;
+            s.last_local.set(i, e.last.0);
+            s.last_r.0[i] = e.last.1;
+            s.staggered_half.set(i, e.staggered_half);
+            s.bend.0[i] = e.bend;
+            s.pos.0[i] = e.pos;
+            s.vsum.set(i, e.vsum);
+            s.sum.0[i] = e.sum;
+            if let Some((d, h)) = e.prev {
+                s.prev_d.set(i, d);
+                s.prev_h.0[i] = h;
+            }
+        }
+        s
+    }
+
+    /// Write lane `i` back into its march (which took `took` packet steps).
+    fn scatter(&self, i: usize, m: &mut March<f64>, took: u32) {
+        if took == 0 {
+            return;
+        }
+        m.state.r = self.r.lane(i);
+        m.state.t = self.t.lane(i);
+        m.comp.r = self.comp_r.lane(i);
+        m.comp.t = self.comp_t.lane(i);
+        m.s0 = FieldSample {
+            n: self.n0.0[i],
+            grad_n: self.g0.lane(i),
+        };
+        m.res.opl = self.opl.0[i];
+        m.res.length = self.length.0[i];
+        m.res.swept = self.swept.lane(i);
+        m.res.steps = self.steps[i];
+        m.res.evals = self.evals[i];
+        m.res.position = m.state.r;
+        m.res.direction = m.state.t.normalize_or_zero();
+        let e = &mut m.estimate;
+        e.near_miss = self.near_miss[i];
+        e.last = (self.last_local.lane(i), self.last_r.0[i]);
+        e.staggered_half = self.staggered_half.lane(i);
+        e.bend = self.bend.0[i];
+        e.pos = self.pos.0[i];
+        e.vsum = self.vsum.lane(i);
+        e.sum = self.sum.0[i];
+        e.prev = Some((self.prev_d.lane(i), self.prev_h.0[i]));
+    }
+}
+
+/// Sample the field at the lanes' points (`IndexField::sample4`; the values of lanes
+/// that take no step are not used).
+fn sample(field: &dyn IndexField, p: V) -> (L, V) {
+    let mut out = [[0.0; LANES]; 4];
+    field.sample4([p.x.0, p.y.0, p.z.0], &mut out);
+    (
+        L(out[0]),
+        V {
+            x: L(out[1]),
+            y: L(out[2]),
+            z: L(out[3]),
+        },
+    )
+}
+
+/// The outward unit normal of the bounds nearest each lane's point (Bounds::normal's
+/// arithmetic).
+fn normal(bounds: &Bounds, p: V) -> V {
+    match *bounds {
+        Bounds::Sphere { center, .. } => {
+            let d = p - V {
+                x: L::splat(center.x),
+                y: L::splat(center.y),
+                z: L::splat(center.z),
+            };
+            d.scale(L::splat(1.0) / d.length())
+        }
+        Bounds::Box { min, max } => {
+            let c = (min + max) * 0.5;
+            let h = (max - min) * 0.5;
+            let (dx, dy, dz) = (
+                p.x - L::splat(c.x),
+                p.y - L::splat(c.y),
+                p.z - L::splat(c.z),
+            );
+            let (qx, qy, qz) = (
+                dx.map(f64::abs) - L::splat(h.x),
+                dy.map(f64::abs) - L::splat(h.y),
+                dz.map(f64::abs) - L::splat(h.z),
+            );
+            let mut n = V::zero();
+            for i in 0..LANES {
+                let (x, y, z) = (qx.0[i], qy.0[i], qz.0[i]);
+                if x >= y && x >= z {
+                    n.x.0[i] = dx.0[i].signum();
+                } else if y >= z {
+                    n.y.0[i] = dy.0[i].signum();
+                } else {
+                    n.z.0[i] = dz.0[i].signum();
+                }
+            }
+            n
+        }
+    }
+}
+
+/// Trace `rays` (origin, direction) with `settings`, for which [`packets_apply`] holds:
+/// the same results as `trace_ray::<f64>` ray by ray.
+pub fn trace_packets(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    rays: &[(DVec3, DVec3)],
+) -> Vec<RayResult> {
+    trace_packets_counted(field, settings, rays).0
+}
+
+/// [`trace_packets`], with the number of steps the packets took (the rest were the
+/// scalar tracer's).
+pub fn trace_packets_counted(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    rays: &[(DVec3, DVec3)],
+) -> (Vec<RayResult>, u64) {
+    let mut packet_steps = 0u64;
+    let mut out: Vec<Option<RayResult>> = vec![None; rays.len()];
+    let mut queue = 0..rays.len();
+    let mut lanes: [Option<(usize, March<f64>)>; LANES] = array::from_fn(|_| None);
+    let mut cont = |_: &crate::boundary::Segment| Control::Continue;
+    loop {
+        for slot in lanes.iter_mut() {
+            while slot.is_none() {
+                let Some(i) = queue.next() else { break };
+                let (o, d) = rays[i];
+                match March::<f64>::begin(field, settings, o, d, 1.0) {
+                    Ok(m) => *slot = Some((i, m)),
+                    Err(done) => out[i] = Some(done),
+                }
+            }
+        }
+        if lanes.iter().all(Option::is_none) {
+            break;
+        }
+        let took = march_packet(field, settings, &mut lanes);
+        packet_steps += took.iter().map(|&t| u64::from(t)).sum::<u64>();
+        // The lanes the packet could not step: one scalar step each.
+        for (slot, &took) in lanes.iter_mut().zip(&took) {
+            if took > 0 {
+                continue;
+            }
+            if let Some((i, m)) = slot
+                && let Some(done) = m.advance(field, settings, &mut cont)
+            {
+                out[*i] = Some(done);
+                *slot = None;
+            }
+        }
+    }
+    let results = out
+        .into_iter()
+        .map(|r| r.unwrap_or_else(unreachable_result))
+        .collect();
+    (results, packet_steps)
+}
+
+/// Never used: every ray's result is set before the queue and the lanes run dry.
+fn unreachable_result() -> RayResult {
+    RayResult {
+        status: crate::trace::RayStatus::Error,
+        position: DVec3::ZERO,
+        direction: DVec3::ZERO,
+        opl: 0.0,
+        length: 0.0,
+        swept: DVec3::ZERO,
+        steps: 0,
+        evals: 0,
+        transmittance: 0.0,
+        error_estimate: f64::INFINITY,
+        crossing_uncertainty: f64::INFINITY,
+    }
+}
+
+/// Plain steps of the occupied lanes while they all can take them (up to
+/// [`STEPS_PER_GATHER`]); returns the steps each lane took.
+// The lane loops index several lane arrays at once.
+#[allow(clippy::needless_range_loop)]
+fn march_packet(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    lanes: &mut [Option<(usize, March<f64>)>; LANES],
+) -> [u32; LANES] {
+    let mut took = [0u32; LANES];
+    let mut ds = [f64::NAN; LANES];
+    let mut feature_cap = [f64::INFINITY; LANES];
+    let mut bounds = None;
+    let mut min_flight = [0.0; LANES];
+    for (i, lane) in lanes.iter().enumerate() {
+        if let Some((_, m)) = lane
+            && let Some(d) = m.ctrl.fixed_ds()
+        {
+            ds[i] = d;
+            feature_cap[i] = m.ctrl.feature_cap();
+            min_flight[i] = m.min_flight;
+            bounds = Some(m.bounds);
+        }
+    }
+    let Some(bounds) = bounds else { return took };
+    let mut s = Soa::gather(lanes);
+    let occupied: [bool; LANES] = array::from_fn(|i| lanes[i].is_some() && ds[i].is_finite());
+    let ds = L(ds);
+    let feature_cap = L(feature_cap);
+    // The signed distance of each lane's point (carried from the step that got there).
+    let mut sd0 = signed_distance(&bounds, s.r);
+    for _ in 0..STEPS_PER_GATHER {
+        // Which lanes the scalar tracer would give a plain step now, and its length
+        // (StepController::take for a fixed step after the first).
+        let mut active = [false; LANES];
+        let mut h = L::splat(0.0);
+        let mut t_len = L::splat(0.0);
+        for i in 0..LANES {
+            let n0 = s.n0.0[i];
+            if !(occupied[i]
+                && s.r.finite(i)
+                && s.t.finite(i)
+                && n0.is_finite()
+                && n0 > 0.0
+                && s.steps[i] < settings.max_steps)
+            {
+                continue;
+            }
+            let p = s.r.lane(i);
+            let t = s.t.lane(i);
+            if settings.macro_cells
+                && field
+                    .homogeneous_span(p, t.normalize_or_zero())
+                    .is_some_and(|span| span > min_flight[i])
+            {
+                continue;
+            }
+            let mut cap =
+                StepController::length_scale_cap(n0, s.g0.lane(i).length()).min(feature_cap.0[i]);
+            let reach = ds.0[i].min(cap);
+            cap = cap.min(field.step_cap(p, reach));
+            let hi = ds.0[i].min(cap) / n0;
+            // Not within a step of the surface: the step can neither leave nor graze it
+            // (the test after the step decides; this one saves a step that would fail).
+            let tl = t.length();
+            if hi > 0.0 && sd0.0[i] < -1.5 * hi * tl {
+                h.0[i] = hi;
+                t_len.0[i] = tl;
+                active[i] = true;
+            }
+        }
+        if !active.iter().any(|&a| a) {
+            break;
+        }
+        // rk4_step, lane by lane.
+        let (r, t) = (s.r, s.t);
+        let d0 = s.g0.scale(s.n0);
+        let half = h * L::splat(0.5);
+        let t1 = t;
+        let d1 = d0;
+        let t2 = t + d1.scale(half);
+        let (n, g) = sample(field, r + t1.scale(half));
+        let d2 = g.scale(n);
+        let t3 = t + d2.scale(half);
+        let (n, g) = sample(field, r + t2.scale(half));
+        let d3 = g.scale(n);
+        let t4 = t + d3.scale(h);
+        let (n, g) = sample(field, r + t3.scale(h));
+        let d4 = g.scale(n);
+        let sixth = h * L::splat(1.0 / 6.0);
+        let two = L::splat(2.0);
+        let dr = (t1 + t2.scale(two) + t3.scale(two) + t4).scale(sixth);
+        let dt = (d1 + d2.scale(two) + d3.scale(two) + d4).scale(sixth);
+        let r_end = r + dr;
+        let t_end = t + dt;
+        // The scalar tracer's tests: not outside, and no excursion (both ends deeper
+        // than the step reaches).
+        let sd1 = signed_distance(&bounds, r_end);
+        let reach = h * t_len.zip(t_end.length(), f64::max);
+        for i in 0..LANES {
+            active[i] &= reach.0[i].is_finite()
+                && r_end.finite(i)
+                && sd0.0[i] < -reach.0[i]
+                && sd1.0[i] < -reach.0[i];
+        }
+        if !active.iter().any(|&a| a) {
+            break;
+        }
+        // add_compensated.
+        let (nr, lost_r) = two_sum(r, dr + s.comp_r);
+        let (nt, lost_t) = two_sum(t, dt + s.comp_t);
+        // The end sample (rk4 has none of its own).
+        let (n1, g1) = sample(field, nr);
+        let d1_end = g1.scale(n1);
+        // accumulate: the cubic Hermite rule.
+        let (n0, g0) = (s.n0, s.g0);
+        let dn0 = g0.dot(t);
+        let dn1 = g1.dot(nt);
+        let h2 = h * h / L::splat(12.0);
+        let length = L::splat(0.5) * h * (n0 + n1) + h2 * (dn0 - dn1);
+        let opl =
+            L::splat(0.5) * h * (n0 * n0 + n1 * n1) + h2 * L::splat(2.0) * (n0 * dn0 - n1 * dn1);
+        let (u0, u1) = (t.normalize_or_zero(), nt.normalize_or_zero());
+        let d_swept = |n: L, dn: L, u: V, g: V| u.scale(dn) + (g - u.scale(u.dot(g))).scale(n);
+        let swept = (u0.scale(n0) + u1.scale(n1)).scale(L::splat(0.5) * h)
+            + (d_swept(n0, dn0, u0, g0) - d_swept(n1, dn1, u1, g1)).scale(h2);
+        // ErrorEstimate::step with the third-order companion's e_T = h/6 (D(r1) - D4)
+        // (its early return cannot happen: h and n0 are positive here).
+        let et = (d1_end - d4).scale(h / L::splat(6.0));
+        let er = et.scale(L::splat(0.5) * h);
+        let across_v = |v: V| v - u0.scale(v.dot(u0));
+        let across = |v: V| across_v(v).length();
+        let local = across_v(et);
+        let local_r = across(er);
+        let bend_inc = across(d0) * h / n0;
+        let feedback = across(d1_end - d0) * s.pos / n0;
+        let direction = s.vsum.length() + s.sum;
+        let turned = t.dot(nt);
+        let pos_new = s.pos + (local_r + direction * h * n0);
+        let vsum_new = s.vsum + local.over(n0);
+        let sum_new = s.sum + feedback / n0;
+        // ErrorEstimate::check_approach at the new point.
+        let sd_new = signed_distance(&bounds, nr);
+        let normals = normal(&bounds, nr);
+        let v = nt.normalize_or_zero().dot(normals);
+        let kappa = -d1_end.dot(normals) / (n1 * n1);
+        let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
+        let half_h = L::splat(0.5) * h;
+        for i in 0..LANES {
+            if !active[i] {
+                continue;
+            }
+            // StepController::take counted the step's own 3, the tracer the end sample.
+            s.evals[i] += 4;
+            s.r.set(i, nr.lane(i));
+            s.t.set(i, nt.lane(i));
+            s.comp_r.set(i, lost_r.lane(i));
+            s.comp_t.set(i, lost_t.lane(i));
+            s.length.0[i] += length.0[i];
+            s.opl.0[i] += opl.0[i];
+            s.swept.set(i, s.swept.lane(i) + swept.lane(i));
+            if turned.0[i] <= 0.0 {
+                s.near_miss[i] = true;
+            }
+            s.last_local.set(i, local.lane(i));
+            s.last_r.0[i] = local_r.0[i];
+            s.staggered_half.set(i, d1_end.lane(i) * half_h.0[i]);
+            s.bend.0[i] += bend_inc.0[i];
+            if local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite() {
+                s.pos.0[i] = pos_new.0[i];
+                s.vsum.set(i, vsum_new.lane(i));
+                s.sum.0[i] = sum_new.0[i];
+            }
+            s.prev_d.set(i, d0.lane(i));
+            s.prev_h.0[i] = h.0[i];
+            let n = n1.0[i];
+            if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
+                && v.0[i] > 0.0
+                && kappa.0[i] > 0.0
+                && closest.0[i].abs() < POSITION_SAFETY * s.pos.0[i]
+            {
+                s.near_miss[i] = true;
+            }
+            s.steps[i] += 1;
+            sd0.0[i] = sd_new.0[i];
+            s.n0.0[i] = n1.0[i];
+            s.g0.set(i, g1.lane(i));
+            took[i] += 1;
+        }
+        if (0..LANES).any(|i| occupied[i] && !active[i]) {
+            break;
+        }
+    }
+    for (i, lane) in lanes.iter_mut().enumerate() {
+        if let Some((_, m)) = lane {
+            s.scatter(i, m, took[i]);
+        }
+    }
+    took
+}
+
+#[cfg(test)]
+mod tests {
+    use grin_field::analytic::{Luneburg, Plume};
+    use grin_field::expr::ExprField;
+    use grin_scene::{ExitMethod, PlumeBlob};
+
+    use super::*;
+    use crate::trace::trace_ray;
+
+    fn settings(ds: f64, max_steps: u32, exit: ExitMethod) -> TraceSettings {
+        TraceSettings {
+            integrator: IntegratorKind::Rk4,
+            step: StepSpec::Fixed(ds),
+            max_steps,
+            exit,
+            macro_cells: true,
+            accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
+            estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+        }
+    }
+
+    /// Rays from all around: most cross the medium, some miss it, some graze it.
+    fn rays(center: DVec3, spread: f64, count: usize) -> Vec<(DVec3, DVec3)> {
+        let mut seed = 0x1234_5678_9abc_def1_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        (0..count)
+            .map(|_| {
+                let o = center + DVec3::new(next(), next(), -3.0) * spread;
+                let d = DVec3::new(next() * 0.3, next() * 0.3, 1.0);
+                (o, d)
+            })
+            .collect()
+    }
+
+    /// A table traced in packets is the table traced ray by ray, bit for bit, on a box
+    /// and a sphere, with the field's step caps, rays that miss and graze, the bisection
+    /// exit and a step cap that ends rays at `max_steps`.
+    #[test]
+    fn packets_are_the_scalar_tracer_bit_for_bit() {
+        let rod = ExprField::new(
+            "1.6 - 0.05*(x^2 + y^2)",
+            Bounds::Box {
+                min: DVec3::new(-2.0, -2.0, 0.0),
+                max: DVec3::new(2.0, 2.0, 10.0),
+            },
+            1.0,
+            0.0,
+        )
+        .expect("rod");
+        let ball = Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius: 1.0,
+        };
+        let lens = Luneburg::new(ball, 1.0, None).expect("lens");
+        let plume = Plume::new(
+            Bounds::Box {
+                min: DVec3::splat(-1.0),
+                max: DVec3::splat(1.0),
+            },
+            1.0,
+            &[PlumeBlob {
+                a: -1e-3,
+                center: [0.1, 0.0, 0.2],
+                s: 0.05,
+            }],
+        )
+        .expect("plume");
+        let bump = ExprField::new(
+            "1.2 + 0.1*exp(-((x - 0.3)^2 + y^2 + z^2)/0.001)",
+            ball,
+            1.0,
+            0.0,
+        )
+        .expect("bump");
+        let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 6] = [
+            (
+                &rod,
+                DVec3::new(0.0, 0.0, 1.0),
+                1.0,
+                settings(0.1, 1_000_000, ExitMethod::Hermite),
+            ),
+            (
+                &rod,
+                DVec3::new(0.0, 0.0, 1.0),
+                1.0,
+                settings(0.37, 1_000_000, ExitMethod::Bisection),
+            ),
+            (
+                &lens,
+                DVec3::ZERO,
+                0.5,
+                settings(0.05, 1_000_000, ExitMethod::Hermite),
+            ),
+            (
+                &lens,
+                DVec3::ZERO,
+                0.5,
+                settings(0.05, 17, ExitMethod::Hermite),
+            ),
+            (
+                &plume,
+                DVec3::ZERO,
+                0.5,
+                settings(0.02, 1_000_000, ExitMethod::Hermite),
+            ),
+            (
+                &bump,
+                DVec3::ZERO,
+                0.4,
+                settings(0.04, 1_000_000, ExitMethod::Hermite),
+            ),
+        ];
+        for (k, (field, center, spread, s)) in cases.iter().enumerate() {
+            let table = rays(*center, *spread, 301);
+            let (packed, in_packets) = trace_packets_counted(*field, s, &table);
+            let mut steps = 0;
+            for (i, &(o, d)) in table.iter().enumerate() {
+                let want = trace_ray::<f64>(*field, s, o, d);
+                let got = packed[i];
+                steps += u64::from(got.steps);
+                assert_eq!(got.status, want.status, "case {k} ray {i}");
+                let bits = |r: &RayResult| {
+                    [
+                        r.position.x,
+                        r.position.y,
+                        r.position.z,
+                        r.direction.x,
+                        r.direction.y,
+                        r.direction.z,
+                        r.opl,
+                        r.length,
+                        r.swept.x,
+                        r.swept.y,
+                        r.swept.z,
+                        r.transmittance,
+                        r.error_estimate,
+                        r.crossing_uncertainty,
+                    ]
+                    .map(f64::to_bits)
+                };
+                assert_eq!(
+                    bits(&got),
+                    bits(&want),
+                    "case {k} ray {i}: {got:?} vs {want:?}"
+                );
+                assert_eq!(
+                    (got.steps, got.evals),
+                    (want.steps, want.evals),
+                    "case {k} ray {i}"
+                );
+            }
+            eprintln!("case {k}: {in_packets} of {steps} steps in packets");
+            assert!(
+                in_packets * 2 > steps,
+                "case {k}: {in_packets} of {steps} steps in packets"
+            );
+        }
+    }
+}
