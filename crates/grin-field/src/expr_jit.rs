@@ -76,9 +76,27 @@ impl Native {
             jb.symbol(*name, *f as *const u8);
         }
         let mut module = JITModule::new(jb);
-        let sample = define(&mut module, tape, "grin_expr_sample", &tape.outputs)?;
-        let n_only = define(&mut module, tape, "grin_expr_n", &tape.outputs[..1])?;
-        let sample4 = define_x2(&mut module, tape, "grin_expr_sample4");
+        let sample = define(
+            &mut module,
+            tape,
+            "grin_expr_sample",
+            &tape.outputs,
+            Width::One,
+        )?;
+        let n_only = define(
+            &mut module,
+            tape,
+            "grin_expr_n",
+            &tape.outputs[..1],
+            Width::One,
+        )?;
+        let sample4 = define(
+            &mut module,
+            tape,
+            "grin_expr_sample4",
+            &tape.outputs,
+            Width::Four,
+        );
         module.finalize_definitions().ok()?;
         let sample_ptr = module.get_finalized_function(sample);
         let n_ptr = module.get_finalized_function(n_only);
@@ -140,12 +158,26 @@ impl Native {
     }
 }
 
-/// Define one function that evaluates the tape and stores the entries `outputs`.
+/// How a defined function lays out its points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Width {
+    /// One point: inputs x, y, z, t; outputs one after another.
+    One,
+    /// Four points in two halves of two-lane vectors: inputs x[4], y[4], z[4], t[4];
+    /// outputs likewise four lanes each.
+    Four,
+}
+
+/// Define one function that evaluates the tape and stores the entries `outputs`, one
+/// point at a time or four ([`Width`]). Arithmetic, square roots and rounding are
+/// instructions (vector instructions for four points); the calls and comparisons run lane
+/// by lane. `None` where an instruction does not compile on this host.
 fn define(
     module: &mut JITModule,
     tape: &Tape,
     name: &str,
     outputs: &[u32],
+    width: Width,
 ) -> Option<cranelift_module::FuncId> {
     let ptr = module.target_config().pointer_type();
     let mut ctx = module.make_context();
@@ -155,6 +187,11 @@ fn define(
         .declare_function(name, Linkage::Local, &ctx.func.signature)
         .ok()?;
     let mut fctx = FunctionBuilderContext::new();
+    // (value type, bytes between one input's start and the next's, halves).
+    let (ty, stride, halves) = match width {
+        Width::One => (types::F64, 8, 1),
+        Width::Four => (types::F64X2, 32, 2),
+    };
     {
         let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
         let block = b.create_block();
@@ -180,102 +217,24 @@ fn define(
             }
         }
         let flags = MemFlagsData::trusted();
-        let mut vals: Vec<Option<Value>> = vec![None; tape.ops.len()];
-        for (i, op) in tape.ops.iter().enumerate() {
-            if !needed[i] {
-                continue;
-            }
-            let arg = |k: u32| vals[k as usize];
-            let v = match *op {
-                Op::Const(c) => b.ins().f64const(c),
-                Op::Var(k) => b.ins().load(types::F64, flags, inp, i32::from(k) * 8),
-                Op::Un(f, a) => {
-                    let a = arg(a)?;
-                    match f {
-                        Un::Neg => b.ins().fneg(a),
-                        Un::Abs => b.ins().fabs(a),
-                        Un::Sqrt => b.ins().sqrt(a),
-                        Un::Floor => b.ins().floor(a),
-                        Un::Ceil => b.ins().ceil(a),
-                        Un::Trunc => b.ins().trunc(a),
-                        // f64::fract is x - trunc(x).
-                        Un::Fract => {
-                            let t = b.ins().trunc(a);
-                            b.ins().fsub(a, t)
-                        }
-                        _ => {
-                            let sym = unary_symbol(f);
-                            call(module, &mut b, sym, &[a])?
-                        }
-                    }
-                }
-                Op::Bin(f, a, c) => {
-                    let (a, c) = (arg(a)?, arg(c)?);
-                    match f {
-                        Bin::Add => b.ins().fadd(a, c),
-                        Bin::Sub => b.ins().fsub(a, c),
-                        Bin::Mul => b.ins().fmul(a, c),
-                        Bin::Div => b.ins().fdiv(a, c),
-                        Bin::Le => {
-                            let cond = b.ins().fcmp(FloatCC::LessThanOrEqual, a, c);
-                            let one = b.ins().f64const(1.0);
-                            let zero = b.ins().f64const(0.0);
-                            b.ins().select(cond, one, zero)
-                        }
-                        Bin::Pow => call(module, &mut b, "grin_expr_pow", &[a, c])?,
-                        Bin::Atan2 => call(module, &mut b, "grin_expr_atan2", &[a, c])?,
-                        Bin::Min => call(module, &mut b, "grin_expr_min", &[a, c])?,
-                        Bin::Max => call(module, &mut b, "grin_expr_max", &[a, c])?,
-                    }
-                }
-            };
-            vals[i] = Some(v);
-        }
-        for (k, &o) in outputs.iter().enumerate() {
-            let v = vals[o as usize]?;
-            let offset = i32::try_from(k * 8).ok()?;
-            b.ins().store(flags, v, out, offset);
-        }
-        b.ins().return_(&[]);
-        b.finalize(module.target_config());
-    }
-    module.define_function(id, &mut ctx).ok()?;
-    module.clear_context(&mut ctx);
-    Some(id)
-}
-
-/// Define the four-point function: the tape twice (points 0-1, then 2-3) in two-lane
-/// vectors. Arithmetic, square roots and rounding are vector instructions; the calls and
-/// comparisons run lane by lane. `None` where a vector instruction does not compile on
-/// this host.
-fn define_x2(module: &mut JITModule, tape: &Tape, name: &str) -> Option<cranelift_module::FuncId> {
-    let ptr = module.target_config().pointer_type();
-    let mut ctx = module.make_context();
-    ctx.func.signature.params.push(AbiParam::new(ptr));
-    ctx.func.signature.params.push(AbiParam::new(ptr));
-    let id = module
-        .declare_function(name, Linkage::Local, &ctx.func.signature)
-        .ok()?;
-    let mut fctx = FunctionBuilderContext::new();
-    let x2 = types::F64X2;
-    {
-        let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
-        let block = b.create_block();
-        b.append_block_params_for_function_params(block);
-        b.switch_to_block(block);
-        b.seal_block(block);
-        let (inp, out) = (b.block_params(block)[0], b.block_params(block)[1]);
-        let flags = MemFlagsData::trusted();
-        for half in 0..2i32 {
+        for half in 0..halves {
             let mut vals: Vec<Option<Value>> = vec![None; tape.ops.len()];
             for (i, op) in tape.ops.iter().enumerate() {
+                if !needed[i] {
+                    continue;
+                }
                 let arg = |k: u32| vals[k as usize];
                 let v = match *op {
                     Op::Const(c) => {
                         let s = b.ins().f64const(c);
-                        b.ins().splat(x2, s)
+                        match width {
+                            Width::One => s,
+                            Width::Four => b.ins().splat(ty, s),
+                        }
                     }
-                    Op::Var(k) => b.ins().load(x2, flags, inp, i32::from(k) * 32 + half * 16),
+                    Op::Var(k) => b
+                        .ins()
+                        .load(ty, flags, inp, i32::from(k) * stride + half * 16),
                     Op::Un(f, a) => {
                         let a = arg(a)?;
                         match f {
@@ -285,13 +244,14 @@ fn define_x2(module: &mut JITModule, tape: &Tape, name: &str) -> Option<cranelif
                             Un::Floor => b.ins().floor(a),
                             Un::Ceil => b.ins().ceil(a),
                             Un::Trunc => b.ins().trunc(a),
+                            // f64::fract is x - trunc(x).
                             Un::Fract => {
                                 let t = b.ins().trunc(a);
                                 b.ins().fsub(a, t)
                             }
                             _ => {
                                 let sym = unary_symbol(f);
-                                per_lane(&mut b, &[a], |b, s| call(module, b, sym, s))?
+                                per_lane(&mut b, width, &[a], |b, s| call(module, b, sym, s))?
                             }
                         }
                     }
@@ -302,32 +262,24 @@ fn define_x2(module: &mut JITModule, tape: &Tape, name: &str) -> Option<cranelif
                             Bin::Sub => b.ins().fsub(a, c),
                             Bin::Mul => b.ins().fmul(a, c),
                             Bin::Div => b.ins().fdiv(a, c),
-                            Bin::Le => per_lane(&mut b, &[a, c], |b, s| {
+                            Bin::Le => per_lane(&mut b, width, &[a, c], |b, s| {
                                 let cond = b.ins().fcmp(FloatCC::LessThanOrEqual, s[0], s[1]);
                                 let one = b.ins().f64const(1.0);
                                 let zero = b.ins().f64const(0.0);
                                 Some(b.ins().select(cond, one, zero))
                             })?,
-                            Bin::Pow => per_lane(&mut b, &[a, c], |b, s| {
-                                call(module, b, "grin_expr_pow", s)
-                            })?,
-                            Bin::Atan2 => per_lane(&mut b, &[a, c], |b, s| {
-                                call(module, b, "grin_expr_atan2", s)
-                            })?,
-                            Bin::Min => per_lane(&mut b, &[a, c], |b, s| {
-                                call(module, b, "grin_expr_min", s)
-                            })?,
-                            Bin::Max => per_lane(&mut b, &[a, c], |b, s| {
-                                call(module, b, "grin_expr_max", s)
-                            })?,
+                            Bin::Pow | Bin::Atan2 | Bin::Min | Bin::Max => {
+                                let sym = binary_symbol(f);
+                                per_lane(&mut b, width, &[a, c], |b, s| call(module, b, sym, s))?
+                            }
                         }
                     }
                 };
                 vals[i] = Some(v);
             }
-            for (k, &o) in tape.outputs.iter().enumerate() {
+            for (k, &o) in outputs.iter().enumerate() {
                 let v = vals[o as usize]?;
-                let offset = i32::try_from(k * 32).ok()? + half * 16;
+                let offset = i32::try_from(k).ok()? * stride + half * 16;
                 b.ins().store(flags, v, out, offset);
             }
         }
@@ -339,12 +291,17 @@ fn define_x2(module: &mut JITModule, tape: &Tape, name: &str) -> Option<cranelif
     Some(id)
 }
 
-/// `f` on each lane of the two-lane vectors `args`, the results put back together.
+/// `f` on scalars: on `args` themselves for one point, else on each lane of the
+/// two-lane vectors `args`, the results put back together.
 fn per_lane(
     b: &mut FunctionBuilder<'_>,
+    width: Width,
     args: &[Value],
     mut f: impl FnMut(&mut FunctionBuilder<'_>, &[Value]) -> Option<Value>,
 ) -> Option<Value> {
+    if width == Width::One {
+        return f(b, args);
+    }
     let mut lanes = [None; 2];
     for (lane, slot) in lanes.iter_mut().enumerate() {
         let scalars: Vec<Value> = args
@@ -426,6 +383,18 @@ const BINARY_CALLS: &[(&str, extern "C" fn(f64, f64) -> f64)] = &[
     ("grin_expr_min", grin_expr_min),
     ("grin_expr_max", grin_expr_max),
 ];
+
+/// The symbol of a function of two arguments that is compiled as a call.
+fn binary_symbol(f: Bin) -> &'static str {
+    match f {
+        Bin::Pow => "grin_expr_pow",
+        Bin::Atan2 => "grin_expr_atan2",
+        Bin::Min => "grin_expr_min",
+        Bin::Max => "grin_expr_max",
+        // Compiled as instructions (never reaches here).
+        Bin::Add | Bin::Sub | Bin::Mul | Bin::Div | Bin::Le => "grin_expr_none",
+    }
+}
 
 /// The symbol of a function of one argument that is compiled as a call.
 fn unary_symbol(f: Un) -> &'static str {
