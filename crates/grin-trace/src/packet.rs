@@ -427,17 +427,8 @@ pub fn trace_packets_counted(
 /// Never used: every ray's result is set before the queue and the lanes run dry.
 fn unreachable_result() -> RayResult {
     RayResult {
-        status: crate::trace::RayStatus::Error,
-        position: DVec3::ZERO,
-        direction: DVec3::ZERO,
-        opl: 0.0,
-        length: 0.0,
-        swept: DVec3::ZERO,
-        steps: 0,
-        evals: 0,
-        transmittance: 0.0,
         error_estimate: f64::INFINITY,
-        crossing_uncertainty: f64::INFINITY,
+        ..RayResult::at(crate::trace::RayStatus::Error, DVec3::ZERO, DVec3::ZERO)
     }
 }
 

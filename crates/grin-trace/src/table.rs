@@ -618,19 +618,7 @@ mod tests {
     }
 
     fn missed(row: &RayRow) -> RayResult {
-        RayResult {
-            status: RayStatus::Missed,
-            position: row.origin,
-            direction: DVec3::Z,
-            opl: 0.0,
-            length: 0.0,
-            swept: DVec3::ZERO,
-            steps: 0,
-            evals: 0,
-            transmittance: 1.0,
-            error_estimate: 0.0,
-            crossing_uncertainty: 0.0,
-        }
+        RayResult::at(RayStatus::Missed, row.origin, DVec3::Z)
     }
 
     #[test]

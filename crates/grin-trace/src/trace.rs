@@ -130,6 +130,26 @@ pub struct RayResult {
     pub crossing_uncertainty: f64,
 }
 
+impl RayResult {
+    /// A ray that ended with `status` at `position`, heading `direction`, before any
+    /// step: no path, full transmittance, no error.
+    pub fn at(status: RayStatus, position: DVec3, direction: DVec3) -> RayResult {
+        RayResult {
+            status,
+            position,
+            direction,
+            opl: 0.0,
+            length: 0.0,
+            swept: DVec3::ZERO,
+            steps: 0,
+            evals: 0,
+            transmittance: 1.0,
+            error_estimate: 0.0,
+            crossing_uncertainty: 0.0,
+        }
+    }
+}
+
 /// Tell the tracer to keep going after a segment, or to stop the ray there (`absorbed`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Control {
@@ -239,19 +259,7 @@ impl<R: Real> March<R> {
         dir: DVec3,
         first_step_scale: f64,
     ) -> Result<Self, RayResult> {
-        let mut res = RayResult {
-            status: RayStatus::Error,
-            position: origin,
-            direction: DVec3::ZERO,
-            opl: 0.0,
-            length: 0.0,
-            swept: DVec3::ZERO,
-            steps: 0,
-            evals: 0,
-            transmittance: 1.0,
-            error_estimate: 0.0,
-            crossing_uncertainty: 0.0,
-        };
+        let mut res = RayResult::at(RayStatus::Error, origin, DVec3::ZERO);
         let len2 = dir.length_squared();
         if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
             res.direction = if dir.is_finite() && len2 > 0.0 {
