@@ -497,6 +497,18 @@ field = { kind = "exponential-atmosphere", e = -6e-4, scale_height = 0.15 }
             .any(|w| w.as_str().is_some_and(|w| w.contains("under-resolved"))),
         "{summary}"
     );
+    // On a CPU adapter (lavapipe) the render says that `--backend cpu` is the faster
+    // way here; on a GPU it says nothing of the kind.
+    let on_cpu = summary["adapter"]
+        .as_str()
+        .is_some_and(|a| a.contains("Cpu"));
+    let says = |w: &str| w.contains("CPU adapter") && w.contains("--backend cpu");
+    assert_eq!(
+        warnings.iter().any(|w| w.as_str().is_some_and(says)),
+        on_cpu,
+        "{summary}"
+    );
+    assert_eq!(stderr.contains("CPU adapter"), on_cpu, "{stderr}");
     assert!(out.exists());
 }
 

@@ -220,6 +220,11 @@ impl GpuContext {
         (self.info.device_type == wgpu::DeviceType::Cpu).then_some(CPU_ADAPTER_LOOP_ITERATIONS)
     }
 
+    /// Whether the adapter is a CPU one (lavapipe where a machine has no GPU).
+    pub fn is_cpu_adapter(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// `name (backend, device type)` of the adapter in use.
     pub fn adapter_name(&self) -> String {
         describe_adapter(&self.info)

@@ -171,6 +171,19 @@ fn gpu_context(no_cache: bool) -> anyhow::Result<grin_gpu::GpuContext> {
     Ok(grin_gpu::GpuContext::new_headless_in(dir.as_deref())?)
 }
 
+/// The GPU backend on a CPU adapter (lavapipe where a machine has no GPU): the marcher is
+/// built for GPUs (short dispatches of many threads), and the CPU tracer renders the same
+/// frame on the same cores faster; say so.
+fn cpu_adapter_warning(ctx: &grin_gpu::GpuContext) -> Option<String> {
+    ctx.is_cpu_adapter().then(|| {
+        format!(
+            "the GPU backend runs on a CPU adapter ({}): wgpu finds no GPU on this machine, \
+             and `--backend cpu` is usually faster without one (docs/render.md)",
+            ctx.adapter_name()
+        )
+    })
+}
+
 /// The scene's beauty image: the scene without its [optics] output.
 fn without_optics(mut scene: grin_scene::Scene) -> grin_scene::Scene {
     scene.optics = None;
@@ -800,6 +813,14 @@ fn render_frame(
                     &owned
                 }
             };
+            if let Some(w) = cpu_adapter_warning(ctx)
+                && !warnings.contains(&w)
+            {
+                // Printed once a process (a sequence renders many frames on one device).
+                static PRINTED: std::sync::Once = std::sync::Once::new();
+                PRINTED.call_once(|| bar.suspend(|| eprintln!("grin: warning: {w}")));
+                warnings.push(w);
+            }
             let cache = (!args.no_cache)
                 .then(grin_gpu::cache::BakeCache::user_default)
                 .flatten();
