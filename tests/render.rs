@@ -362,13 +362,20 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
     // error (~1.5e-4) is more than the scene's fixed sharma steps are asked for (the
     // default 1e-4 rad): rays through the outer lens leave 1e-4..4e-4 rad off and their
     // own estimates say so (the drift of |T| from the bake's n), so those pixels end
-    // `degraded` (116 of the 392 in the medium, measured), and that is the one warning.
-    let warnings = summary["warnings"].as_array().expect("warnings");
+    // `degraded` (116 of the 392 in the medium, measured), and that is the one warning
+    // about the image (on lavapipe another says that `--backend cpu` is faster there).
+    let warnings: Vec<&str> = summary["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .filter(|w| !w.contains("runs on a CPU adapter"))
+        .collect();
     assert!(
         warnings.len() <= 1
-            && warnings.iter().all(|w| w
-                .as_str()
-                .is_some_and(|w| w.contains("left the medium `degraded`"))),
+            && warnings
+                .iter()
+                .all(|w| w.contains("left the medium `degraded`")),
         "{summary}"
     );
     let count = |k: &str| summary["status_counts"][k].as_u64().expect("status count");
