@@ -8,7 +8,7 @@ mod common;
 use common::{assert_ok as ok, gpu_available, render};
 use std::path::Path;
 
-use grin_trace::image::Frame;
+use grin_render::image::Frame;
 
 /// A checker wall at z = `wall_z` (squares of 10 m: one vertical edge at x = 0 in view),
 /// lit evenly from behind the camera, seen from z = -4 with the camera table `lens`.

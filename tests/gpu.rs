@@ -75,7 +75,7 @@ fn render_gpu_writes_exr_png_and_summary() {
         summary["seconds"].as_f64().unwrap_or(f64::NAN),
     );
     assert!(device > 0.0 && device <= wall, "{summary}");
-    let frame = grin_trace::image::Frame::read_exr(&out).expect("EXR readable");
+    let frame = grin_render::image::Frame::read_exr(&out).expect("EXR readable");
     assert_eq!((frame.width, frame.height), (64, 36));
     assert!(
         frame.pixels.iter().any(|p| p.status == 1.0),
@@ -108,7 +108,7 @@ fn band_size_does_not_change_the_image() {
             .expect("run grin");
         assert!(o.status.success(), "grin render failed: {}", stderr(&o));
         (
-            grin_trace::image::Frame::read_exr(&out).expect("EXR readable"),
+            grin_render::image::Frame::read_exr(&out).expect("EXR readable"),
             stderr(&o),
         )
     };

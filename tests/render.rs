@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use glam::DVec3;
-use grin_trace::image::Frame;
+use grin_render::image::Frame;
 use grin_trace::render::camera::PinholeCamera;
 
 fn scene_path(name: &str) -> PathBuf {
@@ -392,7 +392,7 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
     );
     let cpu = Frame::read_exr(&cpu_out).expect("cpu exr");
     let gpu = Frame::read_exr(&gpu_out).expect("gpu exr");
-    let (stats, _) = grin_trace::image::diff_frames(&cpu, &gpu).expect("same size");
+    let (stats, _) = grin_render::image::diff_frames(&cpu, &gpu).expect("same size");
     eprintln!(
         "cpu vs gpu (luneburg 48x28): mean {:.2e}, p99 {:.2e}, max {:.2e}",
         stats.mean, stats.p99, stats.max

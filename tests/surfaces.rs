@@ -8,7 +8,7 @@
 mod common;
 use common::{assert_ok as ok, bos_plume_scene, exr_channels, gpu_available, render};
 
-use grin_trace::image::Frame;
+use grin_render::image::Frame;
 use grin_trace::render::surface::srgb_to_linear;
 
 /// A plate at infinity, rendered at its own size without a medium, is the plate: each

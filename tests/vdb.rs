@@ -10,8 +10,9 @@ use std::process::{Command, Output};
 use glam::DVec3;
 use grin_field::vdb::{DEFAULT_MAX_DENSE_BYTES, Mapping, VdbField, VdbFieldParams};
 use grin_field::{Bounds, FieldSample, IndexField};
+use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind, NonFinitePolicy, StepSpec};
-use grin_trace::{RayStatus, TraceSettings, trace_ray};
+use grin_trace::{RayStatus, trace_ray};
 
 fn data(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

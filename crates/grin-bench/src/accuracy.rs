@@ -11,8 +11,9 @@
 use std::time::Instant;
 
 use glam::DVec3;
+use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind};
-use grin_trace::{RayResult, RayStatus, TraceSettings, trace_ray};
+use grin_trace::{RayResult, RayStatus, trace_ray};
 use rayon::prelude::*;
 
 use crate::cases::{Case, Exit};

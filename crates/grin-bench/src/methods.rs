@@ -1,8 +1,8 @@
 //! The methods a sweep runs: integrator x step policy x exit method x precision, each at
 //! a list of step sizes or tolerances (relative to the case's length scale).
 
+use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
-use grin_trace::TraceSettings;
 
 /// How step lengths are chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

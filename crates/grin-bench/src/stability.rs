@@ -600,7 +600,7 @@ fn cell_settings(
     case: &StabilityCase,
     col: &Column,
     field: &dyn IndexField,
-) -> grin_trace::TraceSettings {
+) -> grin_render::settings::TraceSettings {
     let mut settings = col.method.settings(col.param, case.scale);
     settings.max_steps = case.max_steps;
     if col.method.policy == Policy::Auto {

@@ -17,8 +17,8 @@ mod harness;
 
 use std::path::{Path, PathBuf};
 
+use grin_render::image::{Frame, PixelOut, diff_frames};
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec, load_scene, parse_scene};
-use grin_trace::image::{Frame, PixelOut, diff_frames};
 
 /// Mean per-pixel difference allowed (linear radiance, largest channel).
 const MEAN_TOL: f64 = 1e-3;

@@ -12,8 +12,8 @@ use glam::DVec3;
 use grin_field::Bounds;
 use grin_field::baked::{BakeProvenance, BakedField, GridGeometry, Interp, Outside, Voxels};
 use grin_gpu::{GpuError, GpuRenderer};
+use grin_render::image::diff_frames;
 use grin_scene::parse_scene;
-use grin_trace::image::diff_frames;
 use grin_trace::render::{RenderScene, render_cpu};
 
 const SCENE: &str = r#"
@@ -48,7 +48,7 @@ fn gpu_frame(
     ctx: &grin_gpu::GpuContext,
     toml: &str,
     bake: Option<usize>,
-) -> grin_trace::image::Frame {
+) -> grin_render::image::Frame {
     let scene = parse_scene(toml, Path::new("inline.toml")).expect("scene");
     let baked = bake.and_then(|res| harness::baked(&scene, Path::new("."), res));
     let field = baked.clone().map(|b| b as Arc<dyn grin_field::IndexField>);

@@ -7,10 +7,11 @@ use std::sync::Arc;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::DVec3;
 use grin_field::{IndexField, Real};
+use grin_render::settings::TraceSettings;
 use grin_scene::{
     BoundsSpec, ExitMethod, FieldSpec, IntegratorKind, MediumSpec, PlumeBlob, StepSpec,
 };
-use grin_trace::{TraceSettings, trace_ray};
+use grin_trace::trace_ray;
 
 /// Rays per beam: one benchmark iteration traces them all.
 const BEAM: usize = 64;

@@ -19,7 +19,8 @@ use grin_field::{IndexField, Real};
 use grin_scene::{IntegratorKind, StepSpec};
 use rayon::prelude::*;
 
-use crate::trace::{RayResult, RayStatus, TraceSettings, trace_ray};
+use crate::trace::{RayResult, RayStatus, trace_ray};
+use grin_render::settings::TraceSettings;
 
 /// The pilots' reference runs error control at this fraction of the asked error
 /// (tighter costs much more on baked grids, whose interpolant is only C2: at 1e-5 of

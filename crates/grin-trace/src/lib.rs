@@ -11,10 +11,7 @@ pub mod table;
 pub mod trace;
 
 pub use boundary::{Interface, Segment, fresnel, refract};
-pub use trace::{
-    Control, RayResult, RayStatus, TraceError, TraceSettings, trace_ray, trace_ray_observed,
-};
+pub use trace::{Control, RayResult, RayStatus, trace_ray, trace_ray_observed};
 
-pub use grin_render::image;
 pub mod render;
 pub mod shadowgraph;

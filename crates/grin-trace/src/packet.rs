@@ -20,7 +20,8 @@ use grin_scene::{IntegratorKind, StepSpec};
 
 use crate::estimate::POSITION_SAFETY;
 use crate::step::StepController;
-use crate::trace::{Control, March, RayResult, TraceSettings};
+use crate::trace::{Control, March, RayResult};
+use grin_render::settings::TraceSettings;
 
 /// Rays a packet advances together.
 pub const LANES: usize = 4;

@@ -17,7 +17,8 @@ use glam::DVec3;
 use grin_field::{IndexField, Real};
 use rayon::prelude::*;
 
-use crate::trace::{RayResult, RayStatus, TraceSettings, trace_ray};
+use crate::trace::{RayResult, RayStatus, trace_ray};
+use grin_render::settings::TraceSettings;
 
 /// The input columns, in order.
 pub const INPUT_COLUMNS: [&str; 6] = ["ox", "oy", "oz", "dx", "dy", "dz"];

@@ -10,7 +10,7 @@ use glam::DVec3;
 use grin_field::{Bounds, FieldSample, IndexField, Real, Vec3Like};
 use grin_scene::ExitMethod;
 
-pub use grin_render::settings::{MIN_STEP_FRACTION, TraceError, TraceSettings};
+use grin_render::settings::TraceSettings;
 
 use crate::boundary::{
     EXCURSION_SLACK_TOLS, Interface, MAX_BISECTIONS, Segment, exit_tolerance, project_to_surface,

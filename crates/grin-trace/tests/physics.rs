@@ -11,12 +11,11 @@ use std::f64::consts::PI;
 use common::{Profile, TestField, golden_min, log_slope};
 use glam::DVec3;
 use grin_field::{IndexField, Real};
+use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
 use grin_trace::integrate::{self, RayState};
 use grin_trace::step::StepController;
-use grin_trace::{
-    Control, RayResult, RayStatus, Segment, TraceSettings, trace_ray, trace_ray_observed,
-};
+use grin_trace::{Control, RayResult, RayStatus, Segment, trace_ray, trace_ray_observed};
 
 fn settings(integrator: IntegratorKind, step: StepSpec, exit: ExitMethod) -> TraceSettings {
     TraceSettings {

@@ -11,8 +11,9 @@ use common::golden_min;
 use glam::DVec3;
 use grin_field::IndexField;
 use grin_field::analytic::{grin_rod, linear_n2, luneburg, maxwell_fish_eye};
+use grin_render::settings::TraceSettings;
 use grin_scene::{Axis, BoundsSpec, ExitMethod, FieldSpec, IntegratorKind, MediumSpec, StepSpec};
-use grin_trace::{Control, RayStatus, Segment, TraceSettings, trace_ray, trace_ray_observed};
+use grin_trace::{Control, RayStatus, Segment, trace_ray, trace_ray_observed};
 
 fn build(field: FieldSpec, bounds: BoundsSpec, ambient_index: f64) -> Arc<dyn IndexField> {
     let medium = MediumSpec {

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use anyhow::Context;
 use grin_output::Staged;
+use grin_render::image::{Frame, stage_channels_exr, stage_rgb8_png};
 use grin_scene::{OpticsMode, OpticsSpec};
-use grin_trace::image::{Frame, stage_channels_exr, stage_rgb8_png};
 use grin_trace::render::RenderScene;
 use grin_trace::render::optics::{
     Displacement, Plane, bos_pair, deflection_angles, interferogram, schlieren,

@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use grin_trace::image::{Frame, diff_frames};
+use grin_render::image::{Frame, diff_frames};
 use grin_trace::render::{RenderScene, render_cpu};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -719,7 +719,7 @@ fn render_one(
 
     let n_pixels = f64::from(frame.width) * f64::from(frame.height);
     let rays = n_pixels * f64::from(scene.render.spp);
-    let mean = |f: fn(&grin_trace::image::PixelOut) -> f32| {
+    let mean = |f: fn(&grin_render::image::PixelOut) -> f32| {
         frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / n_pixels.max(1.0)
     };
     let mut summary = Summary {

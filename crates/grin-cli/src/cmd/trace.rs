@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
-use grin_trace::TraceSettings;
 use grin_trace::table::{self, TableFormat, TableSummary};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 

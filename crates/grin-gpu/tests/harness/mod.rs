@@ -11,8 +11,8 @@ use std::sync::atomic::AtomicBool;
 use grin_field::IndexField;
 use grin_field::baked::BakedField;
 use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
+use grin_render::image::{Frame, diff_frames};
 use grin_scene::Scene;
-use grin_trace::image::{Frame, diff_frames};
 use grin_trace::render::{RenderScene, render_cpu};
 
 /// The device, or `None` when no adapter exists and `GRIN_ALLOW_NO_GPU=1` is set (after

@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::image::{Frame, PixelOut};
+use grin_render::image::{Frame, PixelOut};
 use rng::Rng;
 
 pub use grin_render::scene::{

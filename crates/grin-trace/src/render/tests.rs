@@ -14,8 +14,8 @@ use super::materials::refract_dir;
 use super::primitives::intersect_sphere;
 use super::shade::status_code;
 use super::{RenderScene, render_cpu};
-use crate::image::Frame;
 use crate::trace::RayStatus;
+use grin_render::image::Frame;
 
 /// n = `n` inside the bounds: the test's own field, independent of grin-field's profiles.
 #[derive(Debug)]

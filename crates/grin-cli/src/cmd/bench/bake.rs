@@ -10,7 +10,8 @@ use glam::DVec3;
 use grin_field::IndexField;
 use grin_field::bake::{BakeOptions, bake};
 use grin_field::baked::{Interp, Storage};
-use grin_trace::{TraceSettings, trace_ray};
+use grin_render::settings::TraceSettings;
+use grin_trace::trace_ray;
 
 /// Arguments of `grin bench bake`.
 #[derive(Debug, clap::Args)]

@@ -13,7 +13,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use grin_field::IndexField;
 use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
-use grin_trace::image::Frame;
+use grin_render::image::Frame;
 use grin_trace::render::{RenderScene, render_cpu};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
@@ -135,7 +135,7 @@ struct Report {
     timed_on_device: bool,
 }
 
-fn mean(frame: &Frame, f: fn(&grin_trace::image::PixelOut) -> f32) -> f64 {
+fn mean(frame: &Frame, f: fn(&grin_render::image::PixelOut) -> f32) -> f64 {
     frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / frame.pixels.len().max(1) as f64
 }
 
