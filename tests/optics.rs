@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use glam::DVec3;
-use grin_trace::render::camera::PinholeCamera;
-use grin_trace::render::optics::{Plane, camera_angles, project_dir};
+use grin_render::camera::PinholeCamera;
+use grin_render::optics::{Plane, camera_angles, project_dir};
 
 fn run(args: &[&str]) -> Output {
     grin().args(args).output().expect("run grin")

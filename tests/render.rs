@@ -9,8 +9,8 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use glam::DVec3;
+use grin_render::camera::PinholeCamera;
 use grin_render::image::Frame;
-use grin_trace::render::camera::PinholeCamera;
 
 fn scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

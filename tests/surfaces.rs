@@ -9,7 +9,7 @@ mod common;
 use common::{assert_ok as ok, bos_plume_scene, exr_channels, gpu_available, render};
 
 use grin_render::image::Frame;
-use grin_trace::render::surface::srgb_to_linear;
+use grin_render::surface::srgb_to_linear;
 
 /// A plate at infinity, rendered at its own size without a medium, is the plate: each
 /// pixel-centre ray projects back to its texel's centre (CPU exactly, to f32 rounding;

@@ -407,7 +407,7 @@ fn baked_file_scene_is_marched_through_its_own_grid() {
     );
     let scene = parse_scene(&text, &dir.join("scene.toml")).expect("baked scene");
     let field = harness::build_field(&scene, &dir).expect("medium");
-    let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field)).expect("scene");
+    let rs = grin_render::scene::RenderScene::new(&scene, &dir, Some(field)).expect("scene");
     let renderer = grin_gpu::GpuRenderer::new(&ctx, &rs, None).expect("GPU renderer");
     let dims = tricubic.geometry().dims;
     assert_eq!(
@@ -488,7 +488,7 @@ material = { glass = { ior = 1.5 } }
     scene.render.spp = 1;
     let dir = path.parent().expect("dir");
     let field = harness::build_field(&scene, dir);
-    let rs = grin_trace::render::RenderScene::new(&scene, dir, field).expect("render scene");
+    let rs = grin_render::scene::RenderScene::new(&scene, dir, field).expect("render scene");
     let cpu =
         grin_trace::render::render_cpu(&rs, &|_| {}, &std::sync::atomic::AtomicBool::new(false))
             .expect("CPU render");
@@ -590,8 +590,8 @@ fn renderers_with_the_same_constants_share_compiled_pipelines() {
     scene.render.height = 18;
     let baked = harness::baked(&scene, &dir, 32).expect("medium");
     let field: std::sync::Arc<dyn grin_field::IndexField> = baked.clone();
-    let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field.clone())).expect("rs");
-    let render = |rs: &grin_trace::render::RenderScene| {
+    let rs = grin_render::scene::RenderScene::new(&scene, &dir, Some(field.clone())).expect("rs");
+    let render = |rs: &grin_render::scene::RenderScene| {
         let r = grin_gpu::GpuRenderer::new(&ctx, rs, Some(&baked)).expect("renderer");
         r.render(&|_| {}, &std::sync::atomic::AtomicBool::new(false))
             .expect("frame")
@@ -606,7 +606,7 @@ fn renderers_with_the_same_constants_share_compiled_pipelines() {
     );
     assert_eq!(a, b);
     scene.render.integrator = Some(IntegratorKind::Rk4);
-    let rs = grin_trace::render::RenderScene::new(&scene, &dir, Some(field)).expect("rs");
+    let rs = grin_render::scene::RenderScene::new(&scene, &dir, Some(field)).expect("rs");
     let c = render(&rs);
     assert_eq!(ctx.pipelines_compiled(), 2);
     assert_eq!((c.width, c.height), (32, 18));

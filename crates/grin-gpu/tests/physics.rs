@@ -13,8 +13,9 @@ use grin_field::Bounds;
 use grin_field::baked::{BakeProvenance, BakedField, GridGeometry, Interp, Outside, Voxels};
 use grin_gpu::{GpuError, GpuRenderer};
 use grin_render::image::diff_frames;
+use grin_render::scene::RenderScene;
 use grin_scene::parse_scene;
-use grin_trace::render::{RenderScene, render_cpu};
+use grin_trace::render::render_cpu;
 
 const SCENE: &str = r#"
 [camera]

@@ -8,8 +8,8 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
 use grin_gpu::{GpuContext, GpuRenderer};
+use grin_render::scene::RenderScene;
 use grin_scene::parse_scene;
-use grin_trace::render::RenderScene;
 
 const SCENE: &str = r#"
 [camera]

@@ -8,12 +8,12 @@ use std::path::Path;
 use anyhow::Context;
 use grin_output::Staged;
 use grin_render::image::{Frame, stage_channels_exr, stage_rgb8_png};
-use grin_scene::{OpticsMode, OpticsSpec};
-use grin_trace::render::RenderScene;
-use grin_trace::render::optics::{
+use grin_render::optics::{
     Displacement, Plane, bos_pair, deflection_angles, interferogram, schlieren,
 };
-use grin_trace::render::sensor::record_all;
+use grin_render::scene::RenderScene;
+use grin_render::sensor::record_all;
+use grin_scene::{OpticsMode, OpticsSpec};
 use serde_json::json;
 
 /// The mode's name as the scene writes it.

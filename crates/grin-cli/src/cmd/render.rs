@@ -7,7 +7,8 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use grin_render::image::{Frame, diff_frames};
-use grin_trace::render::{RenderScene, render_cpu};
+use grin_render::scene::RenderScene;
+use grin_trace::render::render_cpu;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Which renderer runs the frame.
@@ -406,7 +407,7 @@ fn render_one(
                 plane: o
                     .plane
                     .as_ref()
-                    .and_then(|p| grin_trace::render::optics::Plane::new(p, &rs.camera)),
+                    .and_then(|p| grin_render::optics::Plane::new(p, &rs.camera)),
             },
             grin_scene::AccuracyUnit::Waves => grin_trace::auto::Metric::Waves {
                 wavelength: o.wavelength_nm * 1e-9,
@@ -517,13 +518,13 @@ fn render_one(
                 beam_rs.materials.clear();
                 beam_rs.object_images.clear();
                 let pixels = u64::from(beam_rs.camera.width) * u64::from(beam_rs.camera.height);
-                if pixels > grin_trace::render::MAX_PIXELS {
+                if pixels > grin_render::scene::MAX_PIXELS {
                     bail!(
                         "{}: [optics] the shadowgraph's beam is {pixels} rays (bins x \
                          rays_per_pixel); at most {} fit one GPU frame: fewer bins or \
                          rays_per_pixel",
                         args.scene.display(),
-                        grin_trace::render::MAX_PIXELS
+                        grin_render::scene::MAX_PIXELS
                     );
                 }
                 let bar = progress_bar(beam_rs.settings.height);
@@ -639,7 +640,7 @@ fn render_one(
     let mut frame = frame;
     if let Some(sensor) = &scene.sensor {
         match scene.optics.as_ref().map(|o| o.mode) {
-            None => grin_trace::render::sensor::record_frame(sensor, &mut frame),
+            None => grin_render::sensor::record_frame(sensor, &mut frame),
             Some(grin_scene::OpticsMode::Bos | grin_scene::OpticsMode::Interferogram) => {}
             Some(mode) => {
                 let w = format!(

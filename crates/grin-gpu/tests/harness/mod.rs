@@ -12,8 +12,9 @@ use grin_field::IndexField;
 use grin_field::baked::BakedField;
 use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
 use grin_render::image::{Frame, diff_frames};
+use grin_render::scene::RenderScene;
 use grin_scene::Scene;
-use grin_trace::render::{RenderScene, render_cpu};
+use grin_trace::render::render_cpu;
 
 /// The device, or `None` when no adapter exists and `GRIN_ALLOW_NO_GPU=1` is set (after
 /// printing a prominent SKIPPED line). Without that variable a missing adapter fails

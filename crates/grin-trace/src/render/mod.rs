@@ -16,10 +16,8 @@ use rayon::prelude::*;
 use grin_render::image::{Frame, PixelOut};
 use rng::Rng;
 
-pub use grin_render::scene::{
-    MAX_PIXELS, MIN_JITTER_FRACTION, RenderError, RenderScene, SceneMedium,
-};
-pub use grin_render::{camera, materials, optics, primitives, rng, sensor, sky, surface};
+use grin_render::scene::{MIN_JITTER_FRACTION, RenderError, RenderScene, SceneMedium};
+use grin_render::{materials, primitives, rng, surface};
 
 /// All samples of pixel (px, py): mean radiance; AOVs of sample 0, steps and field
 /// evaluations averaged over the samples.

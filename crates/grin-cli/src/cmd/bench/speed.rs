@@ -14,7 +14,8 @@ use anyhow::{Context, bail};
 use grin_field::IndexField;
 use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
 use grin_render::image::Frame;
-use grin_trace::render::{RenderScene, render_cpu};
+use grin_render::scene::RenderScene;
+use grin_trace::render::render_cpu;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
@@ -281,7 +282,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             f_number: None,
             focus_distance: None,
         };
-        rs.camera = grin_trace::render::camera::PinholeCamera::new(&cam, size.0, size.1)
+        rs.camera = grin_render::camera::PinholeCamera::new(&cam, size.0, size.1)
             .context("close-up camera")?;
         rs.objects.clear();
         rs.materials.clear();
