@@ -6,7 +6,8 @@
 
 mod common;
 use common::{
-    assert_ok as ok, bos_plume_scene, exr_channels as channels, gpu_available, grin, render_json,
+    assert_ok as ok, bos_plume_scene, exr_channels as channels, gpu_available, grin, render,
+    render_json,
 };
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -681,19 +682,12 @@ fn bos_on_the_gpu_matches_the_cpu() {
         bos_plume_scene("fov_y_deg = 12.0", 96, 96, 0.0, BOS_OPTICS),
     )
     .expect("scene");
-    let render = |backend: &str| {
+    let render_on = |backend: &str| {
         let out = d.join(format!("bos-{backend}.exr"));
-        ok(&run(&[
-            "render",
-            "--backend",
-            backend,
-            "-o",
-            out.to_str().expect("utf8"),
-            scene.to_str().expect("utf8"),
-        ]));
+        ok(&render(&scene, &out, backend));
         channels(&out).1
     };
-    let (cpu, gpu) = (render("cpu"), render("gpu"));
+    let (cpu, gpu) = (render_on("cpu"), render_on("gpu"));
     let mut diffs: Vec<f64> = cpu["displacement_px.X"]
         .iter()
         .zip(&gpu["displacement_px.X"])
@@ -738,14 +732,7 @@ fn bos_pair_round_trips_through_cross_correlation() {
     )
     .expect("scene");
     let out = d.join("bos.exr");
-    ok(&run(&[
-        "render",
-        "--backend",
-        "cpu",
-        "-o",
-        out.to_str().expect("utf8"),
-        scene.to_str().expect("utf8"),
-    ]));
+    ok(&render(&scene, &out, "cpu"));
     assert!(d.join("bos.png").exists() && d.join("bos-reference.png").exists());
     let (_, ch) = channels(&out);
     for name in [
