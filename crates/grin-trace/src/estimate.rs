@@ -50,11 +50,11 @@ pub const POSITION_SAFETY: f64 = 4.0;
 #[derive(Debug, Clone, Copy)]
 pub struct ErrorEstimate {
     /// The integrator's order (the difference formulas for 1 and 2).
-    pub(crate) order: u32,
+    order: u32,
     /// Symplectic Euler: T is staggered half a step from r (`staggered_half`: h/2 D at
     /// the last step end, what T is off by there).
-    pub(crate) staggered: bool,
-    pub(crate) staggered_half: DVec3,
+    staggered: bool,
+    staggered_half: DVec3,
     /// The position errors' feedback on the direction, summed so far (rad; the local
     /// direction errors are in `vsum`).
     pub(crate) sum: f64,
@@ -69,7 +69,7 @@ pub struct ErrorEstimate {
     pub(crate) near_miss: bool,
     /// D and the t-step of the previous step (order 2), while the samples are a smooth
     /// sequence (reset at flights and reflections).
-    pub(crate) prev: Option<(DVec3, f64)>,
+    prev: Option<(DVec3, f64)>,
     /// The last local errors (direction across the ray, position) a step reported: a
     /// step that reports none (a fourth-order step cut at the surface, whose companion
     /// needs D where the uncut step would have ended) is counted as the one before it.

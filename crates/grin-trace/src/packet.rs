@@ -209,17 +209,16 @@ struct Soa {
     opl: L,
     length: L,
     swept: V,
-    // The error estimate (crate::estimate::ErrorEstimate).
+    // The error estimate (crate::estimate::ErrorEstimate): the parts a fourth-order
+    // integrator's estimate reads (`prev` and `staggered_half` are read only for the
+    // second-order and staggered integrators, which packets do not take).
     near_miss: [bool; LANES],
     last_local: V,
     last_r: L,
-    staggered_half: V,
     bend: L,
     pos: L,
     vsum: V,
     sum: L,
-    prev_d: V,
-    prev_h: L,
     steps: [u32; LANES],
     evals: [u64; LANES],
 }
@@ -239,13 +238,10 @@ impl Soa {
             near_miss: [true; LANES],
             last_local: V::zero(),
             last_r: L::splat(0.0),
-            staggered_half: V::zero(),
             bend: L::splat(0.0),
             pos: L::splat(0.0),
             vsum: V::zero(),
             sum: L::splat(0.0),
-            prev_d: V::zero(),
-            prev_h: L::splat(0.0),
             steps: [0; LANES],
             evals: [0; LANES],
         };
@@ -266,20 +262,17 @@ impl Soa {
             s.near_miss[i] = e.near_miss;
             s.last_local.set(i, e.last.0);
             s.last_r.0[i] = e.last.1;
-            s.staggered_half.set(i, e.staggered_half);
             s.bend.0[i] = e.bend;
             s.pos.0[i] = e.pos;
             s.vsum.set(i, e.vsum);
             s.sum.0[i] = e.sum;
-            if let Some((d, h)) = e.prev {
-                s.prev_d.set(i, d);
-                s.prev_h.0[i] = h;
-            }
         }
         s
     }
 
-    /// Write lane `i` back into its march (which took `took` packet steps).
+    /// Write lane `i` back into its march (which took `took` packet steps). The march's
+    /// reported position and direction are left to [`March::advance`], which sets them
+    /// from the state first thing.
     fn scatter(&self, i: usize, m: &mut March<f64>, took: u32) {
         if took == 0 {
             return;
@@ -297,17 +290,13 @@ impl Soa {
         m.res.swept = self.swept.lane(i);
         m.res.steps = self.steps[i];
         m.res.evals = self.evals[i];
-        m.res.position = m.state.r;
-        m.res.direction = m.state.t.normalize_or_zero();
         let e = &mut m.estimate;
         e.near_miss = self.near_miss[i];
         e.last = (self.last_local.lane(i), self.last_r.0[i]);
-        e.staggered_half = self.staggered_half.lane(i);
         e.bend = self.bend.0[i];
         e.pos = self.pos.0[i];
         e.vsum = self.vsum.lane(i);
         e.sum = self.sum.0[i];
-        e.prev = Some((self.prev_d.lane(i), self.prev_h.0[i]));
     }
 }
 
@@ -580,13 +569,13 @@ fn march_packet(
         let v = nt.normalize_or_zero().dot(normals);
         let kappa = -d1_end.dot(normals) / (n1 * n1);
         let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
-        let half_h = L::splat(0.5) * h;
+        let evals_per_step = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4));
         for i in 0..LANES {
             if !active[i] {
                 continue;
             }
-            // StepController::take counted the step's own 3, the tracer the end sample.
-            s.evals[i] += 4;
+            // The step's own 3 and the end sample.
+            s.evals[i] += evals_per_step;
             s.r.set(i, nr.lane(i));
             s.t.set(i, nt.lane(i));
             s.comp_r.set(i, lost_r.lane(i));
@@ -599,15 +588,12 @@ fn march_packet(
             }
             s.last_local.set(i, local.lane(i));
             s.last_r.0[i] = local_r.0[i];
-            s.staggered_half.set(i, d1_end.lane(i) * half_h.0[i]);
             s.bend.0[i] += bend_inc.0[i];
             if local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite() {
                 s.pos.0[i] = pos_new.0[i];
                 s.vsum.set(i, vsum_new.lane(i));
                 s.sum.0[i] = sum_new.0[i];
             }
-            s.prev_d.set(i, d0.lane(i));
-            s.prev_h.0[i] = h.0[i];
             let n = n1.0[i];
             if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
                 && v.0[i] > 0.0
