@@ -613,7 +613,7 @@ fn the_step_that_leaves_the_medium_matches_its_cpu_twin() {
             }
             let (mut state, mut h) = (taken.step.state, taken.h);
             if code != 0 {
-                let (es, eh, ee) = exit_medium(
+                let (es, eh, ee, _) = exit_medium(
                     field,
                     &s.trace,
                     &bounds,

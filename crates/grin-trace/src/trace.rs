@@ -456,7 +456,7 @@ impl<R: Real> March<R> {
             let mut quad = taken.step.quad;
             if outside && is_finite_v::<R>(next.r) {
                 let (exit_state, exit_h, evals, exit_quad) =
-                    exit_medium_quad(field, settings, &bounds, state, &s0, &taken, exit_tol);
+                    exit_medium(field, settings, &bounds, state, &s0, &taken, exit_tol);
                 res.evals += u64::from(evals);
                 next = exit_state;
                 h = exit_h;
@@ -683,23 +683,10 @@ pub fn excursion_step<R: Real>(
 
 /// The step from `s` ended outside the bounds: find where it crosses the surface.
 /// Returns the state on the surface (projected onto it for the Hermite method), the step
-/// length in t that reaches it and the field evaluations spent.
+/// length in t that reaches it, the field evaluations spent, and the quadrature of the
+/// step that reaches the surface where the integrator has one (the Hermite search's last
+/// re-step).
 pub fn exit_medium<R: Real>(
-    field: &dyn IndexField,
-    settings: &TraceSettings,
-    bounds: &Bounds,
-    s: RayState<R>,
-    s0: &FieldSample<R>,
-    taken: &Taken<R>,
-    tol: f64,
-) -> (RayState<R>, R, u32) {
-    let (state, h, evals, _) = exit_medium_quad(field, settings, bounds, s, s0, taken, tol);
-    (state, h, evals)
-}
-
-/// [`exit_medium`], with the quadrature of the step that reaches the surface where the
-/// integrator has one (the Hermite search's last re-step).
-pub fn exit_medium_quad<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
     bounds: &Bounds,
