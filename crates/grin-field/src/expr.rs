@@ -553,15 +553,7 @@ impl IndexField for ExprField {
     fn sample4(&self, p: [[f64; 4]; 3], out: &mut [[f64; 4]; 4]) {
         match &self.native {
             Some(code) => code.sample4(p, self.t, out),
-            None => {
-                for i in 0..4 {
-                    let s = self.sample_interpreted(DVec3::new(p[0][i], p[1][i], p[2][i]));
-                    out[0][i] = s.n;
-                    out[1][i] = s.grad_n.x;
-                    out[2][i] = s.grad_n.y;
-                    out[3][i] = s.grad_n.z;
-                }
-            }
+            None => crate::field::sample4_each(self, p, out),
         }
     }
     fn n(&self, p: DVec3) -> f64 {

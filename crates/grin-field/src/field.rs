@@ -44,13 +44,7 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
     /// point, bit for bit; fields that compute several points faster together override it
     /// (an `expr` formula's compiled code works in two-lane vectors).
     fn sample4(&self, p: [[f64; 4]; 3], out: &mut [[f64; 4]; 4]) {
-        for i in 0..4 {
-            let s = self.sample(DVec3::new(p[0][i], p[1][i], p[2][i]));
-            out[0][i] = s.n;
-            out[1][i] = s.grad_n.x;
-            out[2][i] = s.grad_n.y;
-            out[3][i] = s.grad_n.z;
-        }
+        sample4_each(self, p, out);
     }
 
     /// n alone (cheaper for fields that can skip the gradient).
@@ -132,6 +126,18 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
     /// uploads it as it is instead of baking the field again.
     fn as_baked(&self) -> Option<&crate::baked::BakedField> {
         None
+    }
+}
+
+/// [`IndexField::sample4`] one point at a time with [`IndexField::sample`] (the default,
+/// and what a field that overrides it falls back to).
+pub fn sample4_each<F: IndexField + ?Sized>(field: &F, p: [[f64; 4]; 3], out: &mut [[f64; 4]; 4]) {
+    for i in 0..4 {
+        let s = field.sample(DVec3::new(p[0][i], p[1][i], p[2][i]));
+        out[0][i] = s.n;
+        out[1][i] = s.grad_n.x;
+        out[2][i] = s.grad_n.y;
+        out[3][i] = s.grad_n.z;
     }
 }
 
