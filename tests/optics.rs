@@ -664,6 +664,18 @@ plane = { point = [0.0, 0.0, 6.0], normal = [0.0, 0.0, -1.0] }
 dots = { diameter = 0.05, density = 0.4, seed = 3 }
 "#;
 
+/// The BOS tests' scene in `d`: the plume seen through a 12 degree view, `size` pixels
+/// square, rk4 at `step` (0: grin's defaults), with [`BOS_OPTICS`].
+fn bos_scene(d: &Path, size: u32, step: f64) -> PathBuf {
+    let scene = d.join("bos.toml");
+    std::fs::write(
+        &scene,
+        bos_plume_scene("fov_y_deg = 12.0", size, size, step, BOS_OPTICS),
+    )
+    .expect("scene");
+    scene
+}
+
 /// BOS on both backends: the GPU's distorted dot image and true displacement (its rays
 /// through the GPU's bake, f32) agree with the CPU's, both with the default accuracy (no
 /// integrator named): displacement within 0.01 px at the 99th percentile, dot images
@@ -676,12 +688,7 @@ fn bos_on_the_gpu_matches_the_cpu() {
     }
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
-    let scene = d.join("bos.toml");
-    std::fs::write(
-        &scene,
-        bos_plume_scene("fov_y_deg = 12.0", 96, 96, 0.0, BOS_OPTICS),
-    )
-    .expect("scene");
+    let scene = bos_scene(d, 96, 0.0);
     let render_on = |backend: &str| {
         let out = d.join(format!("bos-{backend}.exr"));
         ok(&render(&scene, &out, backend));
@@ -725,12 +732,7 @@ fn bos_on_the_gpu_matches_the_cpu() {
 fn bos_pair_round_trips_through_cross_correlation() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
-    let scene = d.join("bos.toml");
-    std::fs::write(
-        &scene,
-        bos_plume_scene("fov_y_deg = 12.0", 160, 160, 0.01, BOS_OPTICS),
-    )
-    .expect("scene");
+    let scene = bos_scene(d, 160, 0.01);
     let out = d.join("bos.exr");
     ok(&render(&scene, &out, "cpu"));
     assert!(d.join("bos.png").exists() && d.join("bos-reference.png").exists());
