@@ -87,11 +87,9 @@ impl Frame {
         Ok(grin_output::commit(vec![self.stage_exr(path)?])?)
     }
 
-    /// Linear HDR EXR: R, G, B and the `aov.*` channels, lossless ZIP compression,
-    /// written in full to a temporary file; [`grin_output::commit`] puts it in place.
-    pub fn stage_exr(&self, path: &Path) -> Result<Staged, RenderError> {
-        let size = (self.width as usize, self.height as usize);
-        let named: Vec<(&str, Vec<f32>)> = vec![
+    /// The EXR's channels by name: R, G, B and the `aov.*` channels ([`AOV_CHANNELS`]).
+    pub fn channels(&self) -> Result<Vec<(&'static str, Vec<f32>)>, RenderError> {
+        Ok(vec![
             ("R", self.channel(|p| p.rgb[0])?),
             ("G", self.channel(|p| p.rgb[1])?),
             ("B", self.channel(|p| p.rgb[2])?),
@@ -107,8 +105,14 @@ impl Frame {
             (AOV_CHANNELS[9], self.channel(|p| p.exit_pos[1])?),
             (AOV_CHANNELS[10], self.channel(|p| p.exit_pos[2])?),
             (AOV_CHANNELS[11], self.channel(|p| p.opd_plane)?),
-        ];
-        stage_channels_exr(path, size, named)
+        ])
+    }
+
+    /// Linear HDR EXR: R, G, B and the `aov.*` channels, lossless ZIP compression,
+    /// written in full to a temporary file; [`grin_output::commit`] puts it in place.
+    pub fn stage_exr(&self, path: &Path) -> Result<Staged, RenderError> {
+        let size = (self.width as usize, self.height as usize);
+        stage_channels_exr(path, size, self.channels()?)
     }
 
     /// Read an EXR written by [`Frame::write_exr`] (beauty and AOVs).

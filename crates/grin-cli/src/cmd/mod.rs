@@ -5,7 +5,6 @@ pub mod bench;
 pub mod export;
 pub mod info;
 pub mod info_vdb;
-pub mod optics;
 pub mod render;
 pub mod trace;
 pub mod view;

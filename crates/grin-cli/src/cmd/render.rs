@@ -2,32 +2,11 @@
 //! beside it, on the GPU (wgpu) or the CPU reference.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-use std::time::Instant;
 
 use anyhow::{Context, bail};
-use grin_render::image::{Frame, diff_frames};
-use grin_render::scene::RenderScene;
-use grin_trace::render::render_cpu;
+use grin_pipeline::{Backend, Rendered, Renderer};
+use grin_render::image::{Frame, diff_frames, stage_channels_exr, stage_rgb8_png};
 use indicatif::{ProgressBar, ProgressStyle};
-
-/// Which renderer runs the frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Backend {
-    /// The WGSL marcher through wgpu (lavapipe without a GPU).
-    Gpu,
-    /// The CPU reference (rayon).
-    Cpu,
-}
-
-impl Backend {
-    fn name(self) -> &'static str {
-        match self {
-            Backend::Gpu => "gpu",
-            Backend::Cpu => "cpu",
-        }
-    }
-}
 
 /// Arguments of `grin render`.
 #[derive(Debug, clap::Args)]
@@ -94,61 +73,17 @@ pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
-/// What a render produced, for the summary.
+/// What a render produced, for the summary: the pipeline's report and the files.
 #[derive(Debug, serde::Serialize)]
 struct Summary {
-    backend: &'static str,
-    adapter: String,
-    width: u32,
-    height: u32,
-    spp: u32,
-    /// Frame time (the render itself).
-    seconds: f64,
-    /// Device setup, field bake and upload, pipeline creation (GPU; ~0 on the CPU).
-    setup_seconds: f64,
-    /// GPU: the device's own time in the render passes (timestamps; absent where the
-    /// adapter has none). `seconds` adds dispatching and reading the pixels back.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    device_seconds: Option<f64>,
-    rays_per_second: f64,
-    steps_per_ray: f64,
-    evals_per_ray: f64,
-    /// Pixels by the camera ray's status in the medium (sample 0): missed, exited,
-    /// absorbed (stopped on an object inside), max_steps, error.
-    status_counts: std::collections::BTreeMap<&'static str, usize>,
+    #[serde(flatten)]
+    report: grin_pipeline::Report,
     exr: PathBuf,
     /// The PNG preview; none where the EXR went to a stream (`-`, a device).
     png: Option<PathBuf>,
-    /// Warnings also printed on stderr: an under-resolved GPU bake, pixels stopped in
-    /// the medium.
-    warnings: Vec<String>,
-    /// GPU: whether the field grid came from the bake cache (`hit`), was baked and stored
-    /// (`stored`) or baked without it (`off`); absent for a baked file or no medium.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    bake_cache: Option<grin_gpu::cache::CacheUse>,
-    /// GPU: the baked grid the marcher sampled (a `.grinf` file as it is, else the
-    /// coarsest bake meeting the error budget, at most 128 nodes per axis).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    gpu_field: Option<GpuField>,
     /// `--compare`: per-pixel beauty difference against the reference (largest channel).
     #[serde(skip_serializing_if = "Option::is_none")]
     comparison: Option<Comparison>,
-    /// `[optics]`: the mode's output (channels written, ranges, PNGs).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    optics: Option<serde_json::Value>,
-    /// `step = { auto = ... }`: what the pilot rays chose (and every candidate tried).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    auto: Option<grin_trace::auto::AutoChoice>,
-    /// `step = { auto = ... }` resolved without pilots (a render too small for them): why.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    auto_note: Option<String>,
-}
-
-/// The field grid on the device.
-#[derive(Debug, serde::Serialize)]
-struct GpuField {
-    dims: [u32; 3],
-    bytes: u64,
 }
 
 /// The `--compare` result.
@@ -160,29 +95,6 @@ struct Comparison {
     /// Pixels whose difference is infinite (NaN or an unmatched infinity).
     nonfinite: usize,
     difference_png: Option<PathBuf>,
-}
-
-/// The GPU device of a render: the driver's pipeline cache beside the user's bake cache,
-/// neither with `--no-cache`.
-fn gpu_context(no_cache: bool) -> anyhow::Result<grin_gpu::GpuContext> {
-    let dir = (!no_cache)
-        .then(grin_gpu::cache::BakeCache::user_default)
-        .flatten()
-        .map(|c| c.pipeline_dir());
-    Ok(grin_gpu::GpuContext::new_headless_in(dir.as_deref())?)
-}
-
-/// The GPU backend on a CPU adapter (lavapipe where a machine has no GPU): the marcher is
-/// built for GPUs (short dispatches of many threads), and the CPU tracer renders the same
-/// frame on the same cores faster; say so.
-fn cpu_adapter_warning(ctx: &grin_gpu::GpuContext) -> Option<String> {
-    ctx.is_cpu_adapter().then(|| {
-        format!(
-            "the GPU backend runs on a CPU adapter ({}): wgpu finds no GPU on this machine, \
-             and `--backend cpu` is usually faster without one (docs/render.md)",
-            ctx.adapter_name()
-        )
-    })
 }
 
 /// The scene's beauty image: the scene without its [optics] output.
@@ -206,15 +118,53 @@ fn check_output(path: &Path) -> anyhow::Result<Option<PathBuf>> {
     Ok(Some(path.with_extension("png")))
 }
 
-fn progress_bar(rows: u32) -> ProgressBar {
-    let bar = ProgressBar::new(u64::from(rows));
-    if let Ok(style) =
-        ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} rows {elapsed}<{eta}")
-    {
-        bar.set_style(style.progress_chars("=> "));
+/// A progress bar on stderr per pass, with the warnings printed above it.
+struct Bar(std::sync::Mutex<Option<ProgressBar>>);
+
+impl Bar {
+    fn new() -> Self {
+        Self(std::sync::Mutex::new(None))
     }
-    bar.set_prefix("rendering");
-    bar
+
+    fn with(&self, f: impl FnOnce(&mut Option<ProgressBar>)) {
+        f(&mut self.0.lock().unwrap_or_else(|e| e.into_inner()));
+    }
+}
+
+impl grin_pipeline::Progress for Bar {
+    fn begin(&self, rows: u64) {
+        let bar = ProgressBar::new(rows);
+        if let Ok(style) =
+            ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} rows {elapsed}<{eta}")
+        {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_prefix("rendering");
+        self.with(|b| *b = Some(bar));
+    }
+
+    fn advance(&self, rows: u32) {
+        self.with(|b| {
+            if let Some(b) = b {
+                b.inc(u64::from(rows));
+            }
+        });
+    }
+
+    fn finish(&self) {
+        self.with(|b| {
+            if let Some(b) = b.take() {
+                b.finish_and_clear();
+            }
+        });
+    }
+
+    fn warn(&self, message: &str) {
+        self.with(|b| match b {
+            Some(b) => b.suspend(|| eprintln!("grin: warning: {message}")),
+            None => eprintln!("grin: warning: {message}"),
+        });
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -232,7 +182,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if scene.render.spp > 1 && o.mode != grin_scene::OpticsMode::Bos {
             eprintln!(
                 "grin: note: [optics] {} traces one ray through each pixel's centre (spp {} ignored)",
-                crate::cmd::optics::mode_name(o.mode),
+                grin_pipeline::optics::mode_name(o.mode),
                 scene.render.spp
             );
         }
@@ -278,7 +228,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => scene,
         };
         let Some(beauty) = &args.beauty else {
-            let (summary, to_stream) = render_one(&args, scene, &args.output, None)?;
+            let renderer = Renderer::new(args.backend, !args.no_cache);
+            let (summary, to_stream) = render_one(&args, &renderer, scene, &args.output)?;
             return print_summary(&summary, args.json, to_stream);
         };
         // The [optics] output and the beauty image, on one device.
@@ -336,13 +287,10 @@ fn render_all(
     args: &Args,
     jobs: impl Iterator<Item = (grin_scene::Scene, PathBuf, String)>,
 ) -> anyhow::Result<()> {
-    let ctx = match args.backend {
-        Backend::Gpu => Some(gpu_context(args.no_cache)?),
-        Backend::Cpu => None,
-    };
+    let renderer = Renderer::new(args.backend, !args.no_cache);
     let mut summaries = Vec::new();
     for (scene, out, what) in jobs {
-        let rendered = render_one(args, scene, &out, ctx.as_ref());
+        let rendered = render_one(args, &renderer, scene, &out);
         let (summary, to_stream) = if what.is_empty() {
             rendered?
         } else {
@@ -359,109 +307,17 @@ fn render_all(
     Ok(())
 }
 
-/// Render `scene` (the scene file's, sized, at its frame) to `output`; `gpu`: a device
-/// to reuse (sequences), else one is made. Returns the summary and whether the EXR went
-/// to a stream.
+/// Render `scene` (the scene file's, sized, at its frame) to `output` with `renderer`.
+/// Returns the summary and whether the EXR went to a stream.
 fn render_one(
     args: &Args,
-    mut scene: grin_scene::Scene,
+    renderer: &Renderer,
+    scene: grin_scene::Scene,
     output: &Path,
-    gpu: Option<&grin_gpu::GpuContext>,
 ) -> anyhow::Result<(Summary, bool)> {
     // Everything that can be wrong with the input fails here, before any GPU work.
     let png = check_output(output)?;
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
-    let field = scene
-        .medium
-        .as_ref()
-        .map(|m| grin_field::build_field(m, scene_dir))
-        .transpose()
-        .with_context(|| format!("{}: [medium]", args.scene.display()))?;
-    // BOS images through the camera's lens or anti-aliased: rendered as beauty images
-    // of the dots on the plane, with and without the medium, at the scene's spp.
-    let bos_scene = bos_image_scene(&scene)?;
-    if scene.optics.is_some() {
-        scene.render.spp = 1;
-        scene.render.jitter = false;
-    }
-    let mut rs = RenderScene::new(&scene, scene_dir, field.clone())
-        .with_context(|| format!("{}", args.scene.display()))?;
-    // `step = { auto = ... }`: pilot rays choose the integrator and step, in the
-    // backend's precision, before anything is traced.
-    // An optical output asks its accuracy in its own unit: pixels of landing point,
-    // waves of OPD (`[optics] accuracy`, default 0.01).
-    let metric = scene.optics.as_ref().and_then(|o| {
-        let asked = o.output_accuracy()?;
-        let metric = match o.accuracy_unit() {
-            // The shadowgraph's pixels are its screen's bins, its rays the beam's.
-            grin_scene::AccuracyUnit::Pixels if o.mode == grin_scene::OpticsMode::Shadowgraph => {
-                let medium = rs.medium.as_ref()?;
-                grin_trace::auto::Metric::Screen(Box::new(grin_trace::shadowgraph::Beam::new(
-                    &medium.bounds,
-                    &rs.camera,
-                    &o.screen,
-                )))
-            }
-            grin_scene::AccuracyUnit::Pixels => grin_trace::auto::Metric::Pixels {
-                cam: Box::new(rs.camera),
-                plane: o
-                    .plane
-                    .as_ref()
-                    .and_then(|p| grin_render::optics::Plane::new(p, &rs.camera)),
-            },
-            grin_scene::AccuracyUnit::Waves => grin_trace::auto::Metric::Waves {
-                wavelength: o.wavelength_nm * 1e-9,
-            },
-            // Schlieren: the exit direction, to a fraction of the knife's range.
-            grin_scene::AccuracyUnit::Radians => grin_trace::auto::Metric::Direction,
-        };
-        Some((metric, asked))
-    });
-    // The GPU's pilots trace in f32 as it does, but for an OPD in waves: a CPU f32 trace
-    // holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre), where the
-    // GPU sums n - n_amb, so its OPD is as good as f64's.
-    let waves = matches!(metric, Some((grin_trace::auto::Metric::Waves { .. }, _)));
-    // The shadowgraph's pilots are its beam's rays: resolved on a scene whose camera is
-    // the beam's, then applied to this one.
-    let beam_camera = match &metric {
-        Some((grin_trace::auto::Metric::Screen(beam), _)) => Some(beam.camera()),
-        _ => None,
-    };
-    let mut pilot_rs = beam_camera.map(|cam| {
-        let mut p = rs.clone();
-        p.camera = cam;
-        (p.settings.width, p.settings.height) = (cam.width, cam.height);
-        p
-    });
-    let target = pilot_rs.as_mut().unwrap_or(&mut rs);
-    let auto = match args.backend {
-        Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(target, metric),
-        _ => grin_trace::auto::resolve_scene_in::<f64>(target, metric),
-    };
-    if let (Some(_), Some(a)) = (&pilot_rs, &auto) {
-        grin_trace::auto::apply(&mut rs, &a.settings);
-    }
-    let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(&rs));
-    let auto_warning = auto.as_ref().and_then(|a| a.unmet_warning("rendering"));
-    if let Some(w) = &auto_warning {
-        eprintln!("grin: warning: {w}");
-    }
-    let bos_scenes = match &bos_scene {
-        Some(s) => {
-            let mut with = RenderScene::new(s, scene_dir, field.clone())
-                .with_context(|| format!("{}", args.scene.display()))?;
-            if let Some(a) = &auto {
-                grin_trace::auto::apply(&mut with, &a.settings);
-            }
-            let mut bare = s.clone();
-            bare.medium = None;
-            let without = RenderScene::new(&bare, scene_dir, None)
-                .with_context(|| format!("{}", args.scene.display()))?;
-            Some((with, without))
-        }
-        None => None,
-    };
-
     let reference = args
         .compare
         .as_deref()
@@ -479,230 +335,51 @@ fn render_one(
             scene.render.height
         );
     }
-
-    if let Some(spec) = scene
-        .optics
-        .as_ref()
-        .filter(|o| o.mode == grin_scene::OpticsMode::Shadowgraph)
-    {
-        let start = Instant::now();
-        let to_stream = png.is_none();
-        let medium = rs.medium.as_ref().with_context(|| {
-            format!(
-                "{}: [optics] a shadowgraph needs a [medium]",
-                args.scene.display()
-            )
-        })?;
-        let mut warnings: Vec<String> = auto_warning.iter().cloned().collect();
-        let (sg, adapter, gpu_field, bake_cache) = match args.backend {
-            Backend::Cpu => {
-                let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-                let sg = grin_trace::shadowgraph::shadowgraph(
-                    medium.field.as_ref(),
-                    &medium.trace,
-                    &rs.camera,
-                    &spec.screen,
-                );
-                (sg, format!("cpu ({threads} threads)"), None, None)
-            }
-            Backend::Gpu => {
-                // The beam's rays are an orthographic camera's pixel centres: one GPU
-                // frame, its exit AOVs binned on the screen.
-                let beam =
-                    grin_trace::shadowgraph::Beam::new(&medium.bounds, &rs.camera, &spec.screen);
-                let mut beam_rs = rs.clone();
-                beam_rs.camera = beam.camera();
-                beam_rs.settings.width = beam_rs.camera.width;
-                beam_rs.settings.height = beam_rs.camera.height;
-                beam_rs.objects.clear();
-                beam_rs.materials.clear();
-                beam_rs.object_images.clear();
-                let pixels = u64::from(beam_rs.camera.width) * u64::from(beam_rs.camera.height);
-                if pixels > grin_render::scene::MAX_PIXELS {
-                    bail!(
-                        "{}: [optics] the shadowgraph's beam is {pixels} rays (bins x \
-                         rays_per_pixel); at most {} fit one GPU frame: fewer bins or \
-                         rays_per_pixel",
-                        args.scene.display(),
-                        grin_render::scene::MAX_PIXELS
-                    );
-                }
-                let bar = progress_bar(beam_rs.settings.height);
-                let Rendered {
-                    frame,
-                    adapter,
-                    gpu_field,
-                    bake_cache,
-                    ..
-                } = render_frame(
-                    args,
-                    &beam_rs,
-                    scene.medium.as_ref(),
-                    scene_dir,
-                    gpu,
-                    &bar,
-                    &mut warnings,
-                )?;
-                bar.finish_and_clear();
-                let v = |a: [f32; 3]| glam::DVec3::from_array(a.map(f64::from));
-                // status 0 missed (exit_pos = the ray's start), 1 exited, 5 degraded;
-                // else stopped.
-                let ends = frame.pixels.iter().map(|p| {
-                    (p.status <= 1.0 || p.status == 5.0)
-                        .then(|| (v(p.exit_pos), v(p.exit_dir).normalize()))
-                });
-                (beam.collect(ends), adapter, gpu_field, bake_cache)
-            }
-        };
-        let (staged, optics) = crate::cmd::optics::stage_shadowgraph(&sg, output, png.as_deref())?;
-        grin_output::commit(staged)?;
-        let seconds = start.elapsed().as_secs_f64();
-        let rays = optics["rays_launched"].as_f64().unwrap_or(0.0);
-        let summary = Summary {
-            backend: args.backend.name(),
-            adapter,
-            width: scene.render.width,
-            height: scene.render.height,
-            spp: 1,
-            seconds,
-            setup_seconds: 0.0,
-            device_seconds: None,
-            rays_per_second: rays / seconds.max(1e-9),
-            steps_per_ray: 0.0,
-            evals_per_ray: 0.0,
-            status_counts: std::collections::BTreeMap::new(),
-            exr: output.to_owned(),
-            png,
-            warnings,
-            bake_cache,
-            gpu_field,
-            comparison: None,
-            optics: Some(optics),
-            auto,
-            auto_note,
-        };
-        return Ok((summary, to_stream));
-    }
-
-    // Three renders share one device (and its compiled pipelines).
-    let owned_ctx;
-    let gpu = match (gpu, &bos_scenes, args.backend) {
-        (None, Some(_), Backend::Gpu) => {
-            owned_ctx = gpu_context(args.no_cache)?;
-            Some(&owned_ctx)
-        }
-        _ => gpu,
-    };
-    let passes = if bos_scenes.is_some() { 3 } else { 1 };
-    let bar = progress_bar(scene.render.height * passes);
-    let setup_start = Instant::now();
-    let mut warnings: Vec<String> = auto_warning.into_iter().collect();
+    let label = args.scene.display().to_string();
     let Rendered {
+        image,
         frame,
-        adapter,
-        seconds,
-        device_seconds,
-        gpu_field,
-        bake_cache,
-    } = render_frame(
-        args,
-        &rs,
-        scene.medium.as_ref(),
-        scene_dir,
-        gpu,
-        &bar,
-        &mut warnings,
-    )?;
-    let bos_images = match &bos_scenes {
-        Some((with, without)) => {
-            let mut quiet = Vec::new();
-            let Rendered {
-                frame: distorted, ..
-            } = render_frame(
-                args,
-                with,
-                scene.medium.as_ref(),
-                scene_dir,
-                gpu,
-                &bar,
-                &mut quiet,
-            )?;
-            let Rendered {
-                frame: reference, ..
-            } = render_frame(args, without, None, scene_dir, gpu, &bar, &mut quiet)?;
-            let red = |f: &Frame| f.pixels.iter().map(|p| f64::from(p.rgb[0])).collect();
-            Some((red(&reference), red(&distorted)))
-        }
-        None => None,
-    };
-    let setup_seconds = setup_start.elapsed().as_secs_f64() - seconds;
-    bar.finish_and_clear();
-    let mut frame = frame;
-    if let Some(sensor) = &scene.sensor {
-        match scene.optics.as_ref().map(|o| o.mode) {
-            None => grin_render::sensor::record_frame(sensor, &mut frame),
-            Some(grin_scene::OpticsMode::Bos | grin_scene::OpticsMode::Interferogram) => {}
-            Some(mode) => {
-                let w = format!(
-                    "[sensor] records the beauty, BOS and interferogram images; the {} \
-                     output is written without sensor noise",
-                    crate::cmd::optics::mode_name(mode)
-                );
-                eprintln!("grin: warning: {w}");
-                warnings.push(w);
-            }
-        }
-    }
-    if scene.optics.is_some() && scene.camera.f_number.is_some() && bos_images.is_none() {
-        let w = "[optics] outputs trace one pinhole ray per pixel centre: camera.f_number \
-                 (defocus) is not applied to them"
-            .to_owned();
-        eprintln!("grin: warning: {w}");
-        warnings.push(w);
-    }
+        mut report,
+    } = renderer.render(scene, scene_dir, &label, &Bar::new())?;
 
-    // The EXR, its PNG preview and the --compare difference image are staged, then put
+    // The EXR, its PNG previews and the --compare difference image are staged, then put
     // in place together: a failure or a signal leaves the previous set as it was.
     let exr_to_stream = png.is_none();
-    let mut optics = None;
-    let mut staged = match &scene.optics {
-        Some(spec) => {
-            let (staged, summary) = crate::cmd::optics::stage_from_frame(
-                spec,
-                scene.sensor.as_ref(),
-                bos_images,
-                &rs,
-                &frame,
-                output,
-                png.as_deref(),
-            )?;
-            optics = Some(summary);
-            staged
+    let size = (image.width as usize, image.height as usize);
+    let named = image
+        .channels
+        .iter()
+        .map(|(n, d)| (n.as_str(), d.clone()))
+        .collect();
+    let mut staged = vec![stage_channels_exr(output, size, named)?];
+    let mut pngs = Vec::new();
+    if let Some(png) = &png {
+        for preview in &image.previews {
+            let path = match preview.suffix {
+                None => png.clone(),
+                Some(suffix) => sibling(png, suffix),
+            };
+            staged.push(stage_rgb8_png(
+                &path,
+                image.width,
+                image.height,
+                &preview.rgb8,
+            )?);
+            pngs.push(path);
         }
-        None => {
-            let mut v = vec![frame.stage_exr(output)?];
-            if let Some(png) = &png {
-                v.push(frame.stage_png(png)?);
-            }
-            v
-        }
-    };
-    match &png {
-        Some(_) => {}
-        None => eprintln!(
+    } else {
+        eprintln!(
             "grin: note: {} is not a file: the EXR goes there, no PNG preview is written",
             args.output.display()
-        ),
+        );
     }
-    let comparison = match &reference {
-        Some(r) => {
-            let (stats, diff) = diff_frames(&frame, r).context("--compare: sizes differ")?;
-            let diff_png = output.with_file_name(format!(
-                "{}-difference.png",
-                output
-                    .file_stem()
-                    .map_or_else(|| "out".into(), |s| s.to_string_lossy())
-            ));
+    if let Some(optics) = &mut report.optics {
+        optics["pngs"] = serde_json::json!(pngs);
+    }
+    let comparison = match (&reference, &frame) {
+        (Some(r), Some(frame)) => {
+            let (stats, diff) = diff_frames(frame, r).context("--compare: sizes differ")?;
+            let diff_png = sibling(output, "difference");
             if !exr_to_stream {
                 staged.push(diff.stage_png(&diff_png)?);
             }
@@ -714,195 +391,24 @@ fn render_one(
                 difference_png: (!exr_to_stream).then_some(diff_png),
             })
         }
-        None => None,
+        _ => None,
     };
     grin_output::commit(staged)?;
-
-    let n_pixels = f64::from(frame.width) * f64::from(frame.height);
-    let rays = n_pixels * f64::from(scene.render.spp);
-    let mean = |f: fn(&grin_render::image::PixelOut) -> f32| {
-        frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / n_pixels.max(1.0)
-    };
-    let mut summary = Summary {
-        backend: args.backend.name(),
-        adapter,
-        width: frame.width,
-        height: frame.height,
-        spp: scene.render.spp,
-        seconds,
-        setup_seconds,
-        device_seconds,
-        rays_per_second: rays / seconds.max(1e-9),
-        steps_per_ray: mean(|p| p.steps),
-        evals_per_ray: mean(|p| p.evals),
-        status_counts: status_counts(&frame),
-        comparison,
+    let summary = Summary {
+        report,
         exr: output.to_owned(),
         png,
-        warnings,
-        bake_cache,
-        gpu_field,
-        optics,
-        auto,
-        auto_note,
+        comparison,
     };
-    let stuck = summary.status_counts["max_steps"] + summary.status_counts["error"];
-    if stuck > 0 {
-        let w = format!(
-            "{stuck} pixels stopped in the medium (max_steps {}, error {}): see the aov.status channel",
-            summary.status_counts["max_steps"], summary.status_counts["error"]
-        );
-        eprintln!("grin: warning: {w}");
-        summary.warnings.push(w);
-    }
-    let degraded = summary.status_counts["degraded"];
-    if degraded > 0 {
-        let w = format!(
-            "{degraded} pixels left the medium `degraded`: their error estimate is above the {:.1e} rad they are held to (asked {:.1e}; aov.status 5): the integrator's own at these steps (shorter steps, or step = {{ auto = ... }} without an integrator, resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
-            rs.settings.estimate_limit(),
-            rs.settings.accuracy()
-        );
-        eprintln!("grin: warning: {w}");
-        summary.warnings.push(w);
-    }
     Ok((summary, exr_to_stream))
 }
 
-/// One frame of `rs` on the backend `args` asks for (`gpu`: a device to reuse): the
-/// frame, the adapter, the render time, and on the GPU the field's size and how the bake
-/// cache served it; warnings are printed above `bar` and collected.
-#[allow(clippy::type_complexity)]
-/// One frame of [`render_frame`] and what the summary says of it.
-struct Rendered {
-    frame: Frame,
-    adapter: String,
-    seconds: f64,
-    /// The GPU's own time in the render passes, where the adapter writes timestamps.
-    device_seconds: Option<f64>,
-    gpu_field: Option<GpuField>,
-    bake_cache: Option<grin_gpu::cache::CacheUse>,
-}
-
-fn render_frame(
-    args: &Args,
-    rs: &RenderScene,
-    medium: Option<&grin_scene::MediumSpec>,
-    scene_dir: &Path,
-    gpu: Option<&grin_gpu::GpuContext>,
-    bar: &ProgressBar,
-    warnings: &mut Vec<String>,
-) -> anyhow::Result<Rendered> {
-    let cancel = AtomicBool::new(false);
-    let tick = |rows: u32| bar.inc(u64::from(rows));
-    let mut gpu_field = None;
-    let mut bake_cache = None;
-    let mut device_seconds = None;
-    let (frame, adapter, seconds): (Frame, String, f64) = match args.backend {
-        Backend::Cpu => {
-            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-            let start = Instant::now();
-            let frame = render_cpu(rs, &tick, &cancel)?;
-            let adapter = format!("cpu ({threads} threads)");
-            (frame, adapter, start.elapsed().as_secs_f64())
-        }
-        Backend::Gpu => {
-            let owned;
-            let ctx = match gpu {
-                Some(c) => c,
-                None => {
-                    owned = gpu_context(args.no_cache)?;
-                    &owned
-                }
-            };
-            if let Some(w) = cpu_adapter_warning(ctx)
-                && !warnings.contains(&w)
-            {
-                // Printed once a process (a sequence renders many frames on one device).
-                static PRINTED: std::sync::Once = std::sync::Once::new();
-                PRINTED.call_once(|| bar.suspend(|| eprintln!("grin: warning: {w}")));
-                warnings.push(w);
-            }
-            let cache = (!args.no_cache)
-                .then(grin_gpu::cache::BakeCache::user_default)
-                .flatten();
-            let field = grin_gpu::cache::scene_gpu_field(rs, medium, scene_dir, cache.as_ref())
-                .with_context(|| format!("{}: [medium]", args.scene.display()))?;
-            let renderer = grin_gpu::GpuRenderer::new(ctx, rs, field.as_ref().map(|f| &f.0))
-                .with_context(|| format!("{}", args.scene.display()))?;
-            if let Some((_, field_warnings, used)) = &field {
-                bake_cache = Some(*used);
-                for w in field_warnings {
-                    bar.suspend(|| eprintln!("grin: warning: {w}"));
-                    warnings.push(w.clone());
-                }
-            }
-            for w in renderer.warnings() {
-                bar.suspend(|| eprintln!("grin: warning: {w}"));
-                warnings.push(w.clone());
-            }
-            if medium.is_some() {
-                gpu_field = Some(GpuField {
-                    dims: renderer.field_dims(),
-                    bytes: renderer.field_bytes(),
-                });
-            }
-            let adapter = renderer.adapter_info();
-            let start = Instant::now();
-            let frame = renderer.render(&tick, &cancel)?;
-            device_seconds = renderer.last_device_seconds();
-            if let Some(w) = renderer.loop_limit_warning(&frame) {
-                bar.suspend(|| eprintln!("grin: warning: {w}"));
-                warnings.push(w);
-            }
-            (frame, adapter, start.elapsed().as_secs_f64())
-        }
-    };
-    Ok(Rendered {
-        frame,
-        adapter,
-        seconds,
-        device_seconds,
-        gpu_field,
-        bake_cache,
-    })
-}
-
-/// The scene whose beauty renders are the BOS images when they need more than the pixel
-/// centre's pinhole ray (a lens, or spp > 1): the dots as an emissive plane object (white
-/// on black, the `[optics]` dots and plane), at the scene's spp; `None` otherwise.
-fn bos_image_scene(scene: &grin_scene::Scene) -> anyhow::Result<Option<grin_scene::Scene>> {
-    let Some(spec) = scene
-        .optics
-        .as_ref()
-        .filter(|o| o.mode == grin_scene::OpticsMode::Bos)
-    else {
-        return Ok(None);
-    };
-    if scene.render.spp <= 1 && scene.camera.f_number.is_none() {
-        return Ok(None);
-    }
-    let plane = spec
-        .plane
-        .context("[optics] BOS needs a plane for its dots")?;
-    let len = plane.normal.iter().map(|c| c * c).sum::<f64>().sqrt();
-    let mut s = scene.clone();
-    s.optics = None;
-    s.objects.push(grin_scene::Object {
-        shape: grin_scene::Shape::Plane {
-            point: plane.point,
-            normal: plane.normal.map(|c| c / len),
-        },
-        material: grin_scene::Material::Dots {
-            diameter: spec.dots.diameter,
-            density: spec.dots.density,
-            seed: spec.dots.seed,
-            color: [1.0; 3],
-            background: [0.0; 3],
-            center: Some(plane.point),
-            emissive: true,
-        },
-    });
-    Ok(Some(s))
+/// The PNG beside `path` with `-suffix` after its stem.
+fn sibling(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "out".into(), |s| s.to_string_lossy().into_owned());
+    path.with_file_name(format!("{stem}-{suffix}.png"))
 }
 
 /// Print a frame's summary (JSON or a few lines).
@@ -918,26 +424,27 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
         };
         report(format!(
             "rendered {}x{} x {} spp on {} ({}) in {:.3} s{} (+ {:.3} s setup): {:.3} Mrays/s, {:.1} steps/ray, {:.1} field evals/ray\nwrote {}",
-            summary.width,
-            summary.height,
-            summary.spp,
-            summary.backend,
-            summary.adapter,
-            summary.seconds,
+            summary.report.width,
+            summary.report.height,
+            summary.report.spp,
+            summary.report.backend,
+            summary.report.adapter,
+            summary.report.seconds,
             summary
+                .report
                 .device_seconds
                 .map(|d| format!(", {d:.3} s of it on the device"))
                 .unwrap_or_default(),
-            summary.setup_seconds,
-            summary.rays_per_second * 1e-6,
-            summary.steps_per_ray,
-            summary.evals_per_ray,
+            summary.report.setup_seconds,
+            summary.report.rays_per_second * 1e-6,
+            summary.report.steps_per_ray,
+            summary.report.evals_per_ray,
             wrote,
         ));
-        if let Some(a) = &summary.auto {
+        if let Some(a) = &summary.report.auto {
             report(a.summary_line());
         }
-        if let Some(note) = &summary.auto_note {
+        if let Some(note) = &summary.report.auto_note {
             report(note.clone());
         }
         if let Some(c) = &summary.comparison {
@@ -952,18 +459,4 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
         }
     }
     Ok(())
-}
-
-/// Pixels per `aov.status` value, by name.
-fn status_counts(frame: &Frame) -> std::collections::BTreeMap<&'static str, usize> {
-    let names = grin_trace::RayStatus::ALL.map(|s| s.name());
-    let mut counts: std::collections::BTreeMap<_, _> = names.iter().map(|&n| (n, 0)).collect();
-    for p in &frame.pixels {
-        if let Some(name) = names.get(p.status as usize)
-            && let Some(c) = counts.get_mut(name)
-        {
-            *c += 1;
-        }
-    }
-    counts
 }

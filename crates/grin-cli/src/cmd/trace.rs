@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
-use grin_render::settings::TraceSettings;
+use anyhow::bail;
+use grin_pipeline::trace::{TraceOverrides, TracePlan};
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
 use grin_trace::table::{self, TableFormat, TableSummary};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -151,75 +151,32 @@ struct Summary<'a> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = grin_scene::load_scene(&args.scene)?;
-    let Some(medium) = scene.medium.as_ref() else {
-        bail!(
-            "{}: the scene has no [medium] to trace rays through",
-            args.scene.display()
-        );
-    };
     let scene_dir = args.scene.parent().unwrap_or_else(|| Path::new("."));
-    let field = grin_field::build_field(medium, scene_dir)
-        .with_context(|| format!("{}: [medium]", args.scene.display()))?;
-
-    let mut settings = TraceSettings::from_render(&scene.render);
-    if let Some(k) = args.integrator {
-        settings.integrator = k;
+    let label = args.scene.display().to_string();
+    if scene.medium.is_none() {
+        bail!("{label}: the scene has no [medium] to trace rays through");
     }
-    if let Some(s) = args.step {
-        settings.step = s;
-        // `--step auto:RAD` asks for RAD: rays above it are `degraded`.
-        if let StepSpec::Auto(a) = s {
-            settings.accuracy = a;
-        }
-    }
-    if let Some(m) = args.max_steps {
-        settings.max_steps = m;
-    }
-    if let Some(e) = args.exit {
-        settings.exit = match e {
-            Exit::Hermite => ExitMethod::Hermite,
-            Exit::Bisection => ExitMethod::Bisection,
-        };
-    }
-    settings
-        .validate_for(&field.bounds())
-        .with_context(|| format!("{}: [render]", args.scene.display()))?;
-
     // The table streams: the first batch is read now (its rays are the pilots'), the rest
     // while the output is written, a batch at a time.
     let mut reader = table::RayReader::open(&args.rays)?;
     let mut rows = Vec::new();
     reader.next_batch(table::BATCH_ROWS, &mut rows)?;
-    // `step = { auto = ... }`: pilot rays (some of the table's own) choose the method.
-    let free_integrator = scene.render.integrator.is_none() && args.integrator.is_none();
-    // A small table pays for few pilots: at most ~20 % of its work (none below
-    // MIN_PILOTS: error control per length then keeps the asked error on its own).
-    let pilots: Vec<_> = rows.iter().map(|r| (r.origin, r.dir)).collect();
-    let wanted = scene.render.pilot_rays as usize;
-    let afforded = grin_trace::auto::affordable_pilots(wanted, rows.len());
-    let pilots = grin_trace::auto::spread(&pilots, afforded);
-    let auto_note = match settings.step {
-        grin_scene::StepSpec::Auto(rad) if afforded == 0 && wanted > 0 => Some(format!(
-            "auto {rad:.0e} rad: error control per length, no pilot rays (a table of {} \
-             rays: pilots pay from {} rays on)",
-            rows.len(),
-            grin_trace::auto::MIN_PILOTS * grin_trace::auto::JOB_RAYS_PER_PILOT
-        )),
-        _ => None,
+    let overrides = TraceOverrides {
+        integrator: args.integrator,
+        step: args.step,
+        max_steps: args.max_steps,
+        exit: args.exit.map(|e| match e {
+            Exit::Hermite => ExitMethod::Hermite,
+            Exit::Bisection => ExitMethod::Bisection,
+        }),
+        f32: args.f32,
     };
-    let auto = if pilots.is_empty() {
-        None
-    } else if args.f32 {
-        grin_trace::auto::choose::<f32>(field.as_ref(), &settings, free_integrator, &pilots)
-    } else {
-        grin_trace::auto::choose::<f64>(field.as_ref(), &settings, free_integrator, &pilots)
-    };
-    if let Some(a) = &auto {
-        settings = a.settings;
-        if let Some(w) = a.unmet_warning("tracing") {
-            eprintln!("grin: warning: {w}");
-        }
+    let plan = TracePlan::new(&scene, scene_dir, &label, &overrides, &rows)?;
+    if let Some(w) = plan.auto.as_ref().and_then(|a| a.unmet_warning("tracing")) {
+        eprintln!("grin: warning: {w}");
     }
+    let (field, settings) = (&plan.field, plan.settings);
+    let (auto, auto_note) = (plan.auto.clone(), plan.auto_note.clone());
     let format = match args.format {
         Some(Format::Json) => TableFormat::Json,
         Some(Format::Csv) => TableFormat::Csv,
@@ -267,11 +224,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let mut out = table::TableWriter::new(format, reader.extra_columns());
         loop {
             let start = Instant::now();
-            let results = if args.f32 {
-                table::trace_rows::<f32>(field.as_ref(), &settings, &rows)
-            } else {
-                table::trace_rows::<f64>(field.as_ref(), &settings, &rows)
-            };
+            let results = plan.trace(&rows);
             seconds += start.elapsed().as_secs_f64();
             s.add(&results);
             out.rows(w, &rows, &results)?;

@@ -1,0 +1,700 @@
+//! One way from a scene to its image: the medium's field, the render description,
+//! `step = { auto = ... }`'s pilot rays, the GPU bake (through the user's bake cache) and
+//! the renderer of either backend, to the output's named channels (the EXR's) and
+//! previews with a report of how it went. `grin render` writes what [`Renderer::render`]
+//! returns to files; the Python package hands the same channels out as arrays.
+
+pub mod optics;
+pub mod trace;
+
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::Context;
+use grin_render::image::Frame;
+use grin_render::scene::RenderScene;
+use grin_scene::{OpticsMode, Scene};
+
+/// Which renderer runs the frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// The WGSL marcher through wgpu (lavapipe without a GPU).
+    Gpu,
+    /// The CPU reference (rayon).
+    Cpu,
+}
+
+impl Backend {
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Gpu => "gpu",
+            Backend::Cpu => "cpu",
+        }
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "gpu" => Ok(Backend::Gpu),
+            "cpu" => Ok(Backend::Cpu),
+            _ => Err(format!("unknown backend `{s}` (gpu or cpu)")),
+        }
+    }
+}
+
+/// What a render reports as it goes: rows done (for a progress bar) and warnings the
+/// moment they arise. Every method does nothing by default.
+pub trait Progress: Sync {
+    /// A pass of `rows` rows starts.
+    fn begin(&self, _rows: u64) {}
+    /// `rows` more rows are done.
+    fn advance(&self, _rows: u32) {}
+    /// The passes are done.
+    fn finish(&self) {}
+    /// A warning (also kept in [`Report::warnings`]).
+    fn warn(&self, _message: &str) {}
+}
+
+/// Reports nothing as it goes.
+#[derive(Debug)]
+pub struct Quiet;
+impl Progress for Quiet {}
+
+/// Warnings as they arise: told to the progress at once, and kept.
+struct Warnings<'a> {
+    list: Vec<String>,
+    progress: &'a dyn Progress,
+}
+
+impl<'a> Warnings<'a> {
+    fn new(progress: &'a dyn Progress) -> Self {
+        Self {
+            list: Vec::new(),
+            progress,
+        }
+    }
+
+    fn push(&mut self, message: String) {
+        self.progress.warn(&message);
+        self.list.push(message);
+    }
+}
+
+/// One preview image: 8-bit sRGB of the output's size, row 0 at the top.
+#[derive(Debug, Clone)]
+pub struct Preview {
+    /// `None` for the output's own preview; else what the image is (`reference`: the BOS
+    /// reference image), written beside it as `<name>-<suffix>.png`.
+    pub suffix: Option<&'static str>,
+    pub rgb8: Vec<u8>,
+}
+
+/// A rendered output: named f32 channels of one size, row 0 at the top, as the EXR holds
+/// them, and its previews.
+#[derive(Debug, Clone)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub channels: Vec<(String, Vec<f32>)>,
+    pub previews: Vec<Preview>,
+}
+
+impl Image {
+    fn new(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            channels: Vec::new(),
+            previews: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, name: &str, data: Vec<f32>) {
+        self.channels.push((name.to_owned(), data));
+    }
+
+    /// The channel names, in order.
+    pub fn names(&self) -> Vec<&str> {
+        self.channels.iter().map(|(n, _)| n.as_str()).collect()
+    }
+
+    /// The channel `name`.
+    pub fn channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, d)| d.as_slice())
+    }
+}
+
+/// The field grid on the device.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct GpuField {
+    pub dims: [u32; 3],
+    pub bytes: u64,
+}
+
+/// How a render went, for the summary.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Report {
+    pub backend: &'static str,
+    pub adapter: String,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    /// Frame time (the render itself).
+    pub seconds: f64,
+    /// Device setup, field bake and upload, pipeline creation (GPU; ~0 on the CPU).
+    pub setup_seconds: f64,
+    /// GPU: the device's own time in the render passes (timestamps; absent where the
+    /// adapter has none). `seconds` adds dispatching and reading the pixels back.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub device_seconds: Option<f64>,
+    pub rays_per_second: f64,
+    pub steps_per_ray: f64,
+    pub evals_per_ray: f64,
+    /// Pixels by the camera ray's status in the medium (sample 0): missed, exited,
+    /// absorbed (stopped on an object inside), max_steps, error.
+    pub status_counts: std::collections::BTreeMap<&'static str, usize>,
+    /// Warnings also told to the progress: an under-resolved GPU bake, pixels stopped in
+    /// the medium.
+    pub warnings: Vec<String>,
+    /// GPU: whether the field grid came from the bake cache (`hit`), was baked and stored
+    /// (`stored`) or baked without it (`off`); absent for a baked file or no medium.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bake_cache: Option<grin_gpu::cache::CacheUse>,
+    /// GPU: the baked grid the marcher sampled (a `.grinf` file as it is, else the
+    /// coarsest bake meeting the error budget, at most 128 nodes per axis).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_field: Option<GpuField>,
+    /// `[optics]`: the mode's output (channels, ranges).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub optics: Option<serde_json::Value>,
+    /// `step = { auto = ... }`: what the pilot rays chose (and every candidate tried).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub auto: Option<grin_trace::auto::AutoChoice>,
+    /// `step = { auto = ... }` resolved without pilots (a render too small for them): why.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub auto_note: Option<String>,
+}
+
+/// A scene's rendered output.
+#[derive(Debug)]
+pub struct Rendered {
+    /// The output's channels: the beauty and AOVs, or the `[optics]` mode's.
+    pub image: Image,
+    /// The beauty frame itself (none for an `[optics]` output).
+    pub frame: Option<Frame>,
+    pub report: Report,
+}
+
+/// Renders scenes on one backend, keeping the GPU device and its compiled pipelines from
+/// one scene to the next (a sequence's frames, a dataset's samples).
+#[derive(Debug)]
+pub struct Renderer {
+    backend: Backend,
+    use_cache: bool,
+    gpu: Mutex<Option<std::sync::Arc<grin_gpu::GpuContext>>>,
+}
+
+impl Renderer {
+    /// A renderer on `backend`; `use_cache`: read and fill the user's bake cache and the
+    /// driver's pipeline cache beside it.
+    pub fn new(backend: Backend, use_cache: bool) -> Self {
+        Self {
+            backend,
+            use_cache,
+            gpu: Mutex::new(None),
+        }
+    }
+
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    fn bake_cache(&self) -> Option<grin_gpu::cache::BakeCache> {
+        self.use_cache
+            .then(grin_gpu::cache::BakeCache::user_default)
+            .flatten()
+    }
+
+    /// The GPU device, made on first use.
+    fn gpu(&self) -> anyhow::Result<std::sync::Arc<grin_gpu::GpuContext>> {
+        let mut slot = self.gpu.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(ctx) = slot.as_ref() {
+            return Ok(ctx.clone());
+        }
+        let dir = self.bake_cache().map(|c| c.pipeline_dir());
+        let ctx = std::sync::Arc::new(grin_gpu::GpuContext::new_headless_in(dir.as_deref())?);
+        *slot = Some(ctx.clone());
+        Ok(ctx)
+    }
+
+    /// Render `scene` (read from `scene_dir`; `label` names it in errors, usually its
+    /// file): its `[optics]` output when it has one, else its beauty and AOVs.
+    pub fn render(
+        &self,
+        mut scene: Scene,
+        scene_dir: &Path,
+        label: &str,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Rendered> {
+        let field = scene
+            .medium
+            .as_ref()
+            .map(|m| grin_field::build_field(m, scene_dir))
+            .transpose()
+            .with_context(|| format!("{label}: [medium]"))?;
+        // BOS images through the camera's lens or anti-aliased: rendered as beauty images
+        // of the dots on the plane, with and without the medium, at the scene's spp.
+        let bos_scene = bos_image_scene(&scene)?;
+        if scene.optics.is_some() {
+            scene.render.spp = 1;
+            scene.render.jitter = false;
+        }
+        let mut rs =
+            RenderScene::new(&scene, scene_dir, field.clone()).with_context(|| label.to_owned())?;
+        let metric = output_metric(&scene, &rs);
+        // The GPU's pilots trace in f32 as it does, but for an OPD in waves: a CPU f32
+        // trace holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre),
+        // where the GPU sums n - n_amb, so its OPD is as good as f64's.
+        let waves = matches!(metric, Some((grin_trace::auto::Metric::Waves { .. }, _)));
+        // The shadowgraph's pilots are its beam's rays: resolved on a scene whose camera
+        // is the beam's, then applied to this one.
+        let beam_camera = match &metric {
+            Some((grin_trace::auto::Metric::Screen(beam), _)) => Some(beam.camera()),
+            _ => None,
+        };
+        let mut pilot_rs = beam_camera.map(|cam| {
+            let mut p = rs.clone();
+            p.camera = cam;
+            (p.settings.width, p.settings.height) = (cam.width, cam.height);
+            p
+        });
+        let target = pilot_rs.as_mut().unwrap_or(&mut rs);
+        let auto = match self.backend {
+            Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(target, metric),
+            _ => grin_trace::auto::resolve_scene_in::<f64>(target, metric),
+        };
+        if let (Some(_), Some(a)) = (&pilot_rs, &auto) {
+            grin_trace::auto::apply(&mut rs, &a.settings);
+        }
+        let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(&rs));
+        let mut warnings = Warnings::new(progress);
+        if let Some(w) = auto.as_ref().and_then(|a| a.unmet_warning("rendering")) {
+            warnings.push(w);
+        }
+        let bos_scenes = match &bos_scene {
+            Some(s) => {
+                let mut with = RenderScene::new(s, scene_dir, field.clone())
+                    .with_context(|| label.to_owned())?;
+                if let Some(a) = &auto {
+                    grin_trace::auto::apply(&mut with, &a.settings);
+                }
+                let mut bare = s.clone();
+                bare.medium = None;
+                let without =
+                    RenderScene::new(&bare, scene_dir, None).with_context(|| label.to_owned())?;
+                Some((with, without))
+            }
+            None => None,
+        };
+        let job = Job {
+            scene: &scene,
+            scene_dir,
+            label,
+            progress,
+        };
+
+        if let Some(spec) = scene
+            .optics
+            .as_ref()
+            .filter(|o| o.mode == OpticsMode::Shadowgraph)
+        {
+            let start = Instant::now();
+            let (image, optics, frame_report) = self.shadowgraph(&job, &rs, spec, &mut warnings)?;
+            let seconds = start.elapsed().as_secs_f64();
+            let rays = optics["rays_launched"].as_f64().unwrap_or(0.0);
+            let report = Report {
+                backend: self.backend.name(),
+                adapter: frame_report.adapter,
+                width: scene.render.width,
+                height: scene.render.height,
+                spp: 1,
+                seconds,
+                setup_seconds: 0.0,
+                device_seconds: None,
+                rays_per_second: rays / seconds.max(1e-9),
+                steps_per_ray: 0.0,
+                evals_per_ray: 0.0,
+                status_counts: std::collections::BTreeMap::new(),
+                warnings: warnings.list,
+                bake_cache: frame_report.bake_cache,
+                gpu_field: frame_report.gpu_field,
+                optics: Some(optics),
+                auto,
+                auto_note,
+            };
+            return Ok(Rendered {
+                image,
+                frame: None,
+                report,
+            });
+        }
+
+        let passes = if bos_scenes.is_some() { 3 } else { 1 };
+        progress.begin(u64::from(scene.render.height) * passes);
+        let setup_start = Instant::now();
+        let (mut frame, fr) = self.frame(&job, &rs, scene.medium.as_ref(), &mut warnings)?;
+        let bos_images = match &bos_scenes {
+            Some((with, without)) => {
+                let mut quiet = Warnings::new(progress);
+                let (distorted, _) = self.frame(&job, with, scene.medium.as_ref(), &mut quiet)?;
+                let (reference, _) = self.frame(&job, without, None, &mut quiet)?;
+                let red = |f: &Frame| f.pixels.iter().map(|p| f64::from(p.rgb[0])).collect();
+                Some((red(&reference), red(&distorted)))
+            }
+            None => None,
+        };
+        let setup_seconds = setup_start.elapsed().as_secs_f64() - fr.seconds;
+        progress.finish();
+        if let Some(sensor) = &scene.sensor {
+            match scene.optics.as_ref().map(|o| o.mode) {
+                None => grin_render::sensor::record_frame(sensor, &mut frame),
+                Some(OpticsMode::Bos | OpticsMode::Interferogram) => {}
+                Some(mode) => warnings.push(format!(
+                    "[sensor] records the beauty, BOS and interferogram images; the {} \
+                     output is written without sensor noise",
+                    optics::mode_name(mode)
+                )),
+            }
+        }
+        if scene.optics.is_some() && scene.camera.f_number.is_some() && bos_images.is_none() {
+            warnings.push(
+                "[optics] outputs trace one pinhole ray per pixel centre: camera.f_number \
+                 (defocus) is not applied to them"
+                    .to_owned(),
+            );
+        }
+        let (image, optics_summary) = match &scene.optics {
+            Some(spec) => {
+                let (image, summary) =
+                    optics::from_frame(spec, scene.sensor.as_ref(), bos_images, &rs, &frame)?;
+                (image, Some(summary))
+            }
+            None => {
+                let mut image = Image::new(frame.width, frame.height);
+                image.channels = frame
+                    .channels()?
+                    .into_iter()
+                    .map(|(n, d)| (n.to_owned(), d))
+                    .collect();
+                image.previews.push(Preview {
+                    suffix: None,
+                    rgb8: frame.preview_rgb8(),
+                });
+                (image, None)
+            }
+        };
+
+        let n_pixels = f64::from(frame.width) * f64::from(frame.height);
+        let rays = n_pixels * f64::from(scene.render.spp);
+        let mean = |f: fn(&grin_render::image::PixelOut) -> f32| {
+            frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / n_pixels.max(1.0)
+        };
+        let status_counts = status_counts(&frame);
+        let stuck = status_counts["max_steps"] + status_counts["error"];
+        if stuck > 0 {
+            warnings.push(format!(
+                "{stuck} pixels stopped in the medium (max_steps {}, error {}): see the aov.status channel",
+                status_counts["max_steps"], status_counts["error"]
+            ));
+        }
+        let degraded = status_counts["degraded"];
+        if degraded > 0 {
+            warnings.push(format!(
+                "{degraded} pixels left the medium `degraded`: their error estimate is above the {:.1e} rad they are held to (asked {:.1e}; aov.status 5): the integrator's own at these steps (shorter steps, or step = {{ auto = ... }} without an integrator, resolve it), or a baked field's n error amplified at a grazing crossing of the bounds (a finer or tricubic bake resolves it)",
+                rs.settings.estimate_limit(),
+                rs.settings.accuracy()
+            ));
+        }
+        let report = Report {
+            backend: self.backend.name(),
+            adapter: fr.adapter,
+            width: frame.width,
+            height: frame.height,
+            spp: scene.render.spp,
+            seconds: fr.seconds,
+            setup_seconds,
+            device_seconds: fr.device_seconds,
+            rays_per_second: rays / fr.seconds.max(1e-9),
+            steps_per_ray: mean(|p| p.steps),
+            evals_per_ray: mean(|p| p.evals),
+            status_counts,
+            warnings: warnings.list,
+            bake_cache: fr.bake_cache,
+            gpu_field: fr.gpu_field,
+            optics: optics_summary,
+            auto,
+            auto_note,
+        };
+        Ok(Rendered {
+            frame: scene.optics.is_none().then_some(frame),
+            image,
+            report,
+        })
+    }
+
+    /// The shadowgraph of `spec`: its beam traced on the CPU, or as one GPU frame whose
+    /// exit AOVs are binned on the screen.
+    fn shadowgraph(
+        &self,
+        job: &Job,
+        rs: &RenderScene,
+        spec: &grin_scene::OpticsSpec,
+        warnings: &mut Warnings,
+    ) -> anyhow::Result<(Image, serde_json::Value, FrameReport)> {
+        let medium = rs
+            .medium
+            .as_ref()
+            .with_context(|| format!("{}: [optics] a shadowgraph needs a [medium]", job.label))?;
+        let (sg, report) = match self.backend {
+            Backend::Cpu => {
+                let sg = grin_trace::shadowgraph::shadowgraph(
+                    medium.field.as_ref(),
+                    &medium.trace,
+                    &rs.camera,
+                    &spec.screen,
+                );
+                let report = FrameReport {
+                    adapter: cpu_adapter(),
+                    ..FrameReport::default()
+                };
+                (sg, report)
+            }
+            Backend::Gpu => {
+                // The beam's rays are an orthographic camera's pixel centres.
+                let beam =
+                    grin_trace::shadowgraph::Beam::new(&medium.bounds, &rs.camera, &spec.screen);
+                let mut beam_rs = rs.clone();
+                beam_rs.camera = beam.camera();
+                beam_rs.settings.width = beam_rs.camera.width;
+                beam_rs.settings.height = beam_rs.camera.height;
+                beam_rs.objects.clear();
+                beam_rs.materials.clear();
+                beam_rs.object_images.clear();
+                let pixels = u64::from(beam_rs.camera.width) * u64::from(beam_rs.camera.height);
+                if pixels > grin_render::scene::MAX_PIXELS {
+                    anyhow::bail!(
+                        "{}: [optics] the shadowgraph's beam is {pixels} rays (bins x \
+                         rays_per_pixel); at most {} fit one GPU frame: fewer bins or \
+                         rays_per_pixel",
+                        job.label,
+                        grin_render::scene::MAX_PIXELS
+                    );
+                }
+                job.progress.begin(u64::from(beam_rs.settings.height));
+                let (frame, report) =
+                    self.frame(job, &beam_rs, job.scene.medium.as_ref(), warnings)?;
+                job.progress.finish();
+                let v = |a: [f32; 3]| glam::DVec3::from_array(a.map(f64::from));
+                // status 0 missed (exit_pos = the ray's start), 1 exited, 5 degraded;
+                // else stopped.
+                let ends = frame.pixels.iter().map(|p| {
+                    (p.status <= 1.0 || p.status == 5.0)
+                        .then(|| (v(p.exit_pos), v(p.exit_dir).normalize()))
+                });
+                (beam.collect(ends), report)
+            }
+        };
+        let (image, summary) = optics::from_shadowgraph(&sg);
+        Ok((image, summary, report))
+    }
+
+    /// One frame of `rs` on this renderer's backend, and what the report says of it;
+    /// warnings are pushed as they arise.
+    fn frame(
+        &self,
+        job: &Job,
+        rs: &RenderScene,
+        medium: Option<&grin_scene::MediumSpec>,
+        warnings: &mut Warnings,
+    ) -> anyhow::Result<(Frame, FrameReport)> {
+        let cancel = AtomicBool::new(false);
+        let tick = |rows: u32| job.progress.advance(rows);
+        match self.backend {
+            Backend::Cpu => {
+                let start = Instant::now();
+                let frame = grin_trace::render::render_cpu(rs, &tick, &cancel)?;
+                let report = FrameReport {
+                    adapter: cpu_adapter(),
+                    seconds: start.elapsed().as_secs_f64(),
+                    ..FrameReport::default()
+                };
+                Ok((frame, report))
+            }
+            Backend::Gpu => {
+                let ctx = self.gpu()?;
+                if let Some(w) = cpu_adapter_warning(&ctx)
+                    && !warnings.list.contains(&w)
+                {
+                    // Told once a process (a sequence renders many frames on one device).
+                    static TOLD: std::sync::Once = std::sync::Once::new();
+                    TOLD.call_once(|| job.progress.warn(&w));
+                    warnings.list.push(w);
+                }
+                let cache = self.bake_cache();
+                let field =
+                    grin_gpu::cache::scene_gpu_field(rs, medium, job.scene_dir, cache.as_ref())
+                        .with_context(|| format!("{}: [medium]", job.label))?;
+                let renderer = grin_gpu::GpuRenderer::new(&ctx, rs, field.as_ref().map(|f| &f.0))
+                    .with_context(|| job.label.to_owned())?;
+                let mut report = FrameReport::default();
+                if let Some((_, field_warnings, used)) = &field {
+                    report.bake_cache = Some(*used);
+                    for w in field_warnings {
+                        warnings.push(w.clone());
+                    }
+                }
+                for w in renderer.warnings() {
+                    warnings.push(w.clone());
+                }
+                if medium.is_some() {
+                    report.gpu_field = Some(GpuField {
+                        dims: renderer.field_dims(),
+                        bytes: renderer.field_bytes(),
+                    });
+                }
+                report.adapter = renderer.adapter_info();
+                let start = Instant::now();
+                let frame = renderer.render(&tick, &cancel)?;
+                report.device_seconds = renderer.last_device_seconds();
+                if let Some(w) = renderer.loop_limit_warning(&frame) {
+                    warnings.push(w);
+                }
+                report.seconds = start.elapsed().as_secs_f64();
+                Ok((frame, report))
+            }
+        }
+    }
+}
+
+/// What one render call works on.
+struct Job<'a> {
+    scene: &'a Scene,
+    scene_dir: &'a Path,
+    label: &'a str,
+    progress: &'a dyn Progress,
+}
+
+/// What the report says of one frame.
+#[derive(Default)]
+struct FrameReport {
+    adapter: String,
+    seconds: f64,
+    device_seconds: Option<f64>,
+    gpu_field: Option<GpuField>,
+    bake_cache: Option<grin_gpu::cache::CacheUse>,
+}
+
+fn cpu_adapter() -> String {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!("cpu ({threads} threads)")
+}
+
+/// The GPU backend on a CPU adapter (lavapipe where a machine has no GPU): the marcher is
+/// built for GPUs (short dispatches of many threads), and the CPU tracer renders the same
+/// frame on the same cores faster; say so.
+fn cpu_adapter_warning(ctx: &grin_gpu::GpuContext) -> Option<String> {
+    ctx.is_cpu_adapter().then(|| {
+        format!(
+            "the GPU backend runs on a CPU adapter ({}): wgpu finds no GPU on this machine, \
+             and `--backend cpu` is usually faster without one (docs/render.md)",
+            ctx.adapter_name()
+        )
+    })
+}
+
+/// The accuracy an `[optics]` output asks in its own unit (`[optics] accuracy`: pixels of
+/// landing point, waves of OPD, a fraction of the knife's range), as the pilots' metric.
+fn output_metric(scene: &Scene, rs: &RenderScene) -> Option<(grin_trace::auto::Metric, f64)> {
+    let o = scene.optics.as_ref()?;
+    let asked = o.output_accuracy()?;
+    let metric = match o.accuracy_unit() {
+        // The shadowgraph's pixels are its screen's bins, its rays the beam's.
+        grin_scene::AccuracyUnit::Pixels if o.mode == OpticsMode::Shadowgraph => {
+            let medium = rs.medium.as_ref()?;
+            grin_trace::auto::Metric::Screen(Box::new(grin_trace::shadowgraph::Beam::new(
+                &medium.bounds,
+                &rs.camera,
+                &o.screen,
+            )))
+        }
+        grin_scene::AccuracyUnit::Pixels => grin_trace::auto::Metric::Pixels {
+            cam: Box::new(rs.camera),
+            plane: o
+                .plane
+                .as_ref()
+                .and_then(|p| grin_render::optics::Plane::new(p, &rs.camera)),
+        },
+        grin_scene::AccuracyUnit::Waves => grin_trace::auto::Metric::Waves {
+            wavelength: o.wavelength_nm * 1e-9,
+        },
+        // Schlieren: the exit direction, to a fraction of the knife's range.
+        grin_scene::AccuracyUnit::Radians => grin_trace::auto::Metric::Direction,
+    };
+    Some((metric, asked))
+}
+
+/// The scene whose beauty renders are the BOS images when they need more than the pixel
+/// centre's pinhole ray (a lens, or spp > 1): the dots as an emissive plane object (white
+/// on black, the `[optics]` dots and plane), at the scene's spp; `None` otherwise.
+fn bos_image_scene(scene: &Scene) -> anyhow::Result<Option<Scene>> {
+    let Some(spec) = scene.optics.as_ref().filter(|o| o.mode == OpticsMode::Bos) else {
+        return Ok(None);
+    };
+    if scene.render.spp <= 1 && scene.camera.f_number.is_none() {
+        return Ok(None);
+    }
+    let plane = spec
+        .plane
+        .context("[optics] BOS needs a plane for its dots")?;
+    let len = plane.normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+    let mut s = scene.clone();
+    s.optics = None;
+    s.objects.push(grin_scene::Object {
+        shape: grin_scene::Shape::Plane {
+            point: plane.point,
+            normal: plane.normal.map(|c| c / len),
+        },
+        material: grin_scene::Material::Dots {
+            diameter: spec.dots.diameter,
+            density: spec.dots.density,
+            seed: spec.dots.seed,
+            color: [1.0; 3],
+            background: [0.0; 3],
+            center: Some(plane.point),
+            emissive: true,
+        },
+    });
+    Ok(Some(s))
+}
+
+/// Pixels per `aov.status` value, by name.
+pub fn status_counts(frame: &Frame) -> std::collections::BTreeMap<&'static str, usize> {
+    let names = grin_trace::RayStatus::ALL.map(|s| s.name());
+    let mut counts: std::collections::BTreeMap<_, _> = names.iter().map(|&n| (n, 0)).collect();
+    for p in &frame.pixels {
+        if let Some(name) = names.get(p.status as usize)
+            && let Some(c) = counts.get_mut(name)
+        {
+            *c += 1;
+        }
+    }
+    counts
+}

@@ -1,0 +1,141 @@
+//! One way from a scene to traced rays: the medium's field, the trace settings with the
+//! caller's overrides, and `step = { auto = ... }`'s pilots (some of the rays themselves).
+//! `grin trace` streams a table through a [`TracePlan`]; the Python package traces arrays.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::{Context, bail};
+use glam::DVec3;
+use grin_field::IndexField;
+use grin_render::settings::TraceSettings;
+use grin_scene::{ExitMethod, IntegratorKind, Scene, StepSpec};
+use grin_trace::RayResult;
+use grin_trace::table::RayRow;
+
+/// What a caller overrides of the scene's `[render]` trace settings.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TraceOverrides {
+    pub integrator: Option<IntegratorKind>,
+    /// `StepSpec::Auto(rad)` also asks for `rad`: rays above it are `degraded`.
+    pub step: Option<StepSpec>,
+    pub max_steps: Option<u32>,
+    pub exit: Option<ExitMethod>,
+    /// Integrate in f32 (what the GPU does) instead of f64.
+    pub f32: bool,
+}
+
+/// A scene's medium ready to trace rays through: its field and the settings the pilots
+/// chose.
+pub struct TracePlan {
+    pub field: Arc<dyn IndexField>,
+    pub settings: TraceSettings,
+    pub f32: bool,
+    /// `step = { auto = ... }`: what the pilot rays chose.
+    pub auto: Option<grin_trace::auto::AutoChoice>,
+    /// `step = { auto = ... }` resolved without pilots (too few rays for them): why.
+    pub auto_note: Option<String>,
+}
+
+impl std::fmt::Debug for TracePlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TracePlan")
+            .field("field", &self.field.describe())
+            .field("settings", &self.settings)
+            .field("f32", &self.f32)
+            .finish_non_exhaustive()
+    }
+}
+
+impl TracePlan {
+    /// The plan for tracing `rays` (or the first batch of a longer table, whose rays are
+    /// the pilots) through `scene`'s medium (read from `scene_dir`; `label` names the scene
+    /// in errors).
+    pub fn new(
+        scene: &Scene,
+        scene_dir: &Path,
+        label: &str,
+        overrides: &TraceOverrides,
+        rays: &[RayRow],
+    ) -> anyhow::Result<Self> {
+        let Some(medium) = scene.medium.as_ref() else {
+            bail!("{label}: the scene has no [medium] to trace rays through");
+        };
+        let field = grin_field::build_field(medium, scene_dir)
+            .with_context(|| format!("{label}: [medium]"))?;
+        let mut settings = TraceSettings::from_render(&scene.render);
+        if let Some(k) = overrides.integrator {
+            settings.integrator = k;
+        }
+        if let Some(s) = overrides.step {
+            settings.step = s;
+            if let StepSpec::Auto(a) = s {
+                settings.accuracy = a;
+            }
+        }
+        if let Some(m) = overrides.max_steps {
+            settings.max_steps = m;
+        }
+        if let Some(e) = overrides.exit {
+            settings.exit = e;
+        }
+        settings
+            .validate_for(&field.bounds())
+            .with_context(|| format!("{label}: [render]"))?;
+        // `step = { auto = ... }`: pilot rays (some of the table's own) choose the method.
+        // A small table pays for few pilots: at most ~20 % of its work (none below
+        // MIN_PILOTS: error control per length then keeps the asked error on its own).
+        let free_integrator = scene.render.integrator.is_none() && overrides.integrator.is_none();
+        let pilots: Vec<_> = rays.iter().map(|r| (r.origin, r.dir)).collect();
+        let wanted = scene.render.pilot_rays as usize;
+        let afforded = grin_trace::auto::affordable_pilots(wanted, rays.len());
+        let pilots = grin_trace::auto::spread(&pilots, afforded);
+        let auto_note = match settings.step {
+            StepSpec::Auto(rad) if afforded == 0 && wanted > 0 => Some(format!(
+                "auto {rad:.0e} rad: error control per length, no pilot rays (a table of {} \
+                 rays: pilots pay from {} rays on)",
+                rays.len(),
+                grin_trace::auto::MIN_PILOTS * grin_trace::auto::JOB_RAYS_PER_PILOT
+            )),
+            _ => None,
+        };
+        let auto = if pilots.is_empty() {
+            None
+        } else if overrides.f32 {
+            grin_trace::auto::choose::<f32>(field.as_ref(), &settings, free_integrator, &pilots)
+        } else {
+            grin_trace::auto::choose::<f64>(field.as_ref(), &settings, free_integrator, &pilots)
+        };
+        if let Some(a) = &auto {
+            settings = a.settings;
+        }
+        Ok(Self {
+            field,
+            settings,
+            f32: overrides.f32,
+            auto,
+            auto_note,
+        })
+    }
+
+    /// Trace `rows` in parallel (rayon), in the plan's precision.
+    pub fn trace(&self, rows: &[RayRow]) -> Vec<RayResult> {
+        if self.f32 {
+            grin_trace::table::trace_rows::<f32>(self.field.as_ref(), &self.settings, rows)
+        } else {
+            grin_trace::table::trace_rows::<f64>(self.field.as_ref(), &self.settings, rows)
+        }
+    }
+}
+
+/// Rays as table rows (line numbers from 1, no extra columns).
+pub fn rows(rays: impl Iterator<Item = (DVec3, DVec3)>) -> Vec<RayRow> {
+    rays.enumerate()
+        .map(|(i, (origin, dir))| RayRow {
+            line: i + 1,
+            origin,
+            dir,
+            extra: Vec::new(),
+        })
+        .collect()
+}
