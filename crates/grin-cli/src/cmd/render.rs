@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use grin_pipeline::{Backend, Rendered, Renderer};
 use grin_render::image::{Frame, diff_frames, stage_channels_exr, stage_rgb8_png};
+use grin_scene::frames::FrameList;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin render`.
@@ -36,12 +37,34 @@ pub struct Args {
     /// (and do not store it there); the driver's pipeline cache is not used either.
     #[arg(long)]
     pub no_cache: bool,
-    /// Render frames A..B (inclusive) of the scene's sequence: the medium's path may hold a
+    /// Render these frames of the scene's sequence: `A..B` (inclusive) or a render farm's
+    /// frame list (OpenJD / Deadline: `1-3,5,7-20:2`, frames `A`, ranges `A-B`, stepped
+    /// ranges `A-B:S`, in the order given, repeats dropped). The medium's path may hold a
     /// frame token (`####`, `%04d`, `$F4`) and noise / expr time is t + frame / fps. The
     /// output must hold a frame token too (`-o out.####.exr`). The GPU device and its
     /// compiled pipelines are kept from frame to frame.
-    #[arg(long, value_name = "A..B", value_parser = grin_scene::frames::parse_frame_range)]
-    pub frames: Option<(i64, i64)>,
+    #[arg(long, value_name = "LIST", value_parser = grin_scene::frames::parse_frame_list)]
+    pub frames: Option<FrameList>,
+    /// Render only shard I of N (0-based) of the --frames list: the list cut into N
+    /// contiguous pieces whose sizes differ by at most one, the earlier pieces taking the
+    /// extra frames (a Slurm array task:
+    /// `--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT` with `--array=0-(N-1)`).
+    /// A shard with no frames renders nothing and succeeds.
+    #[arg(long, value_name = "I/N", value_parser = grin_scene::frames::parse_shard)]
+    pub shard: Option<(u32, u32)>,
+    /// Skip what is rendered already: a frame whose EXR (and --beauty EXR) exists is not
+    /// rendered again (a retried farm task renders only what is missing). Outputs are put
+    /// in place whole, so an existing file is a complete one.
+    #[arg(long)]
+    pub skip_existing: bool,
+    /// Seed each frame's randomness from S and the frame number: the [render] seed
+    /// (sub-pixel positions, step jitter, lens and path sampling) and the [sensor] noise
+    /// seed, each frame its own. A frame renders the same whichever shard or task renders
+    /// it, and different frames get unrelated noise. The [optics] BOS dot pattern keeps
+    /// its seed (the background does not change between frames). Without --seed the
+    /// scene's seeds are used (the sensor's mixed with the frame number).
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
     /// Frames per second of the sequence (default: the scene's [animation] fps, else 24).
     #[arg(long)]
     pub fps: Option<f64>,
@@ -76,6 +99,9 @@ pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
 /// What a render produced, for the summary: the pipeline's report and the files.
 #[derive(Debug, serde::Serialize)]
 struct Summary {
+    /// The frame, with --frames.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    frame: Option<i64>,
     #[serde(flatten)]
     report: grin_pipeline::Report,
     exr: PathBuf,
@@ -168,6 +194,12 @@ impl grin_pipeline::Progress for Bar {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let (Some((index, count)), None) = (args.shard, &args.frames) {
+        bail!(
+            "--shard {index}/{count} renders a shard of a frame list: give the list with --frames \
+             (e.g. --frames 1-100 --shard {index}/{count})"
+        );
+    }
     let mut scene = grin_scene::load_scene(&args.scene)?;
     if let Some((w, h)) = args.size {
         scene.render.width = w;
@@ -215,7 +247,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(fps.is_finite() && fps > 0.0) {
         bail!("--fps must be a positive number of frames per second, got {fps}");
     }
-    let Some((first, last)) = args.frames else {
+    let Some(list) = &args.frames else {
         if grin_scene::frames::has_frame_token(&args.output.to_string_lossy()) {
             bail!(
                 "{}: the output holds a frame token but no --frames A..B was given",
@@ -223,10 +255,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
         // A scene with an [animation] renders its first frame.
-        let scene = match scene.animation {
-            Some(a) => scene.at_frame(a.frames[0], fps),
+        let first = scene.animation.as_ref().map(|a| a.frames[0]);
+        let scene = match first {
+            Some(f) => scene.at_frame(f, fps),
             None => scene,
         };
+        let scene = seeded(scene, first.unwrap_or(0), args.seed);
+        if args.skip_existing && complete(&args.output)? {
+            if let Some(beauty) = &args.beauty {
+                if complete(beauty)? {
+                    return report_skipped(&args, None, &args.output, Some(beauty));
+                }
+            } else {
+                return report_skipped(&args, None, &args.output, None);
+            }
+        }
         let Some(beauty) = &args.beauty else {
             let renderer = Renderer::new(args.backend, !args.no_cache);
             let (summary, to_stream) = render_one(&args, &renderer, scene, &args.output)?;
@@ -234,8 +277,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         // The [optics] output and the beauty image, on one device.
         let jobs = [
-            (scene.clone(), args.output.clone(), String::new()),
-            (without_optics(scene), beauty.clone(), "beauty".into()),
+            Job::render(scene.clone(), args.output.clone(), String::new(), None),
+            Job::render(without_optics(scene), beauty.clone(), "beauty".into(), None),
         ];
         return render_all(&args, jobs.into_iter());
     };
@@ -249,57 +292,297 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.compare.is_some() {
         bail!("--compare compares one frame: render the frame alone to compare it");
     }
-    // Every frame's file must be there before any frame is rendered.
-    let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
-    let missing = grin_scene::frames::missing_frames(&scene, scene_dir, first, last);
-    if !missing.is_empty() {
-        bail!(
-            "{}: {} of frames {first}..{last} missing: {}",
-            args.scene.display(),
-            missing.len(),
-            grin_scene::frames::summarize(&missing)
+    let frames = match args.shard {
+        Some((index, count)) => list.shard(index, count),
+        None => list.frames().to_vec(),
+    };
+    if let (true, Some((index, count))) = (frames.is_empty(), args.shard) {
+        eprintln!(
+            "grin: note: shard {index}/{count} of the {} frames {list} holds no frame: nothing to render",
+            list.len()
         );
+        if args.json {
+            outln!("[]");
+        }
+        return Ok(());
     }
-    grin_field::vdb::check_sequence(&scene, scene_dir, first, last)
-        .with_context(|| format!("{}", args.scene.display()))?;
-    // Each frame, and its beauty image beside it with --beauty.
+    // Each frame's outputs, and whether they are there already (--skip-existing).
     let at = |path: &Path, f: i64| {
         let p = path.to_string_lossy();
         PathBuf::from(grin_scene::frames::substitute_frame(&p, f).unwrap_or_else(|| p.into()))
     };
-    let jobs = (first..=last).flat_map(|f| {
-        let frame = scene.at_frame(f, fps);
-        let beauty = args.beauty.as_ref().map(|b| {
-            (
+    let mut done = std::collections::HashSet::new();
+    if args.skip_existing {
+        for &f in &frames {
+            let beauty = args.beauty.as_ref().map(|b| at(b, f));
+            if complete(&at(&args.output, f))? && beauty.as_deref().map_or(Ok(true), complete)? {
+                done.insert(f);
+            }
+        }
+    }
+    let todo: Vec<i64> = frames
+        .iter()
+        .copied()
+        .filter(|f| !done.contains(f))
+        .collect();
+    // Every file of a frame to render must be there before any frame is rendered.
+    let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
+    check_frames(&args.scene, &scene, scene_dir, &todo)?;
+    // Each frame, and its beauty image beside it with --beauty; or what is there already.
+    let jobs = frames.iter().flat_map(|&f| {
+        let out = at(&args.output, f);
+        let beauty_out = args.beauty.as_ref().map(|b| at(b, f));
+        if done.contains(&f) {
+            return vec![Job::Skipped {
+                frame: Some(f),
+                exr: out,
+                beauty: beauty_out,
+            }];
+        }
+        let frame = seeded(scene.at_frame(f, fps), f, args.seed);
+        let beauty = beauty_out.map(|b| {
+            Job::render(
                 without_optics(frame.clone()),
-                at(b, f),
+                b,
                 format!("frame {f} (beauty)"),
+                Some(f),
             )
         });
-        std::iter::once((frame, at(&args.output, f), format!("frame {f}"))).chain(beauty)
+        std::iter::once(Job::render(frame, out, format!("frame {f}"), Some(f)))
+            .chain(beauty)
+            .collect()
     });
-    render_all(&args, jobs)
+    render_all(&args, jobs)?;
+    if args.skip_existing {
+        let text = format!(
+            "{} of {} frames rendered, {} skipped (their outputs exist)",
+            todo.len(),
+            frames.len(),
+            done.len()
+        );
+        // With --json stdout holds the JSON array alone.
+        crate::report(args.json, text);
+    }
+    Ok(())
 }
 
-/// Render each (scene, output, what it is for error messages, or empty) on one device, printing
-/// each summary, or with `--json` all of them as one array at the end.
-fn render_all(
-    args: &Args,
-    jobs: impl Iterator<Item = (grin_scene::Scene, PathBuf, String)>,
+/// Salt of the sensor's per-frame seed: the sensor's noise and the render's sampling
+/// draw from unrelated seeds.
+const SENSOR_SEED_SALT: u64 = 0x5e45_0a5e_ed00_0001;
+
+/// `scene` (at frame `frame`) with its random seeds derived from `--seed` and the frame:
+/// the render's (sub-pixel positions, jitter, sampling) and the sensor's. The BOS dot
+/// pattern keeps its seed. Unchanged without `--seed`.
+fn seeded(mut scene: grin_scene::Scene, frame: i64, seed: Option<u64>) -> grin_scene::Scene {
+    let Some(base) = seed else {
+        return scene;
+    };
+    scene.render.seed = grin_scene::frames::frame_seed(base, frame);
+    if let Some(sensor) = &mut scene.sensor {
+        sensor.seed = grin_scene::frames::frame_seed(base ^ SENSOR_SEED_SALT, frame);
+    }
+    scene
+}
+
+/// Whether `path` is a rendered output already (`--skip-existing`): a file, not a stream.
+/// Outputs are staged and renamed into place, so a file there is a whole one.
+fn complete(path: &Path) -> anyhow::Result<bool> {
+    Ok(check_output(path)?.is_some() && path.is_file())
+}
+
+/// Consecutive runs `(first, last)` of `frames` in their order: each frame of a run is
+/// one more than the one before.
+fn runs(frames: &[i64]) -> Vec<(i64, i64)> {
+    let mut runs: Vec<(i64, i64)> = Vec::new();
+    for &f in frames {
+        match runs.last_mut() {
+            Some((_, last)) if last.checked_add(1) == Some(f) => *last = f,
+            _ => runs.push((f, f)),
+        }
+    }
+    runs
+}
+
+/// Before any frame renders: every file of `frames` of the scene's sequence is there
+/// (the missing ones named), and a VDB sequence's files hold the grid, scalar, with a
+/// linear transform, all of one value type (as for a range, across the whole list).
+fn check_frames(
+    scene_file: &Path,
+    scene: &grin_scene::Scene,
+    scene_dir: &Path,
+    frames: &[i64],
 ) -> anyhow::Result<()> {
+    let runs = runs(frames);
+    let missing: Vec<String> = runs
+        .iter()
+        .flat_map(|&(a, b)| grin_scene::frames::missing_frames(scene, scene_dir, a, b))
+        .collect();
+    if !missing.is_empty() {
+        let which = match runs[..] {
+            [(first, last)] => format!("{first}..{last}"),
+            _ => {
+                let text = runs
+                    .iter()
+                    .map(|&(a, b)| {
+                        if a == b {
+                            format!("{a}")
+                        } else {
+                            format!("{a}-{b}")
+                        }
+                    })
+                    .collect::<Vec<_>>()
+                    .join(",");
+                // Stepped runs compacted (`7-19:2`).
+                grin_scene::frames::parse_frame_list(&text).map_or(text, |l| l.to_string())
+            }
+        };
+        bail!(
+            "{}: {} of frames {which} missing: {}",
+            scene_file.display(),
+            missing.len(),
+            grin_scene::frames::summarize(&missing)
+        );
+    }
+    for &(first, last) in &runs {
+        grin_field::vdb::check_sequence(scene, scene_dir, first, last)
+            .with_context(|| format!("{}", scene_file.display()))?;
+    }
+    same_value_type(scene, scene_dir, &runs).with_context(|| format!("{}", scene_file.display()))
+}
+
+/// A VDB sequence keeps one value type: [`grin_field::vdb::check_sequence`] checks that
+/// within a run of consecutive frames; this compares the first frame of each further run
+/// with the first run's (every file opened and its grid found by then).
+fn same_value_type(
+    scene: &grin_scene::Scene,
+    scene_dir: &Path,
+    runs: &[(i64, i64)],
+) -> anyhow::Result<()> {
+    let Some(grin_scene::FieldSpec::Vdb(spec)) = scene.medium.as_ref().map(|m| &m.field) else {
+        return Ok(());
+    };
+    let Some(((f0, _), rest)) = runs.split_first() else {
+        return Ok(());
+    };
+    if rest.is_empty() || !grin_scene::frames::has_frame_token(&spec.path) {
+        return Ok(());
+    }
+    let value_type = |f: i64| -> anyhow::Result<(PathBuf, String)> {
+        let name = grin_scene::frames::substitute_frame(&spec.path, f)
+            .unwrap_or_else(|| spec.path.clone());
+        let path = grin_field::vdb::resolve(scene_dir, &name);
+        let in_frame = |e: vdb_sys::VdbError| anyhow::anyhow!("frame {f}: {e}");
+        let file = vdb_sys::VdbFile::open(&path).map_err(in_frame)?;
+        let value_type = file.grid(&spec.grid).map_err(in_frame)?.value_type.clone();
+        Ok((path, value_type))
+    };
+    let (_, t0) = value_type(*f0)?;
+    for &(f, _) in rest {
+        let (path, t) = value_type(f)?;
+        if t != t0 {
+            bail!(
+                "frame {f}: {}: grid `{}` is `{t}`, but `{t0}` in frame {f0}: a sequence keeps one type",
+                path.display(),
+                spec.grid
+            );
+        }
+    }
+    Ok(())
+}
+
+/// One thing `render_all` does: render a scene to an output, or report an output that
+/// is there already (`--skip-existing`).
+enum Job {
+    Render {
+        scene: Box<grin_scene::Scene>,
+        out: PathBuf,
+        /// What it is, for error messages (empty: the render itself).
+        what: String,
+        frame: Option<i64>,
+    },
+    Skipped {
+        frame: Option<i64>,
+        exr: PathBuf,
+        beauty: Option<PathBuf>,
+    },
+}
+
+impl Job {
+    fn render(scene: grin_scene::Scene, out: PathBuf, what: String, frame: Option<i64>) -> Self {
+        Job::Render {
+            scene: Box::new(scene),
+            out,
+            what,
+            frame,
+        }
+    }
+}
+
+/// `--skip-existing`: the line on stderr, and the summary entry.
+fn skipped_entry(frame: Option<i64>, exr: &Path, beauty: Option<&Path>) -> serde_json::Value {
+    let outputs = match beauty {
+        Some(b) => format!("{} and {} exist", exr.display(), b.display()),
+        None => format!("{} exists", exr.display()),
+    };
+    match frame {
+        Some(f) => eprintln!("skipped frame {f}: {outputs}"),
+        None => eprintln!("skipped: {outputs}"),
+    }
+    let mut entry = serde_json::Map::new();
+    if let Some(f) = frame {
+        entry.insert("frame".into(), f.into());
+    }
+    entry.insert("skipped".into(), true.into());
+    entry.insert("exr".into(), serde_json::json!(exr));
+    if let Some(b) = beauty {
+        entry.insert("beauty".into(), serde_json::json!(b));
+    }
+    entry.into()
+}
+
+/// A render without --frames that `--skip-existing` skips.
+fn report_skipped(
+    args: &Args,
+    frame: Option<i64>,
+    exr: &Path,
+    beauty: Option<&PathBuf>,
+) -> anyhow::Result<()> {
+    let entry = skipped_entry(frame, exr, beauty.map(PathBuf::as_path));
+    if args.json {
+        outln!("{}", serde_json::to_string_pretty(&entry)?);
+    }
+    Ok(())
+}
+
+/// Run each job on one device, printing each summary (a skipped output: a line on
+/// stderr), or with `--json` all of them as one array at the end.
+fn render_all(args: &Args, jobs: impl Iterator<Item = Job>) -> anyhow::Result<()> {
     let renderer = Renderer::new(args.backend, !args.no_cache);
     let mut summaries = Vec::new();
-    for (scene, out, what) in jobs {
-        let rendered = render_one(args, &renderer, scene, &out);
-        let (summary, to_stream) = if what.is_empty() {
+    for job in jobs {
+        let (scene, out, what, frame) = match job {
+            Job::Render {
+                scene,
+                out,
+                what,
+                frame,
+            } => (scene, out, what, frame),
+            Job::Skipped { frame, exr, beauty } => {
+                summaries.push(skipped_entry(frame, &exr, beauty.as_deref()));
+                continue;
+            }
+        };
+        let rendered = render_one(args, &renderer, *scene, &out);
+        let (mut summary, to_stream) = if what.is_empty() {
             rendered?
         } else {
             rendered.with_context(|| what)?
         };
+        summary.frame = frame;
         if !args.json {
             print_summary(&summary, false, to_stream)?;
         }
-        summaries.push(summary);
+        summaries.push(serde_json::to_value(&summary)?);
     }
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&summaries)?);
@@ -395,6 +678,7 @@ fn render_one(
     };
     grin_output::commit(staged)?;
     let summary = Summary {
+        frame: None,
         report,
         exr: output.to_owned(),
         png,
