@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Run every test of the workspace (unit, physics, GPU on lavapipe, end-to-end).
+# Run every test of the workspace (unit, physics, GPU on lavapipe, end-to-end) and the
+# Python package's.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Mesa's device-select layer probes for a Wayland display on every GPU device and prints
@@ -8,4 +9,6 @@ export NODEVICE_SELECT="${NODEVICE_SELECT:-1}"
 # The GPU bake cache of this run: its own, so tests neither read nor fill the user's.
 export GRIN_CACHE_DIR="${GRIN_CACHE_DIR:-$(mktemp -d)}"
 bash scripts/setup.sh
-cargo test --workspace --locked "$@"
+# grin-py is a Python extension module: built by maturin and tested by pytest below.
+cargo test --workspace --exclude grin-py --locked "$@"
+bash scripts/python.sh test

@@ -139,3 +139,53 @@ pub fn rows(rays: impl Iterator<Item = (DVec3, DVec3)>) -> Vec<RayRow> {
         })
         .collect()
 }
+
+/// An integrator by name (`rk4`, `dopri`, ...), as `--integrator` takes it.
+pub fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
+    IntegratorKind::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = IntegratorKind::ALL.iter().map(|k| k.name()).collect();
+        format!(
+            "unknown integrator `{s}`; expected one of {}",
+            names.join(", ")
+        )
+    })
+}
+
+/// A step policy as `--step` takes it: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] |
+/// adaptive=TOL | auto=RAD.
+pub fn parse_step(s: &str) -> Result<StepSpec, String> {
+    let usage = "expected fixed=DS, heuristic=MIN,MAX[,AMPLITUDE], adaptive=TOL or auto=RAD";
+    let (kind, values) = s.split_once('=').ok_or_else(|| format!("`{s}`: {usage}"))?;
+    let nums = values
+        .split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite() && *x > 0.0)
+                .ok_or_else(|| format!("`{s}`: `{v}` is not a positive number"))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    match (kind.trim(), nums.as_slice()) {
+        ("fixed", [ds]) => Ok(StepSpec::Fixed(*ds)),
+        ("heuristic", [min, max]) | ("heuristic", [min, max, _]) if min <= max => {
+            Ok(StepSpec::Heuristic {
+                min: *min,
+                max: *max,
+                amplitude: nums.get(2).copied(),
+            })
+        }
+        ("heuristic", [_, _]) | ("heuristic", [_, _, _]) => {
+            Err(format!("`{s}`: heuristic needs MIN <= MAX"))
+        }
+        ("adaptive", [tol]) => Ok(StepSpec::Adaptive {
+            tolerance: *tol,
+            initial: None,
+        }),
+        ("auto", [rad]) if *rad < 1.0 => Ok(StepSpec::Auto(*rad)),
+        ("auto", [_]) => Err(format!(
+            "`{s}`: auto takes an exit-direction error in radians, below 1"
+        )),
+        _ => Err(format!("`{s}`: {usage}")),
+    }
+}

@@ -40,11 +40,11 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Integrator, overriding the scene's: euler | symplectic-euler | verlet | sharma | rk4 | adaptive.
-    #[arg(long, value_parser = parse_integrator)]
+    #[arg(long, value_parser = grin_pipeline::trace::parse_integrator)]
     pub integrator: Option<IntegratorKind>,
     /// Step policy, overriding the scene's: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] |
     /// adaptive=TOL | auto=RAD (error control for an exit-direction error of RAD radians).
-    #[arg(long, value_parser = parse_step)]
+    #[arg(long, value_parser = grin_pipeline::trace::parse_step)]
     pub step: Option<StepSpec>,
     /// Per-ray step cap, overriding the scene's max_steps.
     #[arg(long)]
@@ -61,53 +61,6 @@ pub struct Args {
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
-}
-
-fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
-    IntegratorKind::from_name(s).ok_or_else(|| {
-        let names: Vec<&str> = IntegratorKind::ALL.iter().map(|k| k.name()).collect();
-        format!(
-            "unknown integrator `{s}`; expected one of {}",
-            names.join(", ")
-        )
-    })
-}
-
-fn parse_step(s: &str) -> Result<StepSpec, String> {
-    let usage = "expected fixed=DS, heuristic=MIN,MAX[,AMPLITUDE], adaptive=TOL or auto=RAD";
-    let (kind, values) = s.split_once('=').ok_or_else(|| format!("`{s}`: {usage}"))?;
-    let nums = values
-        .split(',')
-        .map(|v| {
-            v.trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite() && *x > 0.0)
-                .ok_or_else(|| format!("`{s}`: `{v}` is not a positive number"))
-        })
-        .collect::<Result<Vec<f64>, String>>()?;
-    match (kind.trim(), nums.as_slice()) {
-        ("fixed", [ds]) => Ok(StepSpec::Fixed(*ds)),
-        ("heuristic", [min, max]) | ("heuristic", [min, max, _]) if min <= max => {
-            Ok(StepSpec::Heuristic {
-                min: *min,
-                max: *max,
-                amplitude: nums.get(2).copied(),
-            })
-        }
-        ("heuristic", [_, _]) | ("heuristic", [_, _, _]) => {
-            Err(format!("`{s}`: heuristic needs MIN <= MAX"))
-        }
-        ("adaptive", [tol]) => Ok(StepSpec::Adaptive {
-            tolerance: *tol,
-            initial: None,
-        }),
-        ("auto", [rad]) if *rad < 1.0 => Ok(StepSpec::Auto(*rad)),
-        ("auto", [_]) => Err(format!(
-            "`{s}`: auto takes an exit-direction error in radians, below 1"
-        )),
-        _ => Err(format!("`{s}`: {usage}")),
-    }
 }
 
 /// The summary printed with `--json`.
