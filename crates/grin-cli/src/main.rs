@@ -26,6 +26,8 @@ enum Command {
     Info(cmd::info::Args),
     /// Export a baked field to OpenVDB.
     Export(cmd::export::Args),
+    /// Generate a dataset for learning (BOS pairs with ground truth).
+    Dataset(cmd::dataset::Args),
     /// Speed-vs-accuracy charts, stability matrix, speed ratios.
     Bench(cmd::bench::Args),
 }
@@ -109,6 +111,7 @@ fn main() -> ExitCode {
         Command::Info(a) => cmd::info::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Bench(a) => cmd::bench::run(a),
+        Command::Dataset(a) => cmd::dataset::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,6 +4,7 @@
 //! previews with a report of how it went. `grin render` writes what [`Renderer::render`]
 //! returns to files; the Python package hands the same channels out as arrays.
 
+pub mod dataset;
 pub mod optics;
 pub mod trace;
 
@@ -105,7 +106,7 @@ pub struct Image {
 }
 
 impl Image {
-    fn new(width: u32, height: u32) -> Self {
+    pub fn new(width: u32, height: u32) -> Self {
         Self {
             width,
             height,
@@ -114,7 +115,7 @@ impl Image {
         }
     }
 
-    fn push(&mut self, name: &str, data: Vec<f32>) {
+    pub fn push(&mut self, name: &str, data: Vec<f32>) {
         self.channels.push((name.to_owned(), data));
     }
 
@@ -188,8 +189,11 @@ pub struct Report {
 pub struct Rendered {
     /// The output's channels: the beauty and AOVs, or the `[optics]` mode's.
     pub image: Image,
-    /// The beauty frame itself (none for an `[optics]` output).
+    /// The frame the output came from: the beauty and AOVs of each pixel (for an
+    /// `[optics]` output, of its centre ray; none for a shadowgraph, which traces a beam).
     pub frame: Option<Frame>,
+    /// The camera the frame was rendered through.
+    pub camera: grin_render::camera::PinholeCamera,
     pub report: Report,
 }
 
@@ -343,6 +347,7 @@ impl Renderer {
             return Ok(Rendered {
                 image,
                 frame: None,
+                camera: rs.camera,
                 report,
             });
         }
@@ -444,7 +449,8 @@ impl Renderer {
             auto_note,
         };
         Ok(Rendered {
-            frame: scene.optics.is_none().then_some(frame),
+            frame: Some(frame),
+            camera: rs.camera,
             image,
             report,
         })

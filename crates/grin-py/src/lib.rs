@@ -547,6 +547,70 @@ fn bake_volume<'py>(
     bake_to(py, Arc::new(field), &opts, path, &label)
 }
 
+/// Render sample `index` of the BOS dataset `seed` at `width` x `height`: (channels,
+/// JSON). Channels are the sample EXR's, plus `slice.n` ((64, 64), the index on the
+/// medium's mid-plane).
+#[pyfunction]
+fn dataset_bos_sample<'py>(
+    py: Python<'py>,
+    renderer: &Renderer,
+    index: u64,
+    seed: u64,
+    width: u32,
+    height: u32,
+) -> PyResult<(Bound<'py, PyDict>, String)> {
+    let dataset = grin_pipeline::dataset::Bos {
+        seed,
+        width,
+        height,
+    };
+    let sample = py
+        .detach(|| dataset.render_sample(&renderer.inner, Path::new("."), index))
+        .map_err(err)?;
+    let image = sample.image;
+    let shape = [image.height as usize, image.width as usize];
+    let channels = PyDict::new(py);
+    for (name, data) in image.channels {
+        channels.set_item(name, PyArray1::from_vec(py, data).reshape(shape)?)?;
+    }
+    let side = grin_pipeline::dataset::SLICE;
+    channels.set_item(
+        "slice.n",
+        PyArray1::from_vec(py, sample.slice).reshape([side, side])?,
+    )?;
+    Ok((channels, sample.meta.to_string()))
+}
+
+/// Write samples `indices` of the `count`-sample BOS dataset `seed` to `dir`, skipping
+/// complete ones, as `grin dataset bos` does: the run's summary (JSON).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn dataset_bos_write(
+    py: Python<'_>,
+    renderer: &Renderer,
+    dir: PathBuf,
+    count: u64,
+    indices: Vec<u64>,
+    seed: u64,
+    width: u32,
+    height: u32,
+) -> PyResult<String> {
+    if let Some(bad) = indices.iter().find(|&&i| i >= count) {
+        return Err(GrinError::new_err(format!(
+            "sample {bad} is not in a dataset of {count} samples"
+        )));
+    }
+    let dataset = grin_pipeline::dataset::Bos {
+        seed,
+        width,
+        height,
+    };
+    let summary = py
+        .detach(|| dataset.write(&renderer.inner, &dir, count, &indices, &|_, _| {}))
+        .map_err(err)?;
+    serde_json::to_string(&summary).map_err(|e| err(e.into()))
+}
+
 /// The version of grin this module was built from.
 #[pyfunction]
 fn version() -> &'static str {
@@ -562,6 +626,8 @@ fn _grin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_field, m)?)?;
     m.add_function(wrap_pyfunction!(bake, m)?)?;
     m.add_function(wrap_pyfunction!(bake_volume, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_bos_sample, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_bos_write, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())
 }

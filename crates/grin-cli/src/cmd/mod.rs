@@ -2,6 +2,7 @@
 
 pub mod bake;
 pub mod bench;
+pub mod dataset;
 pub mod export;
 pub mod info;
 pub mod info_vdb;

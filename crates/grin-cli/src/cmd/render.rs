@@ -623,6 +623,7 @@ fn render_one(
         image,
         frame,
         mut report,
+        ..
     } = renderer.render(scene, scene_dir, &label, &Bar::new())?;
 
     // The EXR, its PNG previews and the --compare difference image are staged, then put

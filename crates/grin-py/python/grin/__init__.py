@@ -24,7 +24,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _grin
+from . import _grin, dataset
 from ._grin import GrinError, Renderer, Scene
 
 __all__ = [
@@ -42,6 +42,7 @@ __all__ = [
     "bake",
     "bake_volume",
     "__version__",
+    "dataset",
 ]
 
 __version__: str = _grin.version()

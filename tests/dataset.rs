@@ -1,0 +1,240 @@
+//! `grin dataset bos`: deterministic by seed and index, shards that add up to the single
+//! run, and runs that resume after an interruption without duplicates or half-written
+//! samples.
+
+mod common;
+use common::{assert_ok, grin};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+/// Samples of the tests' dataset, and its (small) image size.
+const COUNT: u64 = 200;
+const SIZE: &str = "48x32";
+
+fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
+    let out = grin()
+        .args(["dataset", "bos", "-o"])
+        .arg(dir)
+        .args([
+            "--count",
+            &COUNT.to_string(),
+            "--seed",
+            "11",
+            "--size",
+            SIZE,
+        ])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert_ok(&out);
+    out
+}
+
+/// Every file of the folder by name, with its bytes.
+fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// The dataset is complete: 5 files a sample, no temporary files, a manifest with one
+/// line per sample in index order.
+fn assert_complete(dir: &Path) {
+    let f = files(dir);
+    assert_eq!(
+        f.len() as u64,
+        5 * COUNT + 1,
+        "files: {:?}",
+        f.keys().take(8).collect::<Vec<_>>()
+    );
+    assert!(
+        f.keys().all(|n| !n.starts_with(".grin-")),
+        "temporary files left"
+    );
+    let manifest = String::from_utf8(f["manifest.jsonl"].clone()).unwrap();
+    let indices: Vec<u64> = manifest
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["index"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(indices, (0..COUNT).collect::<Vec<_>>());
+}
+
+#[test]
+fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b, s) = (
+        tmp.path().join("a"),
+        tmp.path().join("b"),
+        tmp.path().join("s"),
+    );
+    let out = run(&a, &["--json"]);
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["rendered"], COUNT);
+    assert!(summary["samples_per_second"].as_f64().unwrap() > 0.0);
+    assert_complete(&a);
+    run(&b, &[]);
+    assert_eq!(files(&a), files(&b), "two runs of one seed differ");
+    // Two processes at once, one shard each: the same files, byte for byte.
+    let shard = |i: u32| {
+        grin()
+            .args(["dataset", "bos", "-o"])
+            .arg(&s)
+            .args([
+                "--count",
+                &COUNT.to_string(),
+                "--seed",
+                "11",
+                "--size",
+                SIZE,
+            ])
+            .args(["--shard", &format!("{i}/2")])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (p0, p1) = (shard(0), shard(1));
+    assert_ok(&p0.wait_with_output().unwrap());
+    assert_ok(&p1.wait_with_output().unwrap());
+    // The shard that ends last sees every sample and writes the manifest.
+    assert_complete(&s);
+    assert_eq!(
+        files(&a),
+        files(&s),
+        "two shards differ from the single run"
+    );
+    // Another seed is another dataset.
+    let c = tmp.path().join("c");
+    grin()
+        .args(["dataset", "bos", "-o"])
+        .arg(&c)
+        .args(["--count", "2", "--seed", "12", "--size", SIZE])
+        .output()
+        .unwrap();
+    assert_ne!(
+        std::fs::read(c.join("bos_000000.exr")).unwrap(),
+        files(&a)["bos_000000.exr"]
+    );
+}
+
+#[test]
+fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("d");
+    let reference = tmp.path().join("r");
+    run(&reference, &[]);
+    for signal in ["TERM", "KILL"] {
+        let _ = std::fs::remove_dir_all(&dir);
+        // Each commit waits a little, so the run is stopped in the middle of writing.
+        let mut child = grin()
+            .args(["dataset", "bos", "-o"])
+            .arg(&dir)
+            .args([
+                "--count",
+                &COUNT.to_string(),
+                "--seed",
+                "11",
+                "--size",
+                SIZE,
+            ])
+            .env("GRIN_TEST_PAUSE_BEFORE_COMMIT_MS", "20")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while files_named(&dir, ".json") < 5 && start.elapsed() < Duration::from_secs(60) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let status = std::process::Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        assert!(!child.wait().unwrap().success(), "the run was not stopped");
+        let done = files_named(&dir, ".json");
+        assert!(
+            done > 0 && (done as u64) < COUNT,
+            "{done} samples before the {signal}"
+        );
+        // A sample is complete exactly when its JSON is there: every one with a JSON has
+        // its four other files.
+        let f = files(&dir);
+        for name in f.keys().filter(|n| n.ends_with(".json")) {
+            let stem = name.trim_end_matches(".json");
+            for ext in [".exr", "-slice.exr", ".png", "-reference.png"] {
+                assert!(
+                    f.contains_key(&format!("{stem}{ext}")),
+                    "{stem}{ext} missing"
+                );
+            }
+        }
+        assert!(!f.contains_key("manifest.jsonl"));
+        let out = run(&dir, &["--json"]);
+        let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(
+            summary["skipped"].as_u64().unwrap(),
+            done as u64,
+            "{signal}"
+        );
+        assert_eq!(summary["rendered"].as_u64().unwrap(), COUNT - done as u64);
+        // SIGKILL leaves its temporary file behind (nothing can remove it); SIGTERM does not.
+        let leftovers: Vec<String> = files(&dir)
+            .into_keys()
+            .filter(|n| n.starts_with(".grin-"))
+            .collect();
+        if signal == "TERM" {
+            assert!(leftovers.is_empty(), "{leftovers:?}");
+        }
+        for l in leftovers {
+            std::fs::remove_file(dir.join(l)).unwrap();
+        }
+        assert_complete(&dir);
+        assert_eq!(files(&dir), files(&reference), "resumed after {signal}");
+    }
+}
+
+fn files_named(dir: &Path, suffix: &str) -> usize {
+    std::fs::read_dir(dir).map_or(0, |d| {
+        d.filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.file_name().to_string_lossy().ends_with(suffix))
+        })
+        .count()
+    })
+}
+
+#[test]
+fn bad_dataset_arguments_fail_clearly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = grin()
+        .args(["dataset", "bos", "-o"])
+        .arg(tmp.path().join("x"))
+        .args(["--count", "0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--count 0: a dataset holds 1 to"));
+    let out = grin()
+        .args(["dataset", "bos", "-o"])
+        .arg(tmp.path().join("x"))
+        .args(["--count", "4", "--shard", "4/4"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("shard index 4 must be below"));
+    assert!(!tmp.path().join("x").exists());
+}
