@@ -8,7 +8,7 @@ bash scripts/setup.sh
 venv="${GRIN_VENV:-$PWD/.venv}"
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
 "$venv/bin/pip" install -q --disable-pip-version-check \
-  "maturin>=1.9,<2" "numpy>=1.21" "pytest>=7" "OpenEXR>=3.3" "ray>=2.9"
+  "maturin>=1.9,<2" "numpy>=1.21" "pytest>=7" "OpenEXR>=3.3" "ray>=2.9" openjd-cli
 (cd crates/grin-py && VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop --locked -q)
 echo "python: grin $("$venv/bin/python" -c 'import grin; print(grin.__version__)') in $venv" >&2
 if [ "${1:-}" = test ]; then

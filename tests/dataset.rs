@@ -27,7 +27,7 @@ fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
         ])
         .args(extra)
         .output()
-        .unwrap();
+        .expect("run grin");
     assert_ok(&out);
     out
 }
@@ -35,12 +35,12 @@ fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
 /// Every file of the folder by name, with its bytes.
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     std::fs::read_dir(dir)
-        .unwrap()
+        .expect("read dir")
         .map(|e| {
-            let e = e.unwrap();
+            let e = e.expect("dir entry");
             (
                 e.file_name().to_string_lossy().into_owned(),
-                std::fs::read(e.path()).unwrap(),
+                std::fs::read(e.path()).expect("read file"),
             )
         })
         .collect()
@@ -60,13 +60,13 @@ fn assert_complete(dir: &Path) {
         f.keys().all(|n| !n.starts_with(".grin-")),
         "temporary files left"
     );
-    let manifest = String::from_utf8(f["manifest.jsonl"].clone()).unwrap();
+    let manifest = String::from_utf8(f["manifest.jsonl"].clone()).expect("test step");
     let indices: Vec<u64> = manifest
         .lines()
         .map(|l| {
-            serde_json::from_str::<serde_json::Value>(l).unwrap()["index"]
+            serde_json::from_str::<serde_json::Value>(l).expect("test step")["index"]
                 .as_u64()
-                .unwrap()
+                .expect("test step")
         })
         .collect();
     assert_eq!(indices, (0..COUNT).collect::<Vec<_>>());
@@ -74,16 +74,16 @@ fn assert_complete(dir: &Path) {
 
 #[test]
 fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().expect("test step");
     let (a, b, s) = (
         tmp.path().join("a"),
         tmp.path().join("b"),
         tmp.path().join("s"),
     );
     let out = run(&a, &["--json"]);
-    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("test step");
     assert_eq!(summary["rendered"], COUNT);
-    assert!(summary["samples_per_second"].as_f64().unwrap() > 0.0);
+    assert!(summary["samples_per_second"].as_f64().expect("test step") > 0.0);
     assert_complete(&a);
     run(&b, &[]);
     assert_eq!(files(&a), files(&b), "two runs of one seed differ");
@@ -104,11 +104,11 @@ fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
-            .unwrap()
+            .expect("test step")
     };
     let (p0, p1) = (shard(0), shard(1));
-    assert_ok(&p0.wait_with_output().unwrap());
-    assert_ok(&p1.wait_with_output().unwrap());
+    assert_ok(&p0.wait_with_output().expect("test step"));
+    assert_ok(&p1.wait_with_output().expect("test step"));
     // The shard that ends last sees every sample and writes the manifest.
     assert_complete(&s);
     assert_eq!(
@@ -123,16 +123,16 @@ fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
         .arg(&c)
         .args(["--count", "2", "--seed", "12", "--size", SIZE])
         .output()
-        .unwrap();
+        .expect("run grin");
     assert_ne!(
-        std::fs::read(c.join("bos_000000.exr")).unwrap(),
+        std::fs::read(c.join("bos_000000.exr")).expect("test step"),
         files(&a)["bos_000000.exr"]
     );
 }
 
 #[test]
 fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().expect("test step");
     let dir = tmp.path().join("d");
     let reference = tmp.path().join("r");
     run(&reference, &[]);
@@ -154,7 +154,7 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
-            .unwrap();
+            .expect("test step");
         let start = Instant::now();
         while files_named(&dir, ".json") < 5 && start.elapsed() < Duration::from_secs(60) {
             std::thread::sleep(Duration::from_millis(20));
@@ -162,9 +162,12 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
         let status = std::process::Command::new("kill")
             .args([&format!("-{signal}"), &child.id().to_string()])
             .status()
-            .unwrap();
+            .expect("test step");
         assert!(status.success());
-        assert!(!child.wait().unwrap().success(), "the run was not stopped");
+        assert!(
+            !child.wait().expect("test step").success(),
+            "the run was not stopped"
+        );
         let done = files_named(&dir, ".json");
         assert!(
             done > 0 && (done as u64) < COUNT,
@@ -184,13 +187,16 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
         }
         assert!(!f.contains_key("manifest.jsonl"));
         let out = run(&dir, &["--json"]);
-        let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("test step");
         assert_eq!(
-            summary["skipped"].as_u64().unwrap(),
+            summary["skipped"].as_u64().expect("test step"),
             done as u64,
             "{signal}"
         );
-        assert_eq!(summary["rendered"].as_u64().unwrap(), COUNT - done as u64);
+        assert_eq!(
+            summary["rendered"].as_u64().expect("test step"),
+            COUNT - done as u64
+        );
         // SIGKILL leaves its temporary file behind (nothing can remove it); SIGTERM does not.
         let leftovers: Vec<String> = files(&dir)
             .into_keys()
@@ -200,7 +206,7 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
             assert!(leftovers.is_empty(), "{leftovers:?}");
         }
         for l in leftovers {
-            std::fs::remove_file(dir.join(l)).unwrap();
+            std::fs::remove_file(dir.join(l)).expect("test step");
         }
         assert_complete(&dir);
         assert_eq!(files(&dir), files(&reference), "resumed after {signal}");
@@ -219,13 +225,13 @@ fn files_named(dir: &Path, suffix: &str) -> usize {
 
 #[test]
 fn bad_dataset_arguments_fail_clearly() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().expect("test step");
     let out = grin()
         .args(["dataset", "bos", "-o"])
         .arg(tmp.path().join("x"))
         .args(["--count", "0"])
         .output()
-        .unwrap();
+        .expect("run grin");
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--count 0: a dataset holds 1 to"));
     let out = grin()
@@ -233,7 +239,7 @@ fn bad_dataset_arguments_fail_clearly() {
         .arg(tmp.path().join("x"))
         .args(["--count", "4", "--shard", "4/4"])
         .output()
-        .unwrap();
+        .expect("run grin");
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("shard index 4 must be below"));
     assert!(!tmp.path().join("x").exists());

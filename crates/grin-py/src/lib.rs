@@ -277,9 +277,9 @@ fn trace<'py>(
         .map_err(err)?;
     let n = results.len();
     let out = PyDict::new(py);
-    let vec3 = |f: &dyn Fn(&grin_trace::RayResult) -> DVec3| -> PyResult<_> {
+    let vec3 = |f: &dyn Fn(&grin_trace::RayResult) -> DVec3| {
         let flat: Vec<f64> = results.iter().flat_map(|r| f(r).to_array()).collect();
-        Ok(PyArray1::from_vec(py, flat).reshape([n, 3])?)
+        PyArray1::from_vec(py, flat).reshape([n, 3])
     };
     let scalar = |f: &dyn Fn(&grin_trace::RayResult) -> f64| {
         PyArray1::from_vec(py, results.iter().map(f).collect::<Vec<f64>>())
