@@ -14,7 +14,7 @@ import grin
 
 REPO = Path(__file__).resolve().parents[3]
 GRIN = Path(os.environ.get("GRIN_BIN", REPO / "target" / "debug" / "grin"))
-EXAMPLES = REPO / "examples" / "scale"
+EXAMPLES = REPO / "scripts" / "scale"
 
 
 def test_the_slurm_array_script_writes_one_dataset_from_its_tasks(tmp_path):

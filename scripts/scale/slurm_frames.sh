@@ -3,7 +3,7 @@
 # frame list; --skip-existing makes a requeued task finish only what is missing, and
 # --seed gives every frame the same noise whichever task renders it.
 #
-#   sbatch --array=0-3 examples/scale/slurm_frames.sh
+#   sbatch --array=0-3 scripts/scale/slurm_frames.sh
 #
 #SBATCH --job-name=grin-frames
 #SBATCH --cpus-per-task=2

@@ -4,9 +4,9 @@
 # complete. The task that finishes last writes manifest.jsonl (else rerun one task: it
 # skips everything and writes it).
 #
-#   sbatch --array=0-7 examples/scale/slurm_bos.sh            # on a cluster
+#   sbatch --array=0-7 scripts/scale/slurm_bos.sh            # on a cluster
 #   for i in 0 1 2 3; do                                      # here, without Slurm
-#     SLURM_ARRAY_TASK_ID=$i SLURM_ARRAY_TASK_COUNT=4 bash examples/scale/slurm_bos.sh &
+#     SLURM_ARRAY_TASK_ID=$i SLURM_ARRAY_TASK_COUNT=4 bash scripts/scale/slurm_bos.sh &
 #   done; wait
 #
 #SBATCH --job-name=grin-bos

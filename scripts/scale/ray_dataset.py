@@ -2,7 +2,7 @@
 folder; the same files as one process (or `grin dataset bos`) writes. Prints pairs per
 second for one process and for Ray, and each worker's peak memory.
 
-    .venv/bin/python examples/scale/ray_dataset.py --count 200 --out out/ray-bos
+    .venv/bin/python scripts/scale/ray_dataset.py --count 200 --out out/ray-bos
 """
 
 import argparse
