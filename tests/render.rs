@@ -90,8 +90,8 @@ fn cpu_render_writes_exr_with_aovs_and_png_preview() {
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
 }
 
-/// The exact Luneburg ray (REFERENCES.md): entering the unit-radius lens at p (relative to
-/// the centre) along unit d, it leaves at R d travelling along -p / R.
+/// The exact Luneburg ray (docs/physics.md, Luneburg lens): entering the unit-radius lens
+/// at p (relative to the centre) along unit d, it leaves at R d travelling along -p / R.
 fn luneburg_exit(c: DVec3, r: f64, o: DVec3, d: DVec3) -> Option<(DVec3, DVec3)> {
     let oc = o - c;
     let b = oc.dot(d);

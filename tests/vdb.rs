@@ -636,7 +636,7 @@ fn vdb_field_places_voxels_at_their_world_positions() {
 
 /// File -> Gladstone-Dale map -> tracer: a ray through a uniform 1000 K block of a VDB
 /// temperature grid has optical path / length = n(1000 K), and n - 1 matches the
-/// REFERENCES.md table (0.80e-4 at 1000 K).
+/// table in docs/physics.md, Air (0.80e-4 at 1000 K).
 #[test]
 fn trace_through_a_uniform_hot_block_reads_the_gladstone_dale_index() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -1,7 +1,7 @@
 //! Interval arithmetic over `expr` formulas: an enclosure of n over a whole box, so that
 //! n > 0 is proven everywhere in the bounds, not only at the check grid's nodes (a pocket
-//! where n <= 0 narrower than the grid spacing passes any sampling; REFERENCES.md
-//! failure modes). The formula is parsed a second time with exmex over [`Interval`];
+//! where n <= 0 narrower than the grid spacing passes any sampling; docs/physics.md,
+//! failure mode 3). The formula is parsed a second time with exmex over [`Interval`];
 //! each operation's result encloses every value the operation takes over its operands'
 //! intervals, widened outward by one ulp per operation for roundoff. Branch and bound
 //! over the bounds: a box whose enclosure is > 0 is done, one whose enclosure is <= 0 is

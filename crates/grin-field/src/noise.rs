@@ -8,7 +8,8 @@
 //!   octave with its own seed (`seed + i`), so the peak stays about 1.
 //! - `turbulence`: N = 2 * sum_i w_i sabs(perlin_i(..)) / sum_i w_i - 1 with
 //!   sabs(x) = sqrt(x^2 + TURBULENCE_SOFTNESS^2): Perlin's |noise| with the kink at the
-//!   zero crossings rounded, because a kinked n makes grad n jump (REFERENCES.md, failure 4).
+//!   zero crossings rounded, because a kinked n makes grad n jump (docs/physics.md,
+//!   failure mode 4).
 //!
 //! The envelope fades delta_n to 0 (n to ambient) over the outer `envelope` fraction of
 //! the bounds' radius with a C2 quintic smoothstep, so the field has no jump at the surface.
@@ -376,7 +377,7 @@ mod tests {
 
     /// The crate's fade is quintic: d2n/dx2 has no jump across a lattice plane. The classic
     /// cubic fade (s'' = 6 at t = 0, -6 at t = 1) would make it jump by ~12 x the corner
-    /// gradient terms, i.e. grad n kinked (REFERENCES.md, failure 4).
+    /// gradient terms, i.e. grad n kinked (docs/physics.md, failure mode 4).
     #[test]
     fn gradient_is_smooth_across_lattice_planes() {
         let mut s = spec(NoiseType::Perlin);

@@ -5,7 +5,7 @@
 //! - `index`: n = value, or n = n_ambient + value with `delta = true`;
 //! - `linear`: n = n_ambient + k * value;
 //! - `gladstone-dale` (air): T_K = T_ambient + scale_k * value, rho = P / (R_s T_K),
-//!   n = 1 + K rho (REFERENCES.md; defaults K = 2.26e-4 m^3/kg, P = 101325 Pa,
+//!   n = 1 + K rho (docs/physics.md, Air; defaults K = 2.26e-4 m^3/kg, P = 101325 Pa,
 //!   R_s = 287.05 J/(kg K)).
 //!
 //! World space: world (scene metres) = `units` * (A * ijk + t), where `[A | t]` is the
@@ -1423,8 +1423,8 @@ mod tests {
         }
     }
 
-    /// REFERENCES.md: n - 1 at 101325 Pa = 2.92e-4 (0 C), 2.77e-4 (15 C), 2.72e-4 (20 C),
-    /// 0.80e-4 (1000 K), 0.53e-4 (1500 K), quoted to 3 significant digits.
+    /// docs/physics.md, Air: n - 1 at 101325 Pa = 2.92e-4 (0 C), 2.77e-4 (15 C),
+    /// 2.72e-4 (20 C), 0.80e-4 (1000 K), 0.53e-4 (1500 K), quoted to 3 significant digits.
     #[test]
     fn gladstone_dale_reproduces_reference_table() {
         let gd = gd_default();

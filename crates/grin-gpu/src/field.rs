@@ -5,7 +5,7 @@
 //! rgba16float cannot hold n itself, and even delta_n of air (~1e-5) is a half-float
 //! subnormal there (spacing 6e-8: ~0.6% error, worse for heat haze's gradients);
 //! float32 filtering needs the optional FLOAT32_FILTERABLE feature, and filter hardware
-//! may keep only 8 fractional bits of the weights (REFERENCES.md, failure mode 2).
+//! may keep only 8 fractional bits of the weights (docs/physics.md, failure mode 2).
 //! Manual trilinear costs 8 loads per sample but uses the CPU's weights exactly, so GPU
 //! and CPU march the same field: the GPU-vs-CPU tests measure p99 pixel differences
 //! <= 2e-5 with it. Its speed on lavapipe (`grin bench speed`, docs/benchmarks.md) is

@@ -26,7 +26,7 @@ const MEAN_TOL: f64 = 1e-3;
 const P99_TOL: f64 = 1e-3;
 /// Scenes whose rays are chaotic inside the medium: the Eaton lens (n^2 = 2R/r - 1,
 /// n = 6.2 at its core of 0.05 R) retro-reflects rays around a near-singular core, where
-/// f32 and f64 paths separate (REFERENCES.md failure mode 6). Measured over the whole
+/// f32 and f64 paths separate (docs/physics.md, failure mode 6). Measured over the whole
 /// image: mean 1.2e-2, p99 0.5 (speckle across the lens).
 const CHAOTIC: [&str; 1] = ["eaton"];
 /// Mean difference allowed over the whole image of a chaotic scene.

@@ -1,6 +1,7 @@
 //! The grin scene description: a TOML file (camera, objects, medium, lights, render
 //! settings) parsed with serde and validated, with errors that name the file, the
-//! line/column and the key. See ../shared/ARCHITECTURE.md for the contract.
+//! line/column and the key. The contract: docs/architecture.md (the grin-scene row and
+//! "Inputs grin refuses, and where").
 
 mod ambient;
 mod de;

@@ -485,11 +485,11 @@ fn default_t_amb() -> f64 {
 fn default_scale_k() -> f64 {
     300.0
 }
-/// Standard atmosphere (REFERENCES.md).
+/// Standard atmosphere, Pa (docs/physics.md, Air).
 fn default_pressure() -> f64 {
     101_325.0
 }
-/// Gladstone-Dale constant of air in the visible, m^3/kg (REFERENCES.md).
+/// Gladstone-Dale constant of air in the visible, m^3/kg (docs/physics.md, Air).
 fn default_k_gd() -> f64 {
     2.26e-4
 }

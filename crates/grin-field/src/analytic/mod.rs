@@ -1,5 +1,5 @@
 //! Analytic index profiles with exact gradients, exact n ranges and, where they exist,
-//! exact ray solutions (the validation cases of REFERENCES.md).
+//! exact ray solutions (docs/physics.md, Exact solutions).
 //!
 //! Every profile is a struct implementing [`IndexField`](crate::IndexField). Unless a
 //! profile says otherwise its coordinates are relative to the centre of the medium's
