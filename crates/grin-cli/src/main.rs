@@ -26,7 +26,7 @@ enum Command {
     Info(cmd::info::Args),
     /// Export a baked field to OpenVDB.
     Export(cmd::export::Args),
-    /// Generate a dataset for learning (BOS pairs with ground truth).
+    /// Generate a dataset for learning (BOS, schlieren or heat-haze pairs with ground truth).
     Dataset(cmd::dataset::Args),
     /// Speed-vs-accuracy charts, stability matrix, speed ratios.
     Bench(cmd::bench::Args),

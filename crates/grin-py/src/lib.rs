@@ -547,23 +547,48 @@ fn bake_volume<'py>(
     bake_to(py, Arc::new(field), &opts, path, &label)
 }
 
-/// Render sample `index` of the BOS dataset `seed` at `width` x `height`: (channels,
-/// JSON). Channels are the sample EXR's, plus `slice.n` ((64, 64), the index on the
-/// medium's mid-plane).
+/// A dataset from the Python arguments.
+fn dataset(
+    kind: &str,
+    media: &str,
+    plates: Vec<PathBuf>,
+    seed: u64,
+    width: u32,
+    height: u32,
+) -> PyResult<grin_pipeline::dataset::Dataset> {
+    use clap::ValueEnum;
+    let kind = grin_pipeline::dataset::Kind::from_str(kind, false).map_err(|_| {
+        GrinError::new_err(format!(
+            "unknown dataset kind `{kind}` (bos, schlieren or haze)"
+        ))
+    })?;
+    let media = grin_pipeline::dataset::Media::parse(media).map_err(GrinError::new_err)?;
+    if !plates.is_empty() && kind != grin_pipeline::dataset::Kind::Haze {
+        return Err(GrinError::new_err(
+            "plates: only haze samples have a background plate",
+        ));
+    }
+    let mut d = grin_pipeline::dataset::Dataset::new(kind, media, seed, width, height);
+    d.plates = plates;
+    Ok(d)
+}
+
+/// Render sample `index` of a dataset: (channels, JSON). Channels are the sample EXR's,
+/// plus `slice.n` ((64, 64), the index on the plane through the medium's centre).
 #[pyfunction]
-fn dataset_bos_sample<'py>(
+#[allow(clippy::too_many_arguments)]
+fn dataset_sample<'py>(
     py: Python<'py>,
     renderer: &Renderer,
+    kind: &str,
+    media: &str,
+    plates: Vec<PathBuf>,
     index: u64,
     seed: u64,
     width: u32,
     height: u32,
 ) -> PyResult<(Bound<'py, PyDict>, String)> {
-    let dataset = grin_pipeline::dataset::Bos {
-        seed,
-        width,
-        height,
-    };
+    let dataset = dataset(kind, media, plates, seed, width, height)?;
     let sample = py
         .detach(|| dataset.render_sample(&renderer.inner, Path::new("."), index))
         .map_err(err)?;
@@ -581,13 +606,16 @@ fn dataset_bos_sample<'py>(
     Ok((channels, sample.meta.to_string()))
 }
 
-/// Write samples `indices` of the `count`-sample BOS dataset `seed` to `dir`, skipping
-/// complete ones, as `grin dataset bos` does: the run's summary (JSON).
+/// Write samples `indices` of a `count`-sample dataset to `dir`, skipping complete ones,
+/// as `grin dataset` does: the run's summary (JSON).
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-fn dataset_bos_write(
+fn dataset_write(
     py: Python<'_>,
     renderer: &Renderer,
+    kind: &str,
+    media: &str,
+    plates: Vec<PathBuf>,
     dir: PathBuf,
     count: u64,
     indices: Vec<u64>,
@@ -600,11 +628,7 @@ fn dataset_bos_write(
             "sample {bad} is not in a dataset of {count} samples"
         )));
     }
-    let dataset = grin_pipeline::dataset::Bos {
-        seed,
-        width,
-        height,
-    };
+    let dataset = dataset(kind, media, plates, seed, width, height)?;
     let summary = py
         .detach(|| dataset.write(&renderer.inner, &dir, count, &indices, &|_, _| {}))
         .map_err(err)?;
@@ -626,8 +650,8 @@ fn _grin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_field, m)?)?;
     m.add_function(wrap_pyfunction!(bake, m)?)?;
     m.add_function(wrap_pyfunction!(bake_volume, m)?)?;
-    m.add_function(wrap_pyfunction!(dataset_bos_sample, m)?)?;
-    m.add_function(wrap_pyfunction!(dataset_bos_write, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_sample, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_write, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())
 }

@@ -47,7 +47,7 @@ def test_the_iterator_yields_the_cli_samples(tmp_path):
         assert s["displacement"].shape == (h, w, 2) and s["deflection"].shape == (h, w, 2)
         assert s["slice"].shape == (dataset_slice := 64, dataset_slice)
         # The plumes are hot: the index on the slice dips below ambient, never above.
-        amb = s.meta["medium"]["ambient_index"]
+        amb = 1.000272  # air at 20 C, around every generated medium
         assert s["slice"].min() < amb - 1e-5 and s["slice"].max() <= amb + 1e-7
         # The ground truth is consistent: pixels that moved were deflected.
         moved = np.hypot(*np.moveaxis(s["displacement"], -1, 0)) > 0.05
@@ -90,3 +90,22 @@ def test_ray_workers_write_the_single_process_dataset(tmp_path):
     if not (tmp_path / "ray" / "manifest.jsonl").exists():
         dataset.write_bos(tmp_path / "ray", 24, seed=5, size=SIZE)
     same_folders(tmp_path / "one", tmp_path / "ray")
+
+
+@pytest.mark.parametrize("kind", ["schlieren", "haze"])
+def test_schlieren_and_haze_samples_hold_their_images_and_truth(kind):
+    (s,) = list(dataset.samples(kind, 1, seed=3, size=SIZE, media="expr"))
+    h, w = SIZE[1], SIZE[0]
+    assert s.meta["kind"] == kind and s.meta["medium"]["kind"] == "expr"
+    assert s["deflection"].shape == (h, w, 2)
+    if kind == "schlieren":
+        assert s["schlieren"].shape == (h, w) and "displacement" not in s
+    else:
+        assert s["reference"].shape == (h, w, 3) and s["distorted"].shape == (h, w, 3)
+        assert s["displacement"].shape == (h, w, 2)
+        # The medium moves the background: the two images differ where it is.
+        assert np.abs(s["distorted"] - s["reference"]).max() > 1e-3
+    with pytest.raises(grin.GrinError, match="unknown dataset kind `piv`"):
+        next(dataset.samples("piv", 1))
+    with pytest.raises(grin.GrinError, match="unknown media `smoke`"):
+        next(dataset.samples(kind, 1, media="smoke"))

@@ -2,27 +2,17 @@
 
 use std::path::PathBuf;
 
-use grin_pipeline::dataset::Bos;
+use grin_pipeline::dataset::{Dataset, Kind, Media};
 use grin_pipeline::{Backend, Renderer};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin dataset`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    #[command(subcommand)]
+    /// What a sample shows: bos (a dot plate without and with the medium), schlieren (a
+    /// knife-edge image) or haze (a background without and with the medium, and its ST map).
+    #[arg(value_enum)]
     pub kind: Kind,
-}
-
-#[derive(Debug, clap::Subcommand)]
-pub enum Kind {
-    /// Background-oriented schlieren pairs (reference and distorted dot images) of
-    /// randomised hot-air plumes, with the true displacement, deflection, the index on a
-    /// slice, and the camera as JSON (docs/scale.md).
-    Bos(BosArgs),
-}
-
-#[derive(Debug, clap::Args)]
-pub struct BosArgs {
     /// Output folder (made if missing).
     #[arg(short, long)]
     pub output: PathBuf,
@@ -32,6 +22,15 @@ pub struct BosArgs {
     /// Dataset seed: sample i is drawn from (seed, i) alone.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Media: plumes (Gaussian hot-air plumes), noise (fBm or turbulence), expr (a hot
+    /// layer with waves) or scene:PATH (the [medium] of a scene file at a random frame of
+    /// its [animation]: a pool of VDB frames).
+    #[arg(long, default_value = "plumes", value_parser = Media::parse)]
+    pub media: Media,
+    /// haze: a background plate image (PNG, EXR or HDR), one drawn per sample; repeat for
+    /// a pool. Without it, a checker wall of random scale and contrast.
+    #[arg(long, value_name = "IMAGE")]
+    pub plate: Vec<PathBuf>,
     /// Image size.
     #[arg(long, value_name = "WxH", value_parser = crate::cmd::render::parse_size, default_value = "128x96")]
     pub size: (u32, u32),
@@ -51,12 +50,6 @@ pub struct BosArgs {
 const MAX_COUNT: u64 = 100_000_000;
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    match args.kind {
-        Kind::Bos(a) => bos(a),
-    }
-}
-
-fn bos(args: BosArgs) -> anyhow::Result<()> {
     if args.count == 0 || args.count > MAX_COUNT {
         anyhow::bail!(
             "--count {}: a dataset holds 1 to {MAX_COUNT} samples",
@@ -71,11 +64,16 @@ fn bos(args: BosArgs) -> anyhow::Result<()> {
     .into_iter()
     .map(|i| i as u64)
     .collect();
-    let dataset = Bos {
-        seed: args.seed,
-        width: args.size.0,
-        height: args.size.1,
-    };
+    if !args.plate.is_empty() && args.kind != Kind::Haze {
+        anyhow::bail!("--plate: only haze samples have a background plate");
+    }
+    for p in &args.plate {
+        if !p.is_file() {
+            anyhow::bail!("--plate {}: no such image file", p.display());
+        }
+    }
+    let mut dataset = Dataset::new(args.kind, args.media, args.seed, args.size.0, args.size.1);
+    dataset.plates = args.plate;
     let renderer = Renderer::new(args.backend, true);
     let bar = ProgressBar::new(indices.len() as u64);
     if let Ok(style) =

@@ -79,11 +79,34 @@ def bake_volume(
     max_memory: Optional[int] = None,
 ) -> Tuple[Dict[str, npt.NDArray[np.float32]], str, str]: ...
 def version() -> str: ...
+def version() -> str: ...
 def dataset_bos_sample(
     renderer: Renderer, index: int, seed: int, width: int, height: int
 ) -> Tuple[Dict[str, npt.NDArray[np.float32]], str]: ...
 def dataset_bos_write(
     renderer: Renderer,
+    dir: _Path,
+    count: int,
+    indices: Sequence[int],
+    seed: int,
+    width: int,
+    height: int,
+) -> str: ...
+def dataset_sample(
+    renderer: Renderer,
+    kind: str,
+    media: str,
+    plates: Sequence[_Path],
+    index: int,
+    seed: int,
+    width: int,
+    height: int,
+) -> Tuple[Dict[str, npt.NDArray[np.float32]], str]: ...
+def dataset_write(
+    renderer: Renderer,
+    kind: str,
+    media: str,
+    plates: Sequence[_Path],
     dir: _Path,
     count: int,
     indices: Sequence[int],
