@@ -1,6 +1,6 @@
 //! Gaussian hot-air plumes (heat haze): n = n_amb - sum_i a_i exp(-|p - c_i|^2 / s_i^2)
 //! in world coordinates, n_amb the medium's ambient index. a_i > 0 is hotter (lower n)
-//! air; at 20 C a 30 K excess lowers n by about 2.7e-5 (docs/physics.md, Air).
+//! air; at 20 C a 30 K excess lowers n by about 2.5e-5 (docs/physics.md, Air).
 
 use glam::DVec3;
 use grin_scene::PlumeBlob;
