@@ -18,8 +18,9 @@
 //! - `.exr`: the kind's channels (`reference` and `distorted` exposures for BOS;
 //!   `schlieren` for schlieren; `reference.R/G/B` and `distorted.R/G/B` for haze), the true
 //!   displacement where the kind has one (`displacement_px.X/Y`, `displacement.U/V`,
-//!   `st.S/T`, `valid`), and each pixel ray's deflection `deflection_rad.X/Y` (the line
-//!   integral of the projected grad n over n);
+//!   `st.S/T`, `valid`), each pixel ray's deflection `deflection_rad.X/Y` (radians along
+//!   the camera's right and up) and the projected gradient `grad_n_line.X/Y` (grad n
+//!   integrated along the undeflected pixel ray, the same axes: deflection ~ it / n);
 //! - `-slice.exr`: the medium's index `n` on the plane through its centre facing the
 //!   camera ([`SLICE`] x [`SLICE`] nodes over its x, y box, row 0 at the largest y);
 //! - `.png` (and `-reference.png`): 8-bit previews;
@@ -38,6 +39,9 @@ use grin_render::image::{stage_channels_exr, stage_rgb8_png};
 use serde_json::json;
 
 use crate::{Image, Preview, Quiet, Renderer};
+
+/// Samples per pixel of the haze images.
+pub const HAZE_SPP: u32 = 4;
 
 /// Nodes per side of the index slice.
 pub const SLICE: usize = 64;
@@ -127,8 +131,11 @@ impl Media {
 pub struct Dataset {
     pub kind: Kind,
     pub media: Media,
-    /// Plate images for `haze` backgrounds (one drawn per sample); none: a checker wall.
+    /// Plate images for `haze` backgrounds, seen at infinity (one drawn per sample).
     pub plates: Vec<PathBuf>,
+    /// Texture images for `haze` backgrounds, on the wall behind the medium (one drawn
+    /// per sample, with the plates). No plates and no textures: a checker wall.
+    pub textures: Vec<PathBuf>,
     pub seed: u64,
     pub width: u32,
     pub height: u32,
@@ -179,6 +186,7 @@ impl Dataset {
             kind,
             media,
             plates: Vec::new(),
+            textures: Vec::new(),
             seed,
             width,
             height,
@@ -200,12 +208,14 @@ impl Dataset {
                 let count = 1 + (u(0.0, 4.0) as usize).min(3);
                 let plumes: Vec<[f64; 5]> = (0..count)
                     .map(|_| {
+                        // Inside the box by 2.5 widths or more: n meets ambient at its
+                        // faces (a jump there would refract every ray crossing it).
                         [
                             u(2.0e-4, 1.2e-3),
-                            u(-0.3, 0.3),
-                            u(-0.3, 0.5),
-                            u(-0.25, 0.25),
-                            u(0.06, 0.2),
+                            u(-0.2, 0.2),
+                            u(-0.2, 0.5),
+                            u(-0.2, 0.2),
+                            u(0.05, 0.15),
                         ]
                     })
                     .collect();
@@ -253,12 +263,14 @@ impl Dataset {
                 (toml, BOX_MIN, BOX_MAX, meta)
             }
             Media::Expr => {
-                let (a, y0, w) = (u(2.0e-4, 1.0e-3), u(-0.3, 0.5), u(0.08, 0.25));
+                // The layer fades out well inside the box (a super-Gaussian in x and z).
+                let (a, y0, w) = (u(2.0e-4, 1.0e-3), u(-0.1, 0.4), u(0.06, 0.15));
                 let (b, kx, kz) = (u(0.0, 0.5), u(3.0, 12.0), u(2.0, 8.0));
                 let tau = std::f64::consts::TAU;
                 let (px, pz) = (u(0.0, tau), u(0.0, tau));
                 let formula = format!(
                     "{AMBIENT:?} - {a:?} * exp(-(((y - ({y0:?})) / {w:?})^2)) * \
+                     exp(-((x / 0.45)^8) - ((z / 0.45)^8)) * \
                      (1 + {b:?} * sin({kx:?} * x + {px:?}) * cos({kz:?} * z + {pz:?}))"
                 );
                 let toml = format!("{bounds}field = {{ kind = \"expr\", n = \"{formula}\" }}\n");
@@ -370,7 +382,8 @@ impl Dataset {
                        "source_size_rad": source})
             }
             Kind::Haze => {
-                if self.plates.is_empty() {
+                let images = self.plates.len() + self.textures.len();
+                if images == 0 {
                     let scale = pixel_on_wall * u(6.0, 16.0);
                     let (a, b) = (u(0.6, 0.95), u(0.05, 0.35));
                     sections.push(format!(
@@ -384,14 +397,32 @@ impl Dataset {
                     json!({"kind": "checker", "wall_z": wall_z, "scale": scale,
                            "light": a, "dark": b})
                 } else {
-                    let pick =
-                        (u(0.0, self.plates.len() as f64) as usize).min(self.plates.len() - 1);
-                    let plate = std::path::absolute(&self.plates[pick])
-                        .unwrap_or_else(|_| self.plates[pick].clone());
-                    let shown = plate.to_string_lossy().into_owned();
-                    sections.push(format!("[sky]\nplate = {{ path = {shown:?} }}\n"));
-                    sections.push("[optics]\nmode = \"displacement\"\n".to_owned());
-                    json!({"kind": "plate", "path": shown})
+                    let pick = (u(0.0, images as f64) as usize).min(images - 1);
+                    let (image, is_plate) = match self.plates.get(pick) {
+                        Some(p) => (p, true),
+                        None => (&self.textures[pick - self.plates.len()], false),
+                    };
+                    let image = std::path::absolute(image).unwrap_or_else(|_| image.clone());
+                    let shown = image.to_string_lossy().into_owned();
+                    if is_plate {
+                        sections.push(format!("[sky]\nplate = {{ path = {shown:?} }}\n"));
+                        sections.push("[optics]\nmode = \"displacement\"\n".to_owned());
+                        json!({"kind": "plate", "path": shown})
+                    } else {
+                        // The image fills the view on the wall, with a margin for the
+                        // camera's offset.
+                        let h = (distance + behind) * 2.0 * tan_half * 1.2;
+                        let w = h * f64::from(self.width) / f64::from(self.height);
+                        sections.push(format!(
+                            "[[object]]\nshape = {{ {wall} }}\n\
+                             material = {{ texture = {{ path = {shown:?}, size = [{w:?}, {h:?}], \
+                             center = {}, emissive = true }} }}\n",
+                            v3([centre.x, centre.y, wall_z]),
+                        ));
+                        sections.push(format!("[optics]\nmode = \"displacement\"\n{wall}\n"));
+                        json!({"kind": "texture", "path": shown, "wall_z": wall_z,
+                               "size": [w, h]})
+                    }
                 }
             }
         };
@@ -470,8 +501,10 @@ impl Dataset {
         let angles = grin_render::optics::deflection_angles(frame, &rendered.camera);
         if self.kind == Kind::Haze {
             // The background without and with the medium: two beauty renders.
+            // Anti-aliased (4 samples a pixel), so sub-pixel warps show.
             let mut beauty = sample.scene.clone();
             beauty.optics = None;
+            beauty.render.spp = HAZE_SPP;
             let mut bare = beauty.clone();
             bare.medium = None;
             let mut previews = Vec::new();
@@ -500,7 +533,16 @@ impl Dataset {
                 angles.iter().map(|a| a[1] as f32).collect(),
             );
         }
-        let slice = index_slice(&sample, dir)?;
+        let medium = sample
+            .scene
+            .medium
+            .as_ref()
+            .context("a dataset sample has a medium")?;
+        let field = grin_field::build_field(medium, dir)?;
+        let (gx, gy) = line_gradient(field.as_ref(), &rendered.camera);
+        image.push("grad_n_line.X", gx);
+        image.push("grad_n_line.Y", gy);
+        let slice = index_slice(field.as_ref(), &sample);
         let (z, x, y) = sample.slice;
         let mut meta = sample.meta;
         meta["slice"] = json!({
@@ -625,15 +667,52 @@ fn file_name(p: &Path) -> Option<String> {
     p.file_name().map(|n| n.to_string_lossy().into_owned())
 }
 
+/// Samples along each pixel's straight ray in [`line_gradient`].
+const LINE_SAMPLES: usize = 256;
+
+/// Each pixel's projected index gradient: the integrals of grad n along the camera's right
+/// and up (as `deflection_rad`) along the undeflected ray through the pixel's centre,
+/// across the medium's bounds (trapezoid rule, [`LINE_SAMPLES`] points): the quantity
+/// BOS and schlieren reconstructions assume (deflection ~ this / n for small angles).
+fn line_gradient(
+    field: &dyn grin_field::IndexField,
+    cam: &grin_render::camera::PinholeCamera,
+) -> (Vec<f32>, Vec<f32>) {
+    use rayon::prelude::*;
+    let bounds = field.bounds();
+    let (w, h) = (cam.width, cam.height);
+    let rows: Vec<Vec<(f32, f32)>> = (0..h)
+        .into_par_iter()
+        .map(|py| {
+            (0..w)
+                .map(|px| {
+                    let (o, d) = cam.camera_ray(px, py, 0.5, 0.5);
+                    let (mut x, mut y) = (0.0, 0.0);
+                    if let Some((t0, t1)) = bounds.intersect(o, d) {
+                        let t0 = t0.max(0.0);
+                        let dt = (t1 - t0) / (LINE_SAMPLES - 1) as f64;
+                        for i in 0..LINE_SAMPLES {
+                            let g = field.sample(o + d * (t0 + dt * i as f64)).grad_n;
+                            let weight = if i == 0 || i == LINE_SAMPLES - 1 {
+                                0.5
+                            } else {
+                                1.0
+                            };
+                            x += weight * dt * g.dot(cam.right);
+                            y += weight * dt * g.dot(cam.up);
+                        }
+                    }
+                    (x as f32, y as f32)
+                })
+                .collect()
+        })
+        .collect();
+    rows.into_iter().flatten().unzip()
+}
+
 /// The medium's index on the plane z = the medium's centre: [`SLICE`]² nodes over its x, y
 /// box, row 0 at the largest y.
-fn index_slice(sample: &Sample, dir: &Path) -> anyhow::Result<Vec<f32>> {
-    let medium = sample
-        .scene
-        .medium
-        .as_ref()
-        .context("a dataset sample has a medium")?;
-    let field = grin_field::build_field(medium, dir)?;
+fn index_slice(field: &dyn grin_field::IndexField, sample: &Sample) -> Vec<f32> {
     let (z, [x0, x1], [y0, y1]) = sample.slice;
     let step = |lo: f64, hi: f64, i: usize| lo + (hi - lo) * i as f64 / (SLICE - 1) as f64;
     let mut out = Vec::with_capacity(SLICE * SLICE);
@@ -643,5 +722,5 @@ fn index_slice(sample: &Sample, dir: &Path) -> anyhow::Result<Vec<f32>> {
             out.push(field.n(DVec3::new(step(x0, x1, col), y, z)) as f32);
         }
     }
-    Ok(out)
+    out
 }

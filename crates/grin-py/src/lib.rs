@@ -552,6 +552,7 @@ fn dataset(
     kind: &str,
     media: &str,
     plates: Vec<PathBuf>,
+    textures: Vec<PathBuf>,
     seed: u64,
     width: u32,
     height: u32,
@@ -563,13 +564,20 @@ fn dataset(
         ))
     })?;
     let media = grin_pipeline::dataset::Media::parse(media).map_err(GrinError::new_err)?;
-    if !plates.is_empty() && kind != grin_pipeline::dataset::Kind::Haze {
+    if !(plates.is_empty() && textures.is_empty()) && kind != grin_pipeline::dataset::Kind::Haze {
         return Err(GrinError::new_err(
-            "plates: only haze samples have a background plate",
+            "plates, textures: only haze samples have a background image",
         ));
+    }
+    if let Some(missing) = plates.iter().chain(&textures).find(|p| !p.is_file()) {
+        return Err(GrinError::new_err(format!(
+            "{}: no such image file",
+            missing.display()
+        )));
     }
     let mut d = grin_pipeline::dataset::Dataset::new(kind, media, seed, width, height);
     d.plates = plates;
+    d.textures = textures;
     Ok(d)
 }
 
@@ -583,12 +591,13 @@ fn dataset_sample<'py>(
     kind: &str,
     media: &str,
     plates: Vec<PathBuf>,
+    textures: Vec<PathBuf>,
     index: u64,
     seed: u64,
     width: u32,
     height: u32,
 ) -> PyResult<(Bound<'py, PyDict>, String)> {
-    let dataset = dataset(kind, media, plates, seed, width, height)?;
+    let dataset = dataset(kind, media, plates, textures, seed, width, height)?;
     let sample = py
         .detach(|| dataset.render_sample(&renderer.inner, Path::new("."), index))
         .map_err(err)?;
@@ -616,6 +625,7 @@ fn dataset_write(
     kind: &str,
     media: &str,
     plates: Vec<PathBuf>,
+    textures: Vec<PathBuf>,
     dir: PathBuf,
     count: u64,
     indices: Vec<u64>,
@@ -628,7 +638,7 @@ fn dataset_write(
             "sample {bad} is not in a dataset of {count} samples"
         )));
     }
-    let dataset = dataset(kind, media, plates, seed, width, height)?;
+    let dataset = dataset(kind, media, plates, textures, seed, width, height)?;
     let summary = py
         .detach(|| dataset.write(&renderer.inner, &dir, count, &indices, &|_, _| {}))
         .map_err(err)?;

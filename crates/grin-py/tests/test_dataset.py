@@ -105,7 +105,19 @@ def test_schlieren_and_haze_samples_hold_their_images_and_truth(kind):
         assert s["displacement"].shape == (h, w, 2)
         # The medium moves the background: the two images differ where it is.
         assert np.abs(s["distorted"] - s["reference"]).max() > 1e-3
+    # The projected gradient over n is the deflection, for these weak media.
+    np.testing.assert_allclose(s["deflection"], s["projected_gradient"] / 1.000272,
+                               atol=0.03 * np.abs(s["deflection"]).max())
     with pytest.raises(grin.GrinError, match="unknown dataset kind `piv`"):
         next(dataset.samples("piv", 1))
     with pytest.raises(grin.GrinError, match="unknown media `smoke`"):
         next(dataset.samples(kind, 1, media="smoke"))
+
+
+def test_haze_on_a_texture_wall(tmp_path):
+    street = REPO / "data" / "images" / "street.png"
+    (s,) = list(dataset.samples("haze", 1, seed=1, size=SIZE, textures=[street]))
+    assert s.meta["background"]["kind"] == "texture"
+    assert s["reference"].max() > 0.1  # the image is seen, lit by itself
+    with pytest.raises(grin.GrinError, match="nope.png: no such image file"):
+        next(dataset.samples("haze", 1, textures=[tmp_path / "nope.png"]))

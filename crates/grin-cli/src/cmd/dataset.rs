@@ -31,6 +31,10 @@ pub struct Args {
     /// a pool. Without it, a checker wall of random scale and contrast.
     #[arg(long, value_name = "IMAGE")]
     pub plate: Vec<PathBuf>,
+    /// haze: a texture image on the wall behind the medium (filling the view), one drawn
+    /// per sample with the plates; repeat for a pool.
+    #[arg(long, value_name = "IMAGE")]
+    pub texture: Vec<PathBuf>,
     /// Image size.
     #[arg(long, value_name = "WxH", value_parser = crate::cmd::render::parse_size, default_value = "128x96")]
     pub size: (u32, u32),
@@ -64,16 +68,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     .into_iter()
     .map(|i| i as u64)
     .collect();
-    if !args.plate.is_empty() && args.kind != Kind::Haze {
-        anyhow::bail!("--plate: only haze samples have a background plate");
+    if !(args.plate.is_empty() && args.texture.is_empty()) && args.kind != Kind::Haze {
+        anyhow::bail!("--plate, --texture: only haze samples have a background image");
     }
-    for p in &args.plate {
+    for (flag, p) in args
+        .plate
+        .iter()
+        .map(|p| ("--plate", p))
+        .chain(args.texture.iter().map(|p| ("--texture", p)))
+    {
         if !p.is_file() {
-            anyhow::bail!("--plate {}: no such image file", p.display());
+            anyhow::bail!("{flag} {}: no such image file", p.display());
         }
     }
     let mut dataset = Dataset::new(args.kind, args.media, args.seed, args.size.0, args.size.1);
     dataset.plates = args.plate;
+    dataset.textures = args.texture;
     let renderer = Renderer::new(args.backend, true);
     let bar = ProgressBar::new(indices.len() as u64);
     if let Ok(style) =

@@ -3,8 +3,8 @@ with their ground truth, deterministic by seed and sample index (sample ``i`` de
 ``(seed, i)`` alone).
 
 Kinds: ``"bos"`` (a random-dot plate without and with the medium), ``"schlieren"`` (a
-knife-edge image) and ``"haze"`` (a background, a checker wall or a plate image, without
-and with the medium, with its ST map). Media: ``"plumes"``, ``"noise"``, ``"expr"`` or
+knife-edge image) and ``"haze"`` (a background, a checker wall, a texture image on it or a plate image,
+without and with the medium, with its ST map). Media: ``"plumes"``, ``"noise"``, ``"expr"`` or
 ``"scene:PATH"`` (a scene file's ``[medium]`` at a random frame of its ``[animation]``: a
 pool of VDB frames).
 
@@ -37,7 +37,10 @@ class Sample(dict):
     - ``schlieren``: the schlieren image (schlieren samples);
     - ``displacement``: the true displacement in pixels, (height, width, 2) (x right,
       y down), and ``valid``, where it is defined (bos, haze);
-    - ``deflection``: each pixel ray's deflection in radians, (height, width, 2);
+    - ``deflection``: each pixel ray's deflection in radians along the camera's right and
+      up, (height, width, 2);
+    - ``projected_gradient``: grad n integrated along each pixel's undeflected ray, the
+      same axes (deflection ~ it / n for small angles);
     - ``slice``: the medium's index on the plane through its centre facing the camera,
       (64, 64), row 0 at the top;
     - ``channels``: every channel of the sample's EXR by its name.
@@ -63,6 +66,8 @@ def _sample(channels: Dict[str, np.ndarray], meta: dict) -> Sample:
         s["valid"] = channels["valid"] > 0.5
     s["deflection"] = np.stack(
         [channels["deflection_rad.X"], channels["deflection_rad.Y"]], axis=-1)
+    s["projected_gradient"] = np.stack(
+        [channels["grad_n_line.X"], channels["grad_n_line.Y"]], axis=-1)
     s.meta = meta
     return s
 
@@ -84,6 +89,7 @@ def samples(
     size: Tuple[int, int] = (128, 96),
     media: str = "plumes",
     plates: Sequence["os.PathLike[str] | str"] = (),
+    textures: Sequence["os.PathLike[str] | str"] = (),
     backend: str = "cpu",
     start: int = 0,
     renderer: Optional[Renderer] = None,
@@ -94,7 +100,8 @@ def samples(
     plates = [os.fspath(p) for p in plates]
     for i in range(start, start + count):
         channels, meta = _grin.dataset_sample(
-            renderer, kind, media, plates, i, seed, width, height)
+            renderer, kind, media, plates, [os.fspath(t) for t in textures], i, seed, width,
+            height)
         yield _sample(channels, json.loads(meta))
 
 
@@ -106,6 +113,7 @@ def write(
     size: Tuple[int, int] = (128, 96),
     media: str = "plumes",
     plates: Sequence["os.PathLike[str] | str"] = (),
+    textures: Sequence["os.PathLike[str] | str"] = (),
     backend: str = "cpu",
     indices: Optional[List[int]] = None,
     renderer: Optional[Renderer] = None,
@@ -117,8 +125,8 @@ def write(
     width, height = size
     todo = list(range(count)) if indices is None else [int(i) for i in indices]
     return json.loads(_grin.dataset_write(
-        renderer, kind, media, [os.fspath(p) for p in plates], os.fspath(folder), count,
-        todo, seed, width, height))
+        renderer, kind, media, [os.fspath(p) for p in plates],
+        [os.fspath(t) for t in textures], os.fspath(folder), count, todo, seed, width, height))
 
 
 def bos(count: int, seed: int = 0, size: Tuple[int, int] = (128, 96), **kw) -> Iterator[Sample]:
