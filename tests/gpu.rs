@@ -4,58 +4,32 @@
 //! which turns them into a loud SKIPPED line.
 
 mod common;
-use common::grin;
-use std::path::{Path, PathBuf};
-use std::process::Output;
-
-fn scenes() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes")
-}
-
-/// True if an adapter exists; otherwise fails the test, or prints SKIPPED and returns
-/// false when GRIN_ALLOW_NO_GPU=1.
-fn have_gpu(test: &str) -> bool {
-    match grin_gpu::GpuContext::new_headless() {
-        Ok(_) => true,
-        Err(e) if std::env::var("GRIN_ALLOW_NO_GPU").as_deref() == Ok("1") => {
-            eprintln!(
-                "\n*** SKIPPED {test}: no GPU adapter ({e}); GRIN_ALLOW_NO_GPU=1 is set ***\n"
-            );
-            false
-        }
-        Err(e) => panic!("{test}: no GPU adapter: {e} (set GRIN_ALLOW_NO_GPU=1 to skip loudly)"),
-    }
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{assert_failed, gpu_required, grin, json, run_ok, scenes, stderr};
 
 #[test]
 fn render_gpu_writes_exr_png_and_summary() {
-    if !have_gpu("render_gpu_writes_exr_png_and_summary") {
+    if !gpu_required() {
         return;
     }
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("lens.exr");
-    let o = grin()
-        .args([
-            "render",
-            "--backend",
-            "gpu",
-            "--size",
-            "64x36",
-            "--spp",
-            "1",
-            "--json",
-            "-o",
-        ])
-        .arg(&out)
-        .arg(scenes().join("luneburg.toml"))
-        .output()
-        .expect("run grin");
-    assert!(o.status.success(), "grin render failed: {}", stderr(&o));
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("--json prints JSON");
+    let o = run_ok(
+        grin()
+            .args([
+                "render",
+                "--backend",
+                "gpu",
+                "--size",
+                "64x36",
+                "--spp",
+                "1",
+                "--json",
+                "-o",
+            ])
+            .arg(&out)
+            .arg(scenes().join("luneburg.toml")),
+    );
+    let summary = json(&o);
     assert_eq!(summary["backend"], "gpu", "{summary}");
     assert!(
         !summary["adapter"].as_str().unwrap_or("").is_empty(),
@@ -93,20 +67,19 @@ fn render_gpu_writes_exr_png_and_summary() {
 /// value that is not a positive number is said and the default band used.
 #[test]
 fn band_size_does_not_change_the_image() {
-    if !have_gpu("band_size_does_not_change_the_image") {
+    if !gpu_required() {
         return;
     }
     let dir = tempfile::tempdir().expect("tmp");
     let render = |band: &str, name: &str| {
         let out = dir.path().join(name);
-        let o = grin()
-            .env("GRIN_BAND_PIXELS", band)
-            .args(["render", "--backend", "gpu", "--size", "96x54", "-o"])
-            .arg(&out)
-            .arg(scenes().join("paper-c.toml"))
-            .output()
-            .expect("run grin");
-        assert!(o.status.success(), "grin render failed: {}", stderr(&o));
+        let o = run_ok(
+            grin()
+                .env("GRIN_BAND_PIXELS", band)
+                .args(["render", "--backend", "gpu", "--size", "96x54", "-o"])
+                .arg(&out)
+                .arg(scenes().join("paper-c.toml")),
+        );
         (
             grin_render::image::Frame::read_exr(&out).expect("EXR readable"),
             stderr(&o),
@@ -141,27 +114,26 @@ fn band_size_does_not_change_the_image() {
 /// whole; on a GPU, which has no such limit, the same rays (~200,000 steps) leave.
 #[test]
 fn rays_past_lavapipes_loop_limit_are_named_as_such() {
-    if !have_gpu("rays_past_lavapipes_loop_limit_are_named_as_such") {
+    if !gpu_required() {
         return;
     }
     let dir = tempfile::tempdir().expect("tmp");
     let path = common::long_luneburg_scene(dir.path());
-    let o = grin()
-        .args([
-            "render",
-            "--backend",
-            "gpu",
-            "--size",
-            "6x4",
-            "--json",
-            "-o",
-        ])
-        .arg(dir.path().join("long.exr"))
-        .arg(&path)
-        .output()
-        .expect("run grin");
-    assert!(o.status.success(), "grin render failed: {}", stderr(&o));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON summary");
+    let o = run_ok(
+        grin()
+            .args([
+                "render",
+                "--backend",
+                "gpu",
+                "--size",
+                "6x4",
+                "--json",
+                "-o",
+            ])
+            .arg(dir.path().join("long.exr"))
+            .arg(&path),
+    );
+    let v = json(&o);
     let adapter = v["adapter"].as_str().expect("adapter").to_string();
     let errors = v["status_counts"]["error"].as_u64().expect("error count");
     let warned = v["warnings"]
@@ -199,8 +171,7 @@ fn no_adapter_is_a_clear_error_and_writes_nothing() {
         .arg(scenes().join("luneburg.toml"))
         .output()
         .expect("run grin");
-    assert!(!o.status.success());
-    let err = stderr(&o);
+    let err = assert_failed(&o);
     assert!(
         err.contains("no GPU adapter") && err.contains("WGPU_ADAPTER_NAME"),
         "{err}"
@@ -232,27 +203,21 @@ fn scene_errors_come_before_any_gpu_work() {
         .arg(&scene)
         .output()
         .expect("run grin");
-    assert!(!o.status.success());
-    let err = stderr(&o);
+    let err = assert_failed(&o);
     assert!(err.contains("camera") && !err.contains("adapter"), "{err}");
 }
 
 #[test]
 fn bench_speed_quick_reports_both_backends() {
-    if !have_gpu("bench_speed_quick_reports_both_backends") {
+    if !gpu_required() {
         return;
     }
-    let o = grin()
-        .args(["bench", "speed", "--quick", "--json", "--scenes"])
-        .arg(scenes())
-        .output()
-        .expect("run grin");
-    assert!(
-        o.status.success(),
-        "grin bench speed failed: {}",
-        stderr(&o)
+    let o = run_ok(
+        grin()
+            .args(["bench", "speed", "--quick", "--json", "--scenes"])
+            .arg(scenes()),
     );
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    let r = json(&o);
     let runs = r["runs"].as_array().expect("runs");
     for backend in ["gpu", "cpu"] {
         for scene in ["paper (a)", "paper (c)", "heat haze"] {

@@ -2,8 +2,8 @@
 //! scene loader and field profiles.
 
 mod common;
-use common::grin;
-use std::path::{Path, PathBuf};
+use common::{TestDir as Dir, assert_err, assert_failed, assert_ok, grin, json, stderr};
+use std::path::Path;
 use std::process::Output;
 
 const HEADER: &str = "ox,oy,oz,dx,dy,dz,status,px,py,pz,qx,qy,qz,opl,length,steps,evals";
@@ -23,26 +23,6 @@ integrator = "sharma"
 step = { fixed = 0.004 }
 "#;
 
-struct Dir {
-    dir: tempfile::TempDir,
-}
-
-impl Dir {
-    fn new() -> Self {
-        Dir {
-            dir: tempfile::tempdir().expect("temp dir"),
-        }
-    }
-    fn write(&self, name: &str, text: &str) -> PathBuf {
-        let p = self.dir.path().join(name);
-        std::fs::write(&p, text).expect("write test file");
-        p
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.dir.path().join(name)
-    }
-}
-
 fn run(args: &[&Path], extra: &[&str]) -> Output {
     let mut cmd = grin();
     cmd.arg("trace")
@@ -53,10 +33,6 @@ fn run(args: &[&Path], extra: &[&str]) -> Output {
         .arg(args[2]);
     cmd.args(extra);
     cmd.output().expect("run grin")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// Parse an output CSV into (status, numbers) per row after checking the header.
@@ -94,7 +70,7 @@ fn luneburg_table_focuses_on_the_antipode() {
     let rays = d.write("rays.csv", &rays);
     let out = d.path("out.csv");
     let o = run(&[&scene, &rays, &out], &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ok(&o);
     assert!(stderr(&o).contains("traced 7 rays"), "{}", stderr(&o));
     let rows = read_output(&out);
     assert_eq!(rows.len(), 7);
@@ -128,7 +104,7 @@ fn bad_rows_become_error_rows_and_json_summary() {
         &[&scene, &rays, &out],
         &["--json", "--integrator", "rk4", "--step", "adaptive=1e-9"],
     );
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ok(&o);
     let rows = read_output(&out);
     let statuses: Vec<&str> = rows.iter().map(|r| r.0.as_str()).collect();
     assert_eq!(statuses, ["error", "error", "exited"]);
@@ -152,9 +128,9 @@ fn json_format_and_f32_agree_with_f64() {
     let out64 = d.path("out.json");
     let out32 = d.path("out32.json");
     let o = run(&[&scene, &rays, &out64], &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ok(&o);
     let o = run(&[&scene, &rays, &out32], &["--f32", "--format", "json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ok(&o);
     let a: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out64).expect("json")).expect("valid JSON");
     let b: serde_json::Value =
@@ -177,9 +153,8 @@ fn malformed_scene_fails_naming_file_and_line() {
     let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
     let out = d.path("out.csv");
     let o = run(&[&scene, &rays, &out], &[]);
-    assert!(!o.status.success());
+    assert_err(&o, "bad.toml:6");
     let e = stderr(&o);
-    assert!(e.contains("bad.toml:6"), "stderr: {e}");
     assert_eq!(e.trim().lines().count(), 1, "one-line reason: {e}");
     assert!(!out.exists(), "no output on failure");
 }
@@ -190,8 +165,7 @@ fn missing_or_malformed_ray_tables_fail_without_output() {
     let scene = d.write("lens.toml", LUNEBURG_SCENE);
     let out = d.path("out.csv");
     let o = run(&[&scene, &d.path("nope.csv"), &out], &[]);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("nope.csv"), "{}", stderr(&o));
+    assert_err(&o, "nope.csv");
     assert!(!out.exists());
 
     let cases = [
@@ -211,19 +185,13 @@ fn missing_or_malformed_ray_tables_fail_without_output() {
     for (name, text, msg) in cases {
         let rays = d.write(name, text);
         let o = run(&[&scene, &rays, &out], &[]);
-        assert!(!o.status.success(), "{name}");
-        assert!(stderr(&o).contains(msg), "{name}: {}", stderr(&o));
+        assert_err(&o, msg);
         assert!(!out.exists(), "{name}: output created");
     }
     // A bad --step never gets to write either.
     let rays = d.write("ok.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
     let o = run(&[&scene, &rays, &out], &["--step", "fixed=-1"]);
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("not a positive number"),
-        "{}",
-        stderr(&o)
-    );
+    assert_err(&o, "not a positive number");
     assert!(!out.exists());
 }
 
@@ -237,8 +205,7 @@ fn scene_without_medium_is_an_error() {
     let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
     let out = d.path("out.csv");
     let o = run(&[&scene, &rays, &out], &[]);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("no [medium]"), "{}", stderr(&o));
+    assert_err(&o, "no [medium]");
     assert!(!out.exists());
 }
 
@@ -252,7 +219,7 @@ fn step_cap_reports_max_steps() {
         &[&scene, &rays, &out],
         &["--max-steps", "10", "--exit", "bisection"],
     );
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ok(&o);
     let rows = read_output(&out);
     assert_eq!(rows[0].0, "max_steps");
     assert_eq!(rows[0].1[14], 10.0, "steps column");
@@ -294,9 +261,7 @@ fn the_default_method_is_auto_and_meets_its_error() {
         let rays = d.write("rays.csv", &beam_rows(count));
         let out = d.path("out.csv");
         let o = run(&[&scene, &rays, &out], &["--json"]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let summary: serde_json::Value =
-            serde_json::from_slice(&o.stdout).expect("json summary on stdout");
+        let summary = json(&o);
         let auto = &summary["auto"];
         if count < 1600 {
             assert!(auto.is_null(), "{summary}");
@@ -361,9 +326,7 @@ fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
         &[&scene, &rays, &out],
         &["--json", "--integrator", "euler", "--step", "fixed=0.05"],
     );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value =
-        serde_json::from_slice(&o.stdout).expect("json summary on stdout");
+    let summary = json(&o);
     assert_eq!(summary["degraded"], 12, "{summary}");
     assert!(summary.get("auto").is_none(), "{summary}");
     assert_eq!(summary["accuracy"], 1e-4, "{summary}");
@@ -384,8 +347,7 @@ fn a_low_order_method_says_degraded_where_it_cannot_vouch() {
         &[&scene, &rays, &out],
         &["--json", "--integrator", "rk4", "--step", "fixed=0.25"],
     );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let summary = json(&o);
     assert_eq!(summary["exited"], 12, "{summary}");
     let worst = summary["worst_estimate"].as_f64().expect("worst_estimate");
     assert!(worst > 0.0 && worst <= 1e-4, "{summary}");
@@ -408,8 +370,7 @@ fn a_long_table_streams_and_a_bad_row_is_named_by_its_line() {
     let rays = d.write("rays.csv", &text);
     let out = d.path("out.csv");
     let o = run(&[&scene, &rays, &out], &["--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let summary = json(&o);
     assert_eq!(summary["rays"], rows);
     assert_eq!(summary["missed"], rows);
     assert!(summary["total_seconds"].as_f64().expect("total") >= 0.0);
@@ -433,9 +394,8 @@ fn a_long_table_streams_and_a_bad_row_is_named_by_its_line() {
     let rays = d.write("bad.csv", &text);
     let out = d.path("bad-out.csv");
     let o = run(&[&scene, &rays, &out], &[]);
-    assert!(!o.status.success());
     assert_eq!(
-        stderr(&o).trim(),
+        assert_failed(&o).trim(),
         format!(
             "grin: error: {}:{}: column `oz`: `zero` is not a number",
             rays.display(),
@@ -454,8 +414,7 @@ fn control_characters_in_inputs_are_escaped_in_errors() {
     let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,\0\u{1b}[2J,1,0,0\n");
     let out = d.path("out.csv");
     let o = run(&[&scene, &rays, &out], &[]);
-    assert!(!o.status.success());
-    let err = stderr(&o);
+    let err = assert_failed(&o);
     assert!(!err.contains('\0') && !err.contains('\u{1b}'), "{err:?}");
     assert!(
         err.contains("column `oz`: `\\u{0}\\u{1b}[2J` is not a number"),
@@ -549,7 +508,7 @@ fn a_narrow_bump_in_an_expression_is_not_stepped_over() {
     let rays = d.write("rays.csv", &rays);
     let out = d.path("out.csv");
     let o = run(&[&scene, &rays, &out], &["--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ok(&o);
     let rows = read_output(&out);
     let (mut worst, mut exited, mut bent) = (0.0f64, 0, 0);
     for ((status, v), s) in rows.iter().zip(&starts) {

@@ -3,7 +3,8 @@
 //! VDB-sourced field against the analytic field the VDB sampled.
 
 mod common;
-use common::grin;
+use common::rng::Rng;
+use common::{assert_failed, assert_ok, grin, grin_args as run, json, run_ok, stdout};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -15,37 +16,28 @@ use grin_scene::{ExitMethod, IntegratorKind, NonFinitePolicy, StepSpec};
 use grin_trace::{RayStatus, trace_ray};
 
 fn data(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../data/vdb")
-        .join(rel)
-}
-
-fn run(args: &[&str]) -> Output {
-    grin().args(args).output().expect("run grin")
+    common::data(&format!("vdb/{rel}"))
 }
 
 /// Write the OpenVDB python `script` to `dir/make.py` and run it with `arg` as its one
 /// argument (where it writes): how these tests make VDB files with another tool than
-/// grin's own writer. Fails the test with python's stderr when the script fails.
+/// grin's own writer. The script has `sys`, `numpy as np` and `pyopenvdb as vdb`
+/// imported. Fails the test with python's stderr when the script fails.
 fn run_openvdb_python(dir: &Path, script: &str, arg: &Path) {
     let path = dir.join("make.py");
+    let script = format!("import sys\nimport numpy as np\nimport pyopenvdb as vdb\n{script}");
     std::fs::write(&path, script).expect("script");
     let made = Command::new("/usr/bin/python3")
         .arg(&path)
         .arg(arg)
         .output()
         .expect("python3-openvdb (installed by scripts/setup.sh)");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    assert_ok(&made);
 }
 
 /// The command failed with one clear stderr line containing `needle`, and wrote nothing.
 fn fails_cleanly(out: &Output, needle: &str, output_file: Option<&Path>) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure, stderr: {stderr}");
+    let stderr = assert_failed(out);
     assert!(out.status.code().is_some(), "killed by a signal: {stderr}");
     let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
     let last = lines.last().copied().unwrap_or("");
@@ -74,12 +66,7 @@ fn info_lists_grids_with_transform_and_half_flag() {
         data("blender_fire.vdb").to_str().expect("utf8"),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let v = json(&out);
     assert_eq!(v["metadata"]["creator"], "Blender (grin example)");
     let grids = v["grids"].as_array().expect("grids");
     let mut names: Vec<&str> = grids.iter().filter_map(|g| g["name"].as_str()).collect();
@@ -103,8 +90,8 @@ fn info_lists_grids_with_transform_and_half_flag() {
 
     // The text form names each grid and flags half floats.
     let out = run(&["info", data("houdini_pyro.vdb").to_str().expect("utf8")]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success());
+    assert_ok(&out);
+    let text = stdout(&out);
     assert!(text.contains("grid `vel`: vec3s"), "{text}");
     assert!(text.contains("grid `temperature`: float"), "{text}");
 
@@ -173,39 +160,33 @@ const GD: &str = "{ gladstone-dale = {} }";
 /// n of air at 293.15 K, 101325 Pa (what GD maps the background to).
 const N_AIR_20C: f64 = 1.000_272_131;
 
+/// `grin bake SCENE -o OUT EXTRA`.
+fn bake_with(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    grin()
+        .arg("bake")
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .args(extra)
+        .output()
+        .expect("run grin")
+}
+
+/// A quick bake: `--resolution 24 --error 0.5`.
 fn bake(scene: &Path, out: &Path) -> Output {
-    run(&[
-        "bake",
-        scene.to_str().expect("utf8"),
-        "-o",
-        out.to_str().expect("utf8"),
-        "--resolution",
-        "24",
-        "--error",
-        "0.5",
-    ])
+    bake_with(scene, out, &["--resolution", "24", "--error", "0.5"])
 }
 
 #[test]
 fn bake_of_the_example_vdb_scene_succeeds() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out_file = dir.path().join("fire.grinf");
-    let out = run(&[
-        "bake",
-        data("fire-haze.toml").to_str().expect("utf8"),
-        "-o",
-        out_file.to_str().expect("utf8"),
-        "--resolution",
-        "32",
-        "--error",
-        "0.2",
-        "--json",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = bake_with(
+        &data("fire-haze.toml"),
+        &out_file,
+        &["--resolution", "32", "--error", "0.2", "--json"],
     );
+    assert_ok(&out);
     assert!(out_file.exists());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
     assert!(v.is_object(), "{v}");
@@ -215,14 +196,7 @@ fn bake_of_the_example_vdb_scene_succeeds() {
     let sub = dir.path().join("capped");
     std::fs::create_dir(&sub).expect("subdir");
     let capped = sub.join("capped.grinf");
-    let out = run(&[
-        "bake",
-        data("fire-haze.toml").to_str().expect("utf8"),
-        "-o",
-        capped.to_str().expect("utf8"),
-        "--max-memory",
-        "1k",
-    ]);
+    let out = bake_with(&data("fire-haze.toml"), &capped, &["--max-memory", "1k"]);
     fails_cleanly(&out, "data box", Some(&capped));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("memory cap of 1024 bytes"),
@@ -262,11 +236,7 @@ fn bake_refuses_bad_vdb_input_with_clear_errors() {
         N_AIR_20C,
     );
     let ok = bake(&s, &out);
-    assert!(
-        ok.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ok.stderr)
-    );
+    assert_ok(&ok);
     let report = String::from_utf8_lossy(&ok.stdout);
     assert!(
         report.contains("4 NaN/Inf voxels replaced by ambient"),
@@ -418,13 +388,8 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
     let vdb = VdbField::load(&data("test/gaussian.vdb"), "delta_n", &params).expect("load");
 
     // Point samples: n and grad n (deterministic pseudo-random points in the ball).
-    let mut state = 0x1234_5678_9abc_def0u64;
-    let mut rnd = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
+    let mut rng = Rng(0x1234_5678_9abc_def0);
+    let mut rnd = || rng.range_f64(-1.0, 1.0);
     let (mut max_dn, mut max_dg) = (0.0f64, 0.0f64);
     for _ in 0..2000 {
         let p = c + DVec3::new(rnd(), rnd(), rnd()) * 0.4;
@@ -484,21 +449,12 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
 fn export_writes_delta_n_and_grad_n_that_read_back_exactly() {
     let dir = tempfile::tempdir().expect("tempdir");
     let baked = dir.path().join("fire.grinf");
-    let out = run(&[
-        "bake",
-        data("fire-haze.toml").to_str().expect("utf8"),
-        "-o",
-        baked.to_str().expect("utf8"),
-        "--resolution",
-        "20",
-        "--error",
-        "0.5",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = bake_with(
+        &data("fire-haze.toml"),
+        &baked,
+        &["--resolution", "20", "--error", "0.5"],
     );
+    assert_ok(&out);
     let vdb_path = dir.path().join("fire.vdb");
     let out = run(&[
         "export",
@@ -507,12 +463,7 @@ fn export_writes_delta_n_and_grad_n_that_read_back_exactly() {
         vdb_path.to_str().expect("utf8"),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let summary = json(&out);
     assert_eq!(summary["grids"][0], "delta_n");
 
     let field = grin_field::grinf::load(&baked).expect("load baked");
@@ -695,11 +646,7 @@ step = {{ fixed = 0.01 }}
         "-o",
         traced.to_str().expect("utf8"),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_ok(&out);
     let text = std::fs::read_to_string(&traced).expect("table");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
@@ -765,11 +712,7 @@ fn an_installed_grin_still_isolates_a_crashing_vdb() {
         .arg(data("test/aniso.vdb"))
         .output()
         .expect("run installed grin");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_ok(&out);
 }
 
 /// Four frames of a hot blob rising, written by OpenVDB's own Python API (half floats,
@@ -783,9 +726,6 @@ fn a_vdb_sequence_renders_frame_by_frame() {
     run_openvdb_python(
         dir.path(),
         r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 out = sys.argv[1]
 n = 24
 ax = (np.arange(n) - n / 2 + 0.5) * 0.04
@@ -834,40 +774,38 @@ jitter = false
     };
     let seq = scene("blob_####.vdb", "seq.toml");
     let out = dir.path().join("out.####.exr");
-    let o = grin()
-        .env("GRIN_CACHE_DIR", dir.path())
-        .args([
-            "render",
-            "--backend",
-            "cpu",
-            "--frames",
-            "1..4",
-            "--json",
-            "-o",
-        ])
-        .arg(&out)
-        .arg(&seq)
-        .output()
-        .expect("grin");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let summaries: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let o = run_ok(
+        grin()
+            .env("GRIN_CACHE_DIR", dir.path())
+            .args([
+                "render",
+                "--backend",
+                "cpu",
+                "--frames",
+                "1..4",
+                "--json",
+                "-o",
+            ])
+            .arg(&out)
+            .arg(&seq),
+    );
+    let summaries = json(&o);
     assert_eq!(summaries.as_array().map(Vec::len), Some(4), "{summaries}");
     for f in 1..=4 {
         assert!(dir.path().join(format!("out.{f:04}.exr")).is_file());
     }
     // Frame 3 alone, from a scene naming its file: the same image.
     let single = scene("blob_0003.vdb", "frame3.toml");
-    let o = grin()
-        .env("GRIN_CACHE_DIR", dir.path())
-        .args(["render", "--backend", "cpu", "--json", "-o"])
-        .arg(dir.path().join("single3.exr"))
-        .arg("--compare")
-        .arg(dir.path().join("out.0003.exr"))
-        .arg(&single)
-        .output()
-        .expect("grin");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let s: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let o = run_ok(
+        grin()
+            .env("GRIN_CACHE_DIR", dir.path())
+            .args(["render", "--backend", "cpu", "--json", "-o"])
+            .arg(dir.path().join("single3.exr"))
+            .arg("--compare")
+            .arg(dir.path().join("out.0003.exr"))
+            .arg(&single),
+    );
+    let s = json(&o);
     assert_eq!(s["comparison"]["max"].as_f64(), Some(0.0), "{s}");
     // The blob moved: frames 1 and 4 differ.
     let o = grin()
@@ -883,24 +821,23 @@ jitter = false
     assert!(s["comparison"]["max"].as_f64().expect("max") > 1e-3, "{s}");
 
     // `grin bake` of the sequence: one file a frame, each the frame's field.
-    let o = grin()
-        .args([
-            "bake",
-            "--frames",
-            "2..3",
-            "--resolution",
-            "24",
-            "--error",
-            "0.5",
-            "--json",
-            "-o",
-        ])
-        .arg(dir.path().join("field.####.grinf"))
-        .arg(&seq)
-        .output()
-        .expect("grin");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let baked: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let o = run_ok(
+        grin()
+            .args([
+                "bake",
+                "--frames",
+                "2..3",
+                "--resolution",
+                "24",
+                "--error",
+                "0.5",
+                "--json",
+                "-o",
+            ])
+            .arg(dir.path().join("field.####.grinf"))
+            .arg(&seq),
+    );
+    let baked = json(&o);
     assert_eq!(baked.as_array().map(Vec::len), Some(2), "{baked}");
     let bytes = |f: &str| std::fs::read(dir.path().join(f)).expect("baked file");
     assert_ne!(bytes("field.0002.grinf"), bytes("field.0003.grinf"));
@@ -950,9 +887,6 @@ fn a_z_up_cache_placed_with_up_z_traces_as_the_y_up_one() {
     run_openvdb_python(
         d,
         r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 out = sys.argv[1]
 h, n = 0.04, 26
 ax = np.arange(n) * h
@@ -1048,11 +982,7 @@ step = {{ fixed = 0.004 }}
             "-o",
             out_csv.to_str().expect("utf8"),
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        assert_ok(&out);
         let text = std::fs::read_to_string(&out_csv).expect("table");
         let mut lines = text.lines();
         let header: Vec<String> = lines
@@ -1133,12 +1063,7 @@ step = {{ fixed = 0.004 }}
             up,
             "--json",
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        let v = json(&out);
         v["grids"]
             .as_array()
             .expect("grids")
@@ -1182,19 +1107,8 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out_file = dir.path().join("fire.grinf");
     let scene = data("fire-haze.toml");
-    let out = run(&[
-        "bake",
-        scene.to_str().expect("utf8"),
-        "-o",
-        out_file.to_str().expect("utf8"),
-        "--json",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
+    let out = bake_with(&scene, &out_file, &["--json"]);
+    let v = json(&out);
     assert_eq!(v["meets_budget"], true, "{v}");
     assert_eq!(v["source_limited"], false, "{v}");
     let trials = v["trials"].as_array().expect("trials");
@@ -1209,21 +1123,8 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
     assert!(v["resolution"].as_u64().expect("res") <= 157, "{v}");
 
     let capped = dir.path().join("capped.grinf");
-    let out = run(&[
-        "bake",
-        scene.to_str().expect("utf8"),
-        "-o",
-        capped.to_str().expect("utf8"),
-        "--max-memory",
-        "4M",
-        "--json",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
+    let out = bake_with(&scene, &capped, &["--max-memory", "4M", "--json"]);
+    let v = json(&out);
     assert_eq!(v["meets_budget"], false, "{v}");
     assert_eq!(v["source_limited"], true, "{v}");
     assert!(capped.exists());
@@ -1245,9 +1146,6 @@ fn density_cube(dir: &Path, name: &str, fill: &str) -> PathBuf {
         dir,
         &format!(
             r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 g = vdb.FloatGrid()
 g.name = "density"
 a = np.zeros((4, 4, 4), dtype=np.float32)
@@ -1275,19 +1173,8 @@ fn a_sharp_blob_the_budget_cannot_resolve_says_how_to_go_finer() {
         "a[1:3, 1:3, 1:3] = 1.0\na[1, 1, 1] = 0.5",
     );
     let out_file = dir.path().join("blob.grinf");
-    let out = run(&[
-        "bake",
-        scene.to_str().expect("utf8"),
-        "-o",
-        out_file.to_str().expect("utf8"),
-        "--json",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json summary");
+    let out = bake_with(&scene, &out_file, &["--json"]);
+    let v = json(&out);
     assert_eq!(v["meets_budget"], false, "{v}");
     assert_eq!(v["source_limited"], true, "{v}");
     assert_eq!(v["memory_capped"], false, "{v}");
@@ -1329,9 +1216,6 @@ fn a_cache_active_over_its_whole_domain_is_read_where_the_data_is() {
     run_openvdb_python(
         dir.path(),
         r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 g = vdb.FloatGrid()
 g.name = "temperature"
 g.fill((0, 0, 0), (199, 199, 199), 0.0, active=True)
@@ -1368,9 +1252,6 @@ fn a_sparse_cache_is_kept_in_bricks_not_as_its_dense_box() {
     run_openvdb_python(
         dir.path(),
         r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 g = vdb.FloatGrid()
 g.name = "temperature"
 g.copyFromArray(np.ones((6, 6, 6), dtype=np.float32), ijk=(0, 0, 0), tolerance=0)
@@ -1411,9 +1292,6 @@ fn info_locates_the_data_of_a_large_cache() {
     run_openvdb_python(
         dir.path(),
         r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 g = vdb.FloatGrid()
 g.name = "temperature"
 g.fill((0, 0, 0), (699, 699, 699), 0.0, active=True)
@@ -1425,12 +1303,7 @@ vdb.write(sys.argv[1], grids=[g])
         &file,
     );
     let out = run(&["info", file.to_str().expect("utf8"), "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let v = json(&out);
     let g = &v["grids"][0];
     assert_eq!(
         g["data_index_box"]["min"],
@@ -1453,9 +1326,6 @@ fn a_sequence_whose_grid_changes_is_refused_naming_the_frame() {
     run_openvdb_python(
         tools.path(),
         r#"
-import sys
-import numpy as np
-import pyopenvdb as vdb
 out = sys.argv[1]
 v = -1e-3 * np.ones((6, 6, 6), dtype=np.float32)
 for frame, name, kind in [(1, "delta_n", "f"), (2, "dn", "f"), (3, "delta_n", "v")]:
@@ -1512,7 +1382,7 @@ height = 8
         "{err}"
     );
     let (o, first) = render("1..1");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_ok(&o);
     assert!(first.exists());
 }
 

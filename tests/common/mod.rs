@@ -1,15 +1,50 @@
-//! Helpers the end-to-end tests share: the `grin` binary, its outcome, the GPU's
-//! presence and an EXR's channels.
+//! Helpers the end-to-end tests share (as wgpu's tests/ harness): running the `grin`
+//! binary and asserting its outcome with its streams, the one GPU-presence policy, the
+//! one random generator, temporary directories, the repository's data and an EXR's
+//! channels.
 
 #![allow(dead_code)]
 
+pub mod rng;
+mod skip;
+
+#[allow(unused_imports)]
+pub use skip::{require_gpu, skipped_no_gpu, test_name};
+
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// The `grin` binary built with these tests.
 pub fn grin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_grin"))
+}
+
+/// `grin ARGS`, run to its end.
+pub fn grin_args<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
+    grin().args(args).output().expect("run grin")
+}
+
+/// A file under the repository's `data/`.
+pub fn data(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data")
+        .join(rel)
+}
+
+/// The example scenes, `data/scenes`.
+pub fn scenes() -> PathBuf {
+    data("scenes")
+}
+
+/// The command's stderr, as text.
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// The command's stdout, as text.
+pub fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// Fail with both streams when `grin` did.
@@ -22,9 +57,117 @@ pub fn assert_ok(out: &Output) {
     );
 }
 
+/// Fail unless the command failed (exited non-zero): its stderr.
+pub fn assert_failed(out: &Output) -> String {
+    let err = stderr(out);
+    assert!(
+        !out.status.success(),
+        "expected a failure; it succeeded. stdout {}\nstderr {err}",
+        stdout(out)
+    );
+    err
+}
+
+/// Fail unless the command failed (exited non-zero) with `needle` in its stderr.
+pub fn assert_err(out: &Output, needle: &str) {
+    let err = assert_failed(out);
+    assert!(err.contains(needle), "expected `{needle}` in stderr: {err}");
+}
+
+/// Run `cmd` (a `grin()` built up), which must succeed: its output.
+pub fn run_ok(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("run grin");
+    if !out.status.success() {
+        eprintln!("failed: {cmd:?}");
+    }
+    assert_ok(&out);
+    out
+}
+
+/// Run `cmd`, which must fail with `needle` in its stderr: its output.
+pub fn run_err(cmd: &mut Command, needle: &str) -> Output {
+    let out = cmd.output().expect("run grin");
+    if out.status.success() || !stderr(&out).contains(needle) {
+        eprintln!("ran: {cmd:?}");
+    }
+    assert_err(&out, needle);
+    out
+}
+
+/// The JSON the command printed on stdout, which it must have printed successfully.
+pub fn json(out: &Output) -> serde_json::Value {
+    assert_ok(out);
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("bad JSON ({e}): {}", stdout(out)))
+}
+
 /// Whether a GPU adapter (lavapipe in CI) is there.
 pub fn gpu_available() -> bool {
     grin_gpu::GpuContext::new_headless().is_ok()
+}
+
+/// For a test, or the GPU half of one, that runs where an adapter is: true if there is
+/// one; otherwise prints `SKIPPED (no GPU adapter): <test name>` on stderr and gives false.
+pub fn gpu_or_skip() -> bool {
+    match grin_gpu::GpuContext::new_headless() {
+        Ok(_) => true,
+        Err(e) => {
+            skipped_no_gpu(&e.to_string());
+            false
+        }
+    }
+}
+
+/// For a test that CI runs on lavapipe: true if there is an adapter; without one it fails,
+/// unless `GRIN_ALLOW_NO_GPU=1`, when it prints the SKIPPED line and gives false.
+pub fn gpu_required() -> bool {
+    require_gpu(grin_gpu::GpuContext::new_headless()).is_some()
+}
+
+/// A temporary directory the test writes its files in.
+pub struct TestDir {
+    pub dir: tempfile::TempDir,
+}
+
+impl Default for TestDir {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl TestDir {
+    pub fn new() -> Self {
+        TestDir {
+            dir: tempfile::tempdir().expect("temp dir"),
+        }
+    }
+
+    /// The directory.
+    pub fn root(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// `name` in the directory.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    /// Write `text` to `name` in the directory: its path.
+    pub fn write(&self, name: &str, text: &str) -> PathBuf {
+        let p = self.path(name);
+        std::fs::write(&p, text).expect("write test file");
+        p
+    }
+
+    /// The names in the directory, sorted (to check no temporary or partial file is left).
+    pub fn names(&self) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(self.dir.path())
+            .expect("read dir")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
 }
 
 /// Every channel of an EXR's first layer by name, and the layer's width.
@@ -60,16 +203,16 @@ pub fn render(scene: &Path, out: &Path, backend: &str) -> Output {
 
 /// [`render`] with `--json`, which must succeed: the summary.
 pub fn render_json(scene: &Path, out: &Path, backend: &str) -> serde_json::Value {
-    let o = grin()
-        .arg("render")
-        .arg(scene)
-        .arg("-o")
-        .arg(out)
-        .args(["--backend", backend, "--json"])
-        .output()
-        .expect("grin runs");
-    assert_ok(&o);
-    serde_json::from_slice(&o.stdout).expect("json summary")
+    json(
+        &grin()
+            .arg("render")
+            .arg(scene)
+            .arg("-o")
+            .arg(out)
+            .args(["--backend", backend, "--json"])
+            .output()
+            .expect("grin runs"),
+    )
 }
 
 /// The BOS tests' set-up as scene text: a Gaussian plume of hot air (a = 2e-3, s = 0.3)
@@ -104,8 +247,7 @@ height = {height}
 /// The Luneburg example scene at a fixed step of 1e-5 (~200,000 steps a ray, max_steps
 /// 10^6), written as `long.toml` into `dir`: rays past lavapipe's loop limit.
 pub fn long_luneburg_scene(dir: &Path) -> std::path::PathBuf {
-    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes");
-    let scene = std::fs::read_to_string(scenes.join("luneburg.toml"))
+    let scene = std::fs::read_to_string(scenes().join("luneburg.toml"))
         .expect("scene")
         .replace(
             "step = { fixed = 0.01 }",
