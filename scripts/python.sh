@@ -12,8 +12,13 @@ venv="${GRIN_VENV:-$PWD/.venv}"
 (cd crates/grin-py && VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop --locked -q)
 echo "python: grin $("$venv/bin/python" -c 'import grin; print(grin.__version__)') in $venv" >&2
 if [ "${1:-}" = test ]; then
-  # The tests compare with the CLI: the binary of this build.
-  cargo build --locked -p grin-cli
+  # The tests compare with the CLI: the binary of this build ($GRIN_BIN: scripts/test.sh
+  # passes the one its cargo test built, which a plain `cargo build` would build again
+  # with other features).
+  if [ -z "${GRIN_BIN:-}" ]; then
+    cargo build --locked -p grin-cli
+    export GRIN_BIN="$PWD/target/debug/grin"
+  fi
   export NODEVICE_SELECT="${NODEVICE_SELECT:-1}"
   export GRIN_CACHE_DIR="${GRIN_CACHE_DIR:-$(mktemp -d)}"
   "$venv/bin/python" -m pytest -q crates/grin-py/tests

@@ -15,4 +15,4 @@ export GRIN_CACHE_DIR
 bash scripts/setup.sh
 # grin-py is a Python extension module: built by maturin and tested by pytest below.
 cargo test --workspace --exclude grin-py --locked "$@"
-bash scripts/python.sh test
+GRIN_BIN="$PWD/target/debug/grin" bash scripts/python.sh test
