@@ -3,52 +3,9 @@
 //! and clear errors with no output file.
 
 mod common;
-use common::grin;
-use std::path::{Path, PathBuf};
+use common::{TestDir as Dir, assert_err, grin, json, run_err, run_ok, scenes, stderr, stdout};
+use std::path::Path;
 use std::process::Output;
-
-struct Dir {
-    dir: tempfile::TempDir,
-}
-
-impl Dir {
-    fn new() -> Self {
-        Dir {
-            dir: tempfile::tempdir().expect("temp dir"),
-        }
-    }
-    fn write(&self, name: &str, text: &str) -> PathBuf {
-        let p = self.dir.path().join(name);
-        std::fs::write(&p, text).expect("write test file");
-        p
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.dir.path().join(name)
-    }
-    /// Names in the directory (to check no temporary or partial file is left).
-    fn names(&self) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(self.dir.path())
-            .expect("read dir")
-            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: Output) -> String {
-    assert!(o.status.success(), "grin failed: {}", stderr(&o));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn json(o: Output) -> serde_json::Value {
-    let out = ok(o);
-    serde_json::from_str(&out).unwrap_or_else(|e| panic!("bad JSON ({e}): {out}"))
-}
 
 fn scene(medium: &str, render: &str) -> String {
     format!(
@@ -77,17 +34,16 @@ fn trace(
     out: &Path,
     extra: &[&str],
 ) -> Vec<(String, [f64; 3], [f64; 3], u64)> {
-    let o = grin()
-        .arg("trace")
-        .arg(scene)
-        .arg("--rays")
-        .arg(rays)
-        .arg("-o")
-        .arg(out)
-        .args(extra)
-        .output()
-        .expect("run grin trace");
-    ok(o);
+    run_ok(
+        grin()
+            .arg("trace")
+            .arg(scene)
+            .arg("--rays")
+            .arg(rays)
+            .arg("-o")
+            .arg(out)
+            .args(extra),
+    );
     let text = std::fs::read_to_string(out).expect("trace output");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
@@ -136,7 +92,7 @@ fn baked_luneburg_focuses_with_tricubic() {
     let mut worst = Vec::new();
     for interp in ["tricubic", "trilinear"] {
         let file = format!("l-{interp}.grinf");
-        let v = json(bake(
+        let v = json(&bake(
             &src,
             &d.path(&file),
             &[
@@ -189,7 +145,7 @@ fn macro_cells_give_identical_rays_with_fewer_evaluations() {
     let d = Dir::new();
     let medium = "bounds = { box = { min = [-2.0, -2.0, -2.0], max = [2.0, 2.0, 2.0] } }\nfield = { kind = \"plume\", plumes = [{ a = 0.003, center = [0.3, -0.2, 0.1], s = 0.12 }] }";
     let src = d.write("src.toml", &scene(medium, ""));
-    let v = json(bake(&src, &d.path("p.grinf"), &["--interp", "tricubic"]));
+    let v = json(&bake(&src, &d.path("p.grinf"), &["--interp", "tricubic"]));
     assert_eq!(v["cropped"], true);
     let baked_medium = "bounds = { box = { min = [-2.0, -2.0, -2.0], max = [2.0, 2.0, 2.0] } }\nfield = { kind = \"baked\", path = \"p.grinf\" }";
     let render = "integrator = \"rk4\"\nstep = { fixed = 0.01 }";
@@ -250,7 +206,7 @@ fn macro_cells_give_identical_rays_with_fewer_evaluations() {
 fn bake_info_round_trip() {
     let d = Dir::new();
     let src = d.write("src.toml", &scene(LUNEBURG, ""));
-    let v = json(bake(&src, &d.path("a.grinf"), &[]));
+    let v = json(&bake(&src, &d.path("a.grinf"), &[]));
     assert_eq!(v["meets_budget"], true);
     let res = v["resolution"].as_u64().expect("resolution");
     assert!(
@@ -260,14 +216,14 @@ fn bake_info_round_trip() {
     assert!(v["relative_error"].as_f64().expect("rel") <= 1e-3);
     let bytes = std::fs::metadata(d.path("a.grinf")).expect("file").len();
     assert!(bytes > v["bytes"].as_u64().expect("bytes"));
-    json(bake(&src, &d.path("b.grinf"), &[]));
+    json(&bake(&src, &d.path("b.grinf"), &[]));
     assert_eq!(
         std::fs::read(d.path("a.grinf")).expect("a"),
         std::fs::read(d.path("b.grinf")).expect("b")
     );
 
     let info = json(
-        grin()
+        &grin()
             .arg("info")
             .arg(d.path("a.grinf"))
             .arg("--json")
@@ -279,11 +235,7 @@ fn bake_info_round_trip() {
     assert_eq!(info["source"], "luneburg R=1");
     assert_eq!(info["max_err_n"], v["max_err_n"]);
     assert_eq!(info["file_bytes"].as_u64(), Some(bytes));
-    let text = ok(grin()
-        .arg("info")
-        .arg(d.path("a.grinf"))
-        .output()
-        .expect("info"));
+    let text = stdout(&run_ok(grin().arg("info").arg(d.path("a.grinf"))));
     assert!(
         text.contains("luneburg R=1") && text.contains("bake error"),
         "{text}"
@@ -297,23 +249,18 @@ fn bad_inputs_are_clear_errors_without_output() {
     let d = Dir::new();
     let src = d.write("src.toml", &scene(LUNEBURG, ""));
     let o = bake(&src, &d.path("huge.grinf"), &["--resolution", "100000"]);
-    assert!(!o.status.success());
+    assert_err(&o, "memory cap");
     let e = stderr(&o);
-    assert!(e.contains("memory cap") && e.lines().count() == 1, "{e}");
+    assert!(e.lines().count() == 1, "{e}");
     let o = bake(
         &src,
         &d.path("tight.grinf"),
         &["--error", "1e-9", "--max-memory", "8M"],
     );
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("cannot meet the error budget"),
-        "{}",
-        stderr(&o)
-    );
+    assert_err(&o, "cannot meet the error budget");
     assert_eq!(d.names(), ["src.toml"]);
 
-    json(bake(&src, &d.path("good.grinf"), &["--resolution", "24"]));
+    json(&bake(&src, &d.path("good.grinf"), &["--resolution", "24"]));
     let good = std::fs::read(d.path("good.grinf")).expect("good");
     let mut flipped = good.clone();
     let mid = good.len() / 2;
@@ -331,9 +278,7 @@ fn bad_inputs_are_clear_errors_without_output() {
         ("short.grinf", "truncated"),
         ("magic.grinf", "not a .grinf file"),
     ] {
-        let o = grin().arg("info").arg(d.path(file)).output().expect("info");
-        assert!(!o.status.success());
-        assert!(stderr(&o).contains(want), "{file}: {}", stderr(&o));
+        run_err(grin().arg("info").arg(d.path(file)), want);
         // Tracing a scene that points at it fails the same way.
         let sc = d.write(
             "use.toml",
@@ -343,17 +288,16 @@ fn bad_inputs_are_clear_errors_without_output() {
             ),
         );
         let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
-        let o = grin()
-            .arg("trace")
-            .arg(&sc)
-            .arg("--rays")
-            .arg(&rays)
-            .arg("-o")
-            .arg(d.path("t.csv"))
-            .output()
-            .expect("trace");
-        assert!(!o.status.success());
-        assert!(stderr(&o).contains(want), "{file}: {}", stderr(&o));
+        run_err(
+            grin()
+                .arg("trace")
+                .arg(&sc)
+                .arg("--rays")
+                .arg(&rays)
+                .arg("-o")
+                .arg(d.path("t.csv")),
+            want,
+        );
         assert!(!d.path("t.csv").exists());
     }
     // A baked file used with other bounds is refused.
@@ -361,8 +305,7 @@ fn bad_inputs_are_clear_errors_without_output() {
         "other.toml",
         &scene("bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 2.0 } }\nfield = { kind = \"baked\", path = \"good.grinf\" }", ""),
     );
-    let o = bake(&sc, &d.path("x.grinf"), &[]);
-    assert!(stderr(&o).contains("baked for bounds"), "{}", stderr(&o));
+    assert_err(&bake(&sc, &d.path("x.grinf"), &[]), "baked for bounds");
     assert!(!d.path("x.grinf").exists());
 }
 
@@ -370,8 +313,8 @@ fn bad_inputs_are_clear_errors_without_output() {
 #[test]
 fn noise_scene_bakes_within_budget() {
     let d = Dir::new();
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/noise-sphere.toml");
-    let v = json(bake(&src, &d.path("n.grinf"), &["--interp", "tricubic"]));
+    let src = scenes().join("noise-sphere.toml");
+    let v = json(&bake(&src, &d.path("n.grinf"), &["--interp", "tricubic"]));
     eprintln!(
         "noise-sphere: {} nodes, {}, {} bytes, rel error {}, {} s",
         v["resolution"], v["dims"], v["bytes"], v["relative_error"], v["seconds"]
@@ -394,8 +337,7 @@ fn bake_to_stdout_writes_only_the_grid() {
         if json {
             cmd.arg("--json");
         }
-        let o = cmd.output().expect("run grin bake");
-        assert!(o.status.success(), "{}", stderr(&o));
+        let o = run_ok(&mut cmd);
         let field = grin_field::grinf::from_bytes(&o.stdout, "stdout")
             .unwrap_or_else(|e| panic!("stdout is not a .grinf: {e}"));
         // 12 nodes across the lens and the trilinear margin of 2 on each side.
@@ -425,19 +367,14 @@ fn frame_ranges_cannot_overflow_past_the_cap() {
         } else {
             "f.####.exr"
         });
-        let o = grin()
-            .arg(cmd)
-            .arg(&s)
-            .arg("-o")
-            .arg(&out)
-            .arg("--frames=-1..9223372036854775807")
-            .output()
-            .expect("run grin");
-        assert!(!o.status.success(), "{cmd} accepted the range");
-        assert!(
-            stderr(&o).contains("has 9223372036854775809 frames; at most 100000"),
-            "{cmd}: {}",
-            stderr(&o)
+        run_err(
+            grin()
+                .arg(cmd)
+                .arg(&s)
+                .arg("-o")
+                .arg(&out)
+                .arg("--frames=-1..9223372036854775807"),
+            "has 9223372036854775809 frames; at most 100000",
         );
         assert_eq!(d.names(), ["lens.toml"], "{cmd} wrote a frame");
     }

@@ -4,9 +4,11 @@
 //! CPU.
 
 mod common;
-use common::{assert_ok, grin};
+use common::{
+    TestDir, assert_err, assert_failed, assert_ok, grin, json, run_ok, scenes, stderr, stdout,
+};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Output;
 
 /// A checker plane seen through a GRIN ball whose index swells with time (`time`: true)
@@ -47,33 +49,24 @@ step = {{ fixed = 0.02 }}
 }
 
 /// A temporary directory holding `scene.toml`.
-struct Dir {
-    dir: tempfile::TempDir,
+struct Dir(TestDir);
+
+impl std::ops::Deref for Dir {
+    type Target = TestDir;
+    fn deref(&self) -> &TestDir {
+        &self.0
+    }
 }
 
 impl Dir {
     fn new(scene: &str) -> Self {
-        let dir = tempfile::tempdir().expect("temp dir");
-        std::fs::write(dir.path().join("scene.toml"), scene).expect("scene");
-        Dir { dir }
-    }
-
-    fn path(&self, name: &str) -> PathBuf {
-        self.dir.path().join(name)
+        let dir = TestDir::new();
+        dir.write("scene.toml", scene);
+        Dir(dir)
     }
 
     fn scene(&self) -> PathBuf {
         self.path("scene.toml")
-    }
-
-    /// The names in the directory, sorted.
-    fn names(&self) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(self.dir.path())
-            .expect("read dir")
-            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
     }
 
     /// Every file but the scene, by name, with its bytes.
@@ -104,10 +97,6 @@ fn render(dir: &Dir, extra: &[&str]) -> Output {
         .expect("grin runs")
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
 /// The EXR and PNG names of `frames`.
 fn names_of(frames: &[i64]) -> Vec<String> {
     let mut v: Vec<String> = frames
@@ -120,8 +109,7 @@ fn names_of(frames: &[i64]) -> Vec<String> {
 
 /// The command failed with a one-line `grin: error:` containing `needle`.
 fn fails_with(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert!(!o.status.success(), "expected a failure: {err}");
+    let err = assert_failed(o);
     let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
     assert_eq!(lines.len(), 1, "one line: {err}");
     assert!(lines[0].contains(needle), "`{needle}` in: {err}");
@@ -131,8 +119,7 @@ fn fails_with(o: &Output, needle: &str) {
 fn a_frame_list_renders_exactly_its_frames() {
     let d = Dir::new(&scene_text(true, false));
     let o = render(&d, &["--frames", "1-3,5,7-9:2", "--json"]);
-    assert_ok(&o);
-    let summaries: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let summaries = json(&o);
     let frames: Vec<i64> = summaries
         .as_array()
         .expect("array")
@@ -158,12 +145,7 @@ fn a_frame_list_renders_exactly_its_frames() {
     );
     let d = Dir::new(&scene_text(true, false));
     let o = render(&d, &["--frames", "1-3,,5"]);
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("empty item in `1-3,,5`"),
-        "{}",
-        stderr(&o)
-    );
+    assert_err(&o, "empty item in `1-3,,5`");
     assert_eq!(d.names(), ["scene.toml"]);
 }
 
@@ -249,7 +231,7 @@ fn skip_existing_renders_only_what_is_missing() {
         assert!(err.lines().any(|l| l == line), "`{line}` in: {err}");
     }
     assert!(!err.contains("skipped frame 3"), "{err}");
-    let out = String::from_utf8_lossy(&o.stdout);
+    let out = stdout(&o);
     assert!(out.contains("out.0003.exr"), "frame 3 rendered: {out}");
     assert!(
         out.contains("1 of 4 frames rendered, 3 skipped"),
@@ -268,8 +250,7 @@ fn skip_existing_renders_only_what_is_missing() {
 
     // Everything there: nothing rendered; --json lists the skipped frames.
     let o = render(&d, &["--frames", "1-4", "--skip-existing", "--json"]);
-    assert_ok(&o);
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let v = json(&o);
     let entries = v.as_array().expect("array");
     assert_eq!(entries.len(), 4, "{v}");
     for (entry, f) in entries.iter().zip(1..) {
@@ -286,28 +267,23 @@ fn skip_existing_renders_only_what_is_missing() {
 fn bad_shards_fail_clearly_and_write_nothing() {
     let d = Dir::new(&scene_text(true, false));
     let o = render(&d, &["--frames", "1-4", "--shard", "2/2"]);
-    assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("`2/2`: shard index 2 must be below the shard count 2"),
-        "{}",
-        stderr(&o)
-    );
+    assert_err(&o, "`2/2`: shard index 2 must be below the shard count 2");
     let o = render(&d, &["--shard", "0/2"]);
     fails_with(
         &o,
         "--shard 0/2 renders a shard of a frame list: give the list with --frames",
     );
     let o = render(&d, &["--frames", "1-4", "--shard", "0/0"]);
-    assert!(stderr(&o).contains("the shard count must be at least 1"));
+    assert_err(&o, "the shard count must be at least 1");
     let o = render(&d, &["--frames", "1-4", "--shard", "x"]);
-    assert!(stderr(&o).contains("is not a shard (I/N, e.g. 0/4)"));
+    assert_err(&o, "is not a shard (I/N, e.g. 0/4)");
     assert_eq!(d.names(), ["scene.toml"]);
 
     // More tasks than frames: the spare tasks succeed and render nothing.
     let o = render(&d, &["--frames", "1-2", "--shard", "3/4", "--json"]);
     assert_ok(&o);
     assert!(stderr(&o).contains("holds no frame"), "{}", stderr(&o));
-    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "[]");
+    assert_eq!(stdout(&o).trim(), "[]");
     assert_eq!(d.names(), ["scene.toml"]);
 }
 
@@ -354,13 +330,12 @@ fn a_seeded_frame_renders_the_same_alone_or_in_a_list() {
 /// reads `field.####.grinf`: a sequence with gaps.
 fn baked_sequence(present: &[i64]) -> Dir {
     let d = Dir::new(&scene_text(false, false));
-    let o = grin()
-        .args(["bake", "--resolution", "16", "-o"])
-        .arg(d.path("field.grinf"))
-        .arg(d.scene())
-        .output()
-        .expect("grin bake");
-    assert_ok(&o);
+    run_ok(
+        grin()
+            .args(["bake", "--resolution", "16", "-o"])
+            .arg(d.path("field.grinf"))
+            .arg(d.scene()),
+    );
     for f in present {
         std::fs::copy(
             d.path("field.grinf"),
@@ -421,8 +396,7 @@ fn only_the_frames_rendered_need_their_files() {
 
 #[test]
 fn skip_existing_asks_for_the_beauty_image_too() {
-    let scene =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/optics/displacement.toml");
+    let scene = scenes().join("optics/displacement.toml");
     let d = tempfile::tempdir().expect("temp dir");
     let run = || {
         grin()
@@ -438,8 +412,7 @@ fn skip_existing_asks_for_the_beauty_image_too() {
             .expect("grin runs")
     };
     let o = run();
-    assert_ok(&o);
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let v = json(&o);
     assert_eq!(v.as_array().map(Vec::len), Some(4), "{v}");
     // Frame 1's plate is gone: frame 1 renders again, both its images.
     std::fs::remove_file(d.path().join("plate.0001.exr")).expect("rm");

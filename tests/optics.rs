@@ -6,19 +6,15 @@
 
 mod common;
 use common::{
-    assert_ok as ok, bos_plume_scene, exr_channels as channels, gpu_available, grin, render,
-    render_json,
+    assert_err, assert_failed, assert_ok as ok, bos_plume_scene, exr_channels as channels,
+    gpu_or_skip, grin, grin_args as run, render, render_json, scenes, stderr, stdout,
 };
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use glam::DVec3;
 use grin_render::camera::PinholeCamera;
 use grin_render::optics::{Plane, camera_angles, project_dir};
-
-fn run(args: &[&str]) -> Output {
-    grin().args(args).output().expect("run grin")
-}
 
 const A_WEAK: f64 = 1e-4;
 const S: f64 = 0.25;
@@ -135,10 +131,9 @@ fn weak_plume_displacement_and_schlieren(step: f64) {
         &cam,
     )
     .expect("plane");
-    let backends: &[&str] = if gpu_available() {
+    let backends: &[&str] = if gpu_or_skip() {
         &["cpu", "gpu"]
     } else {
-        eprintln!("no wgpu adapter: CPU only");
         &["cpu"]
     };
     for backend in backends {
@@ -269,8 +264,7 @@ fn interferogram_phase_is_the_line_integral_of_the_index() {
         );
         let mut phases = Vec::new();
         for backend in ["cpu", "gpu"] {
-            if backend == "gpu" && !gpu_available() {
-                eprintln!("SKIPPED the interferogram's GPU half: no GPU adapter");
+            if backend == "gpu" && !gpu_or_skip() {
                 continue;
             }
             let out = dir.path().join(format!("fringes-{backend}.exr"));
@@ -303,7 +297,7 @@ fn interferogram_phase_is_the_line_integral_of_the_index() {
             eprintln!(
                 "{backend}, a = {a:.3e}, step {step}: interferogram vs line integral: worst \
                  {worst:.2e} waves of {deepest:.4} (reads {centre:.4} there); {}",
-                String::from_utf8_lossy(&o.stderr)
+                stderr(&o)
                     .lines()
                     .find(|l| l.starts_with("auto "))
                     .unwrap_or("")
@@ -346,13 +340,12 @@ fn interferogram_phase_is_the_line_integral_of_the_index() {
 /// is the CPU's within 0.01 waves.
 #[test]
 fn example_interferogram_agrees_across_backends() {
-    if !gpu_available() {
-        eprintln!("SKIPPED example_interferogram_agrees_across_backends: no GPU adapter");
+    if !gpu_or_skip() {
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");
     let scene =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/optics/interferogram.toml");
+        scenes().join("optics/interferogram.toml");
     let phase = |backend: &str| {
         let out = dir.path().join(format!("{backend}.exr"));
         let o = run(&[
@@ -627,8 +620,7 @@ fn shadowgraph_conserves_energy_and_focuses_where_the_lens_does() {
 /// 2 % of the mean intensity); the Luneburg lens focuses on the screen at its radius.
 #[test]
 fn shadowgraph_on_the_gpu_matches_the_cpu() {
-    if !gpu_available() {
-        eprintln!("SKIPPED shadowgraph_on_the_gpu_matches_the_cpu: no GPU adapter");
+    if !gpu_or_skip() {
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");
@@ -682,8 +674,7 @@ fn bos_scene(d: &Path, size: u32, step: f64) -> PathBuf {
 /// within 2 % of their range on average (measured: 4.5e-5 px of up to 0.70 px, 4.6e-6).
 #[test]
 fn bos_on_the_gpu_matches_the_cpu() {
-    if !gpu_available() {
-        eprintln!("*** SKIPPED bos_on_the_gpu_matches_the_cpu: no GPU adapter");
+    if !gpu_or_skip() {
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");
@@ -794,7 +785,7 @@ print(f"{len(errs)} {moved} {np.sqrt((errs ** 2).mean()):.4f} {errs.max():.4f}")
         .output()
         .expect("numpy (python3-numpy, installed by scripts/setup.sh)");
     ok(&o);
-    let text = String::from_utf8_lossy(&o.stdout);
+    let text = stdout(&o);
     let v: Vec<f64> = text
         .split_whitespace()
         .map(|x| x.parse().expect("number"))
@@ -880,7 +871,7 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     let scene =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/optics/displacement.toml");
+        scenes().join("optics/displacement.toml");
     let (out, beauty) = (d.join("disp.exr"), d.join("plate.exr"));
     let o = run(&[
         "render",
@@ -953,7 +944,7 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
         assert!(d.join(name).exists(), "{name}");
     }
     // Refused: a scene with no [optics], and a beauty named as the output.
-    let lens = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/luneburg.toml");
+    let lens = scenes().join("luneburg.toml");
     let o = run(&[
         "render",
         lens.to_str().expect("utf8"),
@@ -962,8 +953,7 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
         "--beauty",
         d.join("lb.exr").to_str().expect("utf8"),
     ]);
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("has no [optics] output"));
+    assert_err(&o, "has no [optics] output");
     let o = run(&[
         "render",
         scene.to_str().expect("utf8"),
@@ -972,8 +962,7 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
         "--beauty",
         out.to_str().expect("utf8"),
     ]);
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("needs a name of its own"));
+    assert_err(&o, "needs a name of its own");
 }
 
 /// Errors of the optical outputs name the scene file, as every other error does: a
@@ -981,8 +970,7 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
 #[test]
 fn optics_errors_name_the_scene() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let example =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/optics/shadowgraph.toml");
+    let example = scenes().join("optics/shadowgraph.toml");
     let text = std::fs::read_to_string(example).expect("scene");
     let scene = dir.path().join("beam.toml");
     std::fs::write(
@@ -1001,8 +989,7 @@ fn optics_errors_name_the_scene() {
         "--size",
         "512x512",
     ]);
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = assert_failed(&o);
     assert!(
         err.contains(&format!(
             "grin: error: {}: [optics] the shadowgraph's beam is",

@@ -3,20 +3,16 @@
 //! write phase. No test writes to the real /dev: streams are links we make to our own
 //! stdout (/proc/self/fd/1) or /dev/null, written through.
 
+mod common;
+use common::{assert_failed, assert_ok, data, run_ok, stderr, stdout};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn grin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_grin"));
+    let mut c = common::grin();
     c.env("NODEVICE_SELECT", "1");
     c
-}
-
-fn data(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../data")
-        .join(rel)
 }
 
 const RAYS: &str = "ox,oy,oz,dx,dy,dz\n0,0.5,-3,0,0,1\n0.2,0.5,-3,0,0,1\n";
@@ -51,12 +47,8 @@ fn temp_files(dir: &Path) -> Vec<String> {
 fn dash_and_stdout_links_write_the_table_to_stdout() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = trace_to(dir.path(), Path::new("-"));
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let table = String::from_utf8_lossy(&out.stdout);
+    assert_ok(&out);
+    let table = stdout(&out);
     assert!(table.starts_with("ox,oy,oz,dx,dy,dz,status,"), "{table}");
     assert_eq!(table.lines().count(), 3, "{table}");
     assert!(!dir.path().join("-").exists() && !Path::new("-").exists());
@@ -64,23 +56,15 @@ fn dash_and_stdout_links_write_the_table_to_stdout() {
     let link = dir.path().join("stdout");
     std::os::unix::fs::symlink("/proc/self/fd/1", &link).expect("link");
     let out = trace_to(dir.path(), &link);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(String::from_utf8_lossy(&out.stdout).starts_with("ox,oy,oz"));
+    assert_ok(&out);
+    assert!(stdout(&out).starts_with("ox,oy,oz"));
     let meta = std::fs::symlink_metadata(&link).expect("meta");
     assert!(meta.file_type().is_symlink(), "the link was replaced");
     // A link to a device: written into, the device untouched.
     let null = dir.path().join("null");
     std::os::unix::fs::symlink("/dev/null", &null).expect("link");
     let out = trace_to(dir.path(), &null);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_ok(&out);
     assert!(
         std::fs::symlink_metadata(&null)
             .expect("meta")
@@ -98,11 +82,7 @@ fn a_link_to_a_file_keeps_the_link_and_replaces_the_file() {
     let link = dir.path().join("link.csv");
     std::os::unix::fs::symlink(&real, &link).expect("link");
     let out = trace_to(dir.path(), &link);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_ok(&out);
     assert!(
         std::fs::symlink_metadata(&link)
             .expect("meta")
@@ -122,8 +102,7 @@ fn missing_and_unwritable_targets_are_clear_errors() {
     let dir = tempfile::tempdir().expect("tmp");
     let missing = dir.path().join("nope/out.csv");
     let out = trace_to(dir.path(), &missing);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = assert_failed(&out);
     assert!(
         err.contains(&format!(
             "{}: cannot write: directory {} does not exist",
@@ -148,8 +127,7 @@ fn missing_and_unwritable_targets_are_clear_errors() {
         .args(["-m", "sh", "-c", &script])
         .output()
         .expect("unshare");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let err = assert_failed(&out);
     assert!(
         err.contains("out.csv: cannot write: cannot create a file in"),
         "{err}"
@@ -165,17 +143,12 @@ fn missing_and_unwritable_targets_are_clear_errors() {
 fn export_onto_a_full_disk_fails_and_keeps_the_old_file() {
     let dir = tempfile::tempdir().expect("tmp");
     let grinf = dir.path().join("f.grinf");
-    let out = grin()
-        .arg("bake")
-        .arg(data("scenes/luneburg.toml"))
-        .args(["--resolution", "48", "-o"])
-        .arg(&grinf)
-        .output()
-        .expect("bake");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        grin()
+            .arg("bake")
+            .arg(data("scenes/luneburg.toml"))
+            .args(["--resolution", "48", "-o"])
+            .arg(&grinf),
     );
     let mnt = dir.path().join("small");
     std::fs::create_dir(&mnt).expect("mkdir");
@@ -191,8 +164,8 @@ fn export_onto_a_full_disk_fails_and_keeps_the_old_file() {
         .args(["-m", "sh", "-c", &script])
         .output()
         .expect("unshare");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stdout = stdout(&out);
+    let stderr = stderr(&out);
     let mut lines = stdout.lines();
     assert_eq!(lines.next(), Some("rc=1"), "{stdout}\n{stderr}");
     assert_eq!(
@@ -253,18 +226,13 @@ fn sigterm_in_the_write_phase_leaves_the_old_pair_and_no_temp_files() {
     assert_eq!(std::fs::read_to_string(&exr).expect("exr"), "old exr");
     assert_eq!(std::fs::read_to_string(&png).expect("png"), "old png");
     // Without the signal the pair is replaced together.
-    let out = grin()
-        .arg("render")
-        .arg(data("scenes/luneburg.toml"))
-        .arg("-o")
-        .arg(&exr)
-        .args(["--backend", "cpu", "--size", "32x18", "--spp", "1"])
-        .output()
-        .expect("render");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        grin()
+            .arg("render")
+            .arg(data("scenes/luneburg.toml"))
+            .arg("-o")
+            .arg(&exr)
+            .args(["--backend", "cpu", "--size", "32x18", "--spp", "1"]),
     );
     assert!(
         std::fs::read(&exr)
@@ -293,8 +261,8 @@ fn render_to_dash_streams_the_exr_and_reports_on_stderr() {
         ])
         .output()
         .expect("render");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    assert_ok(&out);
+    let err = stderr(&out);
     assert!(
         out.stdout.starts_with(&[0x76, 0x2f, 0x31, 0x01]),
         "stdout is not an EXR"
@@ -321,10 +289,7 @@ fn buffers_that_do_not_fit_are_errors_not_aborts() {
             .current_dir(dir.path())
             .output()
             .expect("sh");
-        (
-            out.status.code(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
+        (out.status.code(), stderr(&out))
     };
     let scene = data("scenes/paper-a.toml");
     let (code, err) = run(&format!(
@@ -369,8 +334,8 @@ fn ray_tables_stream_through_with_extra_columns() {
         .write_all(b"id,ox,oy,oz,dx,dy,dz\nray-a,0,0.2,-3,0,0,1\nray-b,0,5,-3,0,0,1\n")
         .expect("write rays");
     let out = child.wait_with_output().expect("wait");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    assert_ok(&out);
+    let err = stderr(&out);
     let rows: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
     assert_eq!(rows[0]["id"], "ray-a");
     assert_eq!(rows[0]["status"], "exited");

@@ -3,7 +3,7 @@
 //! errors before any work, and no broken output when a render is interrupted.
 
 mod common;
-use common::grin;
+use common::{assert_err, assert_failed, assert_ok, grin, json, run_ok, scenes, stderr};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -13,9 +13,7 @@ use grin_render::camera::PinholeCamera;
 use grin_render::image::Frame;
 
 fn scene_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../data/scenes")
-        .join(name)
+    scenes().join(name)
 }
 
 /// Width and height from a PNG's IHDR chunk.
@@ -52,8 +50,7 @@ fn cpu_render_writes_exr_with_aovs_and_png_preview() {
         &out,
         &["--size", "64x36", "--spp", "1", "--json"],
     );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json summary");
+    let summary = json(&o);
     assert_eq!(summary["backend"], "cpu");
     assert_eq!(summary["width"], 64);
     assert_eq!(summary["height"], 36);
@@ -121,7 +118,7 @@ fn luneburg_scene_focuses_as_the_exact_solution_predicts() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("lune.exr");
     let o = run_render(&scene_file, &out, &["--size", "48x27", "--spp", "1"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_ok(&o);
     let frame = Frame::read_exr(&out).expect("exr");
     let mut through = 0;
     let mut worst: f64 = 0.0;
@@ -181,19 +178,14 @@ fn luneburg_scene_focuses_as_the_exact_solution_predicts() {
     let rays = dir.path().join("rays.csv");
     let traced = dir.path().join("out.csv");
     std::fs::write(&rays, csv).expect("write rays");
-    let o = grin()
-        .arg("trace")
-        .arg(&scene_file)
-        .arg("--rays")
-        .arg(&rays)
-        .arg("-o")
-        .arg(&traced)
-        .output()
-        .expect("grin trace runs");
-    assert!(
-        o.status.success(),
-        "grin trace: {}",
-        String::from_utf8_lossy(&o.stderr)
+    run_ok(
+        grin()
+            .arg("trace")
+            .arg(&scene_file)
+            .arg("--rays")
+            .arg(&rays)
+            .arg("-o")
+            .arg(&traced),
     );
     let text = std::fs::read_to_string(&traced).expect("trace output");
     let mut lines = text.lines();
@@ -251,8 +243,7 @@ fn scene_errors_fail_before_any_work_and_write_nothing() {
         .arg(&out)
         .output()
         .expect("runs");
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = assert_failed(&o);
     assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
     assert!(err.contains("bad.toml") && err.contains("velvet"), "{err}");
     assert!(!out.exists() && !dir.path().join("out.png").exists());
@@ -264,12 +255,7 @@ fn scene_errors_fail_before_any_work_and_write_nothing() {
     )
     .expect("write");
     let o = run_render(&bad, &out, &[]);
-    assert!(!o.status.success());
-    assert!(
-        String::from_utf8_lossy(&o.stderr).contains("camera"),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert_err(&o, "camera");
 
     // Bad flags and outputs.
     let good = scene_path("paper-b.toml");
@@ -279,14 +265,12 @@ fn scene_errors_fail_before_any_work_and_write_nothing() {
         (&["--spp", "0"][..], "spp"),
     ] {
         let o = run_render(&good, &out, extra);
-        assert!(!o.status.success());
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(needle), "{extra:?}: {err}");
+        assert_err(&o, needle);
     }
     let o = run_render(&good, &dir.path().join("out.png"), &[]);
-    assert!(String::from_utf8_lossy(&o.stderr).contains(".exr"));
+    assert_err(&o, ".exr");
     let o = run_render(&good, &dir.path().join("missing/out.exr"), &[]);
-    assert!(String::from_utf8_lossy(&o.stderr).contains("does not exist"));
+    assert_err(&o, "does not exist");
     assert!(
         std::fs::read_dir(dir.path()).expect("ls").count() == 1,
         "only bad.toml remains"
@@ -335,7 +319,7 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
     let args = ["--size", "48x28", "--spp", "1", "--json"];
     let cpu_out = dir.path().join("cpu.exr");
     let o = run_render(&scene, &cpu_out, &args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_ok(&o);
     let gpu_out = dir.path().join("gpu.exr");
     let o = grin()
         .arg("render")
@@ -349,12 +333,7 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
         .output()
         .expect("grin runs");
     // CI installs lavapipe (mesa-vulkan-drivers): no adapter is a failure, said loudly.
-    assert!(
-        o.status.success(),
-        "GPU render failed (is a Vulkan adapter, e.g. lavapipe, installed?): {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let summary = json(&o);
     assert_eq!(summary["backend"], "gpu");
     assert!(summary["adapter"].as_str().is_some_and(|a| !a.is_empty()));
     // The smooth lens meets the error budget on a coarser grid than 128 nodes (96 plus
@@ -432,7 +411,7 @@ fn gpu_backend_renders_the_same_scene_as_the_cpu() {
             cpu_out.to_str().expect("utf8"),
         ],
     );
-    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("48x28"));
+    assert_err(&o, "48x28");
     assert!(!dir.path().join("x.exr").exists());
     // The same outcome (exited and degraded both left the medium: the CPU traces the
     // analytic lens, the GPU its bake, whose error it flags).
@@ -469,29 +448,24 @@ field = { kind = "exponential-atmosphere", e = -6e-4, scale_height = 0.15 }
 "#,
     )
     .expect("write scene");
-    let o = grin()
-        .env("GRIN_CACHE_DIR", dir.path())
-        .arg("render")
-        .arg(&scene)
-        .arg("-o")
-        .arg(&out)
-        .args([
-            "--backend",
-            "gpu",
-            "--size",
-            "32x18",
-            "--spp",
-            "1",
-            "--json",
-        ])
-        .output()
-        .expect("grin runs");
-    assert!(
-        o.status.success(),
-        "GPU render failed (is a Vulkan adapter, e.g. lavapipe, installed?): {}",
-        String::from_utf8_lossy(&o.stderr)
+    let o = run_ok(
+        grin()
+            .env("GRIN_CACHE_DIR", dir.path())
+            .arg("render")
+            .arg(&scene)
+            .arg("-o")
+            .arg(&out)
+            .args([
+                "--backend",
+                "gpu",
+                "--size",
+                "32x18",
+                "--spp",
+                "1",
+                "--json",
+            ]),
     );
-    let stderr = String::from_utf8_lossy(&o.stderr);
+    let stderr = stderr(&o);
     assert!(
         stderr.contains("grin: warning:") && stderr.contains("under-resolved"),
         "{stderr}"
@@ -535,21 +509,14 @@ fn every_example_scene_gets_a_resolved_gpu_bake() {
     scenes.sort();
     assert!(scenes.len() >= 12, "{scenes:?}");
     for scene in &scenes {
-        let o = grin()
-            .arg("render")
-            .arg(scene)
-            .arg("-o")
-            .arg(dir.path().join("s.exr"))
-            .args(["--size", "16x9", "--spp", "1", "--json"])
-            .output()
-            .expect("grin runs");
-        assert!(
-            o.status.success(),
-            "{}: {}",
-            scene.display(),
-            String::from_utf8_lossy(&o.stderr)
-        );
-        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+        let summary = json(&run_ok(
+            grin()
+                .arg("render")
+                .arg(scene)
+                .arg("-o")
+                .arg(dir.path().join("s.exr"))
+                .args(["--size", "16x9", "--spp", "1", "--json"]),
+        ));
         let warnings = summary["warnings"].as_array().expect("warnings");
         assert!(
             !warnings

@@ -6,7 +6,9 @@
 //! crates/grin-gpu/tests/gpu_vs_cpu.rs.
 
 mod common;
-use common::{assert_ok as ok, bos_plume_scene, exr_channels, gpu_available, render};
+use common::{
+    assert_err, assert_ok as ok, bos_plume_scene, exr_channels, gpu_or_skip, render, stderr,
+};
 
 use grin_render::image::Frame;
 use grin_render::surface::srgb_to_linear;
@@ -34,7 +36,7 @@ fn background_plate_without_a_medium_is_the_plate() {
     )
     .expect("scene");
     let mut backends = vec![("cpu", 1e-6)];
-    if gpu_available() {
+    if gpu_or_skip() {
         backends.push(("gpu", 2e-5));
     }
     for (backend, tol) in backends {
@@ -230,9 +232,8 @@ fn bad_images_are_errors_naming_the_file() {
         std::fs::write(&scene, format!("{body}{cam}")).expect("scene");
         let out = d.join(format!("bad{i}.exr"));
         let o = render(&scene, &out, "cpu");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success(), "case {i} succeeded");
-        assert!(err.contains(needle), "case {i}: {err}");
+        assert_err(&o, needle);
+        let err = stderr(&o);
         assert!(!err.contains("panicked"), "case {i}: {err}");
         assert!(!out.exists(), "case {i} wrote {}", out.display());
     }
