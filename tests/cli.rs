@@ -1,13 +1,11 @@
 //! End-to-end tests of the `grin` binary.
 
 mod common;
-use common::grin;
+use common::{data, grin, json, run_err, run_ok, scenes, stderr, stdout};
 
 #[test]
 fn help_lists_subcommands() {
-    let out = grin().arg("--help").output().expect("run grin");
-    assert!(out.status.success());
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = stdout(&run_ok(grin().arg("--help")));
     for sub in ["trace", "bake", "render", "view", "info", "export", "bench"] {
         assert!(text.contains(sub), "help lacks `{sub}`: {text}");
     }
@@ -16,12 +14,10 @@ fn help_lists_subcommands() {
 /// `grin info file | head`: a reader that closes the pipe early must not make grin panic.
 #[test]
 fn closed_stdout_is_not_a_crash() {
-    let vdb = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../data/vdb/blender_fire.vdb"
-    );
+    let vdb = data("vdb/blender_fire.vdb");
     let mut child = grin()
-        .args(["info", vdb])
+        .arg("info")
+        .arg(vdb)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -29,7 +25,7 @@ fn closed_stdout_is_not_a_crash() {
     // Close the read end before grin (which first opens the VDB file) writes anything.
     drop(child.stdout.take());
     let out = child.wait_with_output().expect("wait for grin");
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = stderr(&out);
     assert!(!stderr.contains("panicked"), "grin panicked: {stderr}");
     assert!(
         out.status.success() || out.status.code() == Some(141),
@@ -41,16 +37,15 @@ fn closed_stdout_is_not_a_crash() {
 /// `bench bake --rays 0` used to print speedups computed from zero evaluations.
 #[test]
 fn bench_bake_refuses_zero_rays() {
-    let scene = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../data/scenes/paper-c.toml"
-    );
+    let scene = scenes().join("paper-c.toml");
     let out = grin()
-        .args(["bench", "bake", "--scene", scene, "--rays", "0"])
+        .args(["bench", "bake", "--scene"])
+        .arg(scene)
+        .args(["--rays", "0"])
         .output()
         .expect("run grin");
     assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(
         err.contains("invalid value '0' for '--rays <RAYS>'"),
         "{err}"
@@ -65,14 +60,11 @@ fn bench_bake_refuses_zero_rays() {
 fn bench_accuracy_and_stability_quick_smoke() {
     let dir = tempfile::tempdir().expect("temp dir");
     let acc = dir.path().join("acc");
-    let out = grin()
-        .args(["bench", "accuracy", "--quick", "--json", "-o"])
-        .arg(&acc)
-        .output()
-        .expect("run grin");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "bench accuracy failed: {stderr}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    let v = json(&run_ok(
+        grin()
+            .args(["bench", "accuracy", "--quick", "--json", "-o"])
+            .arg(&acc),
+    ));
     assert_eq!(v["failed_runs"], 0, "{v}");
     let orders = v["orders"].as_array().expect("orders");
     let verlet = orders
@@ -91,27 +83,19 @@ fn bench_accuracy_and_stability_quick_smoke() {
         assert!(acc.join(f).is_file(), "missing {f}");
     }
 
-    let out = grin()
-        .args(["bench", "accuracy", "--quick", "--case", "nope", "-o"])
-        .arg(dir.path().join("none"))
-        .output()
-        .expect("run grin");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "--case nope succeeded");
-    assert!(
-        stderr.contains("--case nope: no case of this suite matches (cases: luneburg, plume,"),
-        "{stderr}"
+    run_err(
+        grin()
+            .args(["bench", "accuracy", "--quick", "--case", "nope", "-o"])
+            .arg(dir.path().join("none")),
+        "--case nope: no case of this suite matches (cases: luneburg, plume,",
     );
 
     let stab = dir.path().join("stab");
-    let out = grin()
-        .args(["bench", "stability", "--quick", "--json", "-o"])
-        .arg(&stab)
-        .output()
-        .expect("run grin");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "bench stability failed: {stderr}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON summary");
+    let v = json(&run_ok(
+        grin()
+            .args(["bench", "stability", "--quick", "--json", "-o"])
+            .arg(&stab),
+    ));
     let cells = v["cells"].as_array().expect("cells");
     assert!(cells.len() >= 8 * 18, "{} cells", cells.len());
     assert!(cells.iter().all(|c| c["nan"] == false), "a cell wrote NaN");

@@ -3,7 +3,7 @@
 //! samples.
 
 mod common;
-use common::{assert_ok, grin};
+use common::{assert_ok, grin, json, run_err, run_ok};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Stdio;
@@ -14,22 +14,20 @@ const COUNT: u64 = 200;
 const SIZE: &str = "48x32";
 
 fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
-    let out = grin()
-        .args(["dataset", "bos", "-o"])
-        .arg(dir)
-        .args([
-            "--count",
-            &COUNT.to_string(),
-            "--seed",
-            "11",
-            "--size",
-            SIZE,
-        ])
-        .args(extra)
-        .output()
-        .expect("run grin");
-    assert_ok(&out);
-    out
+    run_ok(
+        grin()
+            .args(["dataset", "bos", "-o"])
+            .arg(dir)
+            .args([
+                "--count",
+                &COUNT.to_string(),
+                "--seed",
+                "11",
+                "--size",
+                SIZE,
+            ])
+            .args(extra),
+    )
 }
 
 /// Every file of the folder by name, with its bytes.
@@ -81,7 +79,7 @@ fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
         tmp.path().join("s"),
     );
     let out = run(&a, &["--json"]);
-    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("test step");
+    let summary = json(&out);
     assert_eq!(summary["rendered"], COUNT);
     assert!(summary["samples_per_second"].as_f64().expect("test step") > 0.0);
     assert_complete(&a);
@@ -187,7 +185,7 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
         }
         assert!(!f.contains_key("manifest.jsonl"));
         let out = run(&dir, &["--json"]);
-        let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("test step");
+        let summary = json(&out);
         assert_eq!(
             summary["skipped"].as_u64().expect("test step"),
             done as u64,
@@ -226,22 +224,20 @@ fn files_named(dir: &Path, suffix: &str) -> usize {
 #[test]
 fn bad_dataset_arguments_fail_clearly() {
     let tmp = tempfile::tempdir().expect("test step");
-    let out = grin()
-        .args(["dataset", "bos", "-o"])
-        .arg(tmp.path().join("x"))
-        .args(["--count", "0"])
-        .output()
-        .expect("run grin");
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--count 0: a dataset holds 1 to"));
-    let out = grin()
-        .args(["dataset", "bos", "-o"])
-        .arg(tmp.path().join("x"))
-        .args(["--count", "4", "--shard", "4/4"])
-        .output()
-        .expect("run grin");
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("shard index 4 must be below"));
+    run_err(
+        grin()
+            .args(["dataset", "bos", "-o"])
+            .arg(tmp.path().join("x"))
+            .args(["--count", "0"]),
+        "--count 0: a dataset holds 1 to",
+    );
+    run_err(
+        grin()
+            .args(["dataset", "bos", "-o"])
+            .arg(tmp.path().join("x"))
+            .args(["--count", "4", "--shard", "4/4"]),
+        "shard index 4 must be below",
+    );
     assert!(!tmp.path().join("x").exists());
 }
 
@@ -260,15 +256,9 @@ fn every_kind_and_media_give_their_channels_and_ground_truth() {
     for kind in ["bos", "schlieren", "haze"] {
         for media in ["plumes", "noise", "expr", pool.as_str()] {
             let dir = tmp.path().join(format!("{kind}-{}", media.len()));
-            let out = grin()
-                .args(["dataset", kind, "-o"])
-                .arg(&dir)
-                .args([
-                    "--count", "1", "--seed", "2", "--size", "24x16", "--media", media,
-                ])
-                .output()
-                .expect("run grin");
-            assert_ok(&out);
+            run_ok(grin().args(["dataset", kind, "-o"]).arg(&dir).args([
+                "--count", "1", "--seed", "2", "--size", "24x16", "--media", media,
+            ]));
             let (width, ch) = common::exr_channels(&dir.join(format!("{kind}_000000.exr")));
             assert_eq!(width, 24);
             let want: &[&str] = match kind {
@@ -323,15 +313,13 @@ fn every_kind_and_media_give_their_channels_and_ground_truth() {
             let scene = dir.join("again.toml");
             std::fs::write(&scene, json["scene_toml"].as_str().expect("toml")).expect("write");
             let again = dir.join("again.exr");
-            assert_ok(
-                &grin()
+            run_ok(
+                grin()
                     .args(["render"])
                     .arg(&scene)
                     .arg("-o")
                     .arg(&again)
-                    .args(["--backend", "cpu"])
-                    .output()
-                    .expect("render"),
+                    .args(["--backend", "cpu"]),
             );
             let (_, rendered) = common::exr_channels(&again);
             for (name, values) in &rendered {

@@ -5,20 +5,12 @@
 //! broken scene and without an adapter.
 
 mod common;
-use common::grin;
+use common::{grin, json, run_ok, scenes, stderr};
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
-
-fn scenes() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// An Xvfb server of this test's own, killed when dropped.
 struct Xvfb {
@@ -84,16 +76,6 @@ fn view(x: &Xvfb, cache: &Path) -> Command {
     c
 }
 
-fn json(o: &Output) -> serde_json::Value {
-    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
-        panic!(
-            "not JSON ({e}): {}\n{}",
-            String::from_utf8_lossy(&o.stdout),
-            stderr(o)
-        )
-    })
-}
-
 /// The window's accumulated frames are one render of all their samples: 4 frames of the
 /// paper's scene (a) at 4 spp each against `grin render --spp 16` of the same camera.
 /// Tolerance: the same samples are drawn (frame k renders samples 4k..4k+3 of 16), so
@@ -119,7 +101,6 @@ fn view_screenshot_matches_render_of_the_same_camera() {
         .arg(&shot)
         .output()
         .expect("run grin view");
-    assert!(o.status.success(), "{}", stderr(&o));
     let s = json(&o);
     assert_eq!(s["frames"], 4, "{s}");
     assert_eq!(s["samples"], 16, "{s}");
@@ -127,17 +108,16 @@ fn view_screenshot_matches_render_of_the_same_camera() {
     assert!(shot.is_file() && shot.with_extension("png").is_file());
 
     let reference = dir.path().join("ref.exr");
-    let o = grin()
-        .env("GRIN_CACHE_DIR", dir.path())
-        .arg("render")
-        .arg(&scene)
-        .args(["--size", "160x90", "--spp", "16", "--json", "-o"])
-        .arg(&reference)
-        .arg("--compare")
-        .arg(&shot)
-        .output()
-        .expect("run grin render");
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run_ok(
+        grin()
+            .env("GRIN_CACHE_DIR", dir.path())
+            .arg("render")
+            .arg(&scene)
+            .args(["--size", "160x90", "--spp", "16", "--json", "-o"])
+            .arg(&reference)
+            .arg("--compare")
+            .arg(&shot),
+    );
     let r = json(&o);
     // The render read the view's bake from the cache.
     assert_eq!(r["bake_cache"], "hit", "{r}");
@@ -171,7 +151,6 @@ fn view_orbits_and_reports_frame_rates() {
         .arg(&shot)
         .output()
         .expect("run grin view");
-    assert!(o.status.success(), "{}", stderr(&o));
     let s = json(&o);
     // Six orbit frames, then the still one for the screenshot.
     assert_eq!(s["frames"], 7, "{s}");
@@ -347,7 +326,6 @@ fn view_names_lavapipes_loop_limit() {
         .args(["--frames", "2", "--size", "32x18", "--json"])
         .output()
         .expect("run grin view");
-    assert!(o.status.success(), "{}", stderr(&o));
     let s = json(&o);
     let adapter = s["adapter"].as_str().expect("adapter");
     let named: Vec<&str> = s["warnings"]
