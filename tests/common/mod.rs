@@ -112,7 +112,7 @@ pub fn gpu_or_skip() -> bool {
     match grin_gpu::GpuContext::new_headless() {
         Ok(_) => true,
         Err(e) => {
-            skipped_no_gpu(&e.to_string());
+            skipped_no_gpu(&test_name(), &e.to_string());
             false
         }
     }
@@ -121,7 +121,7 @@ pub fn gpu_or_skip() -> bool {
 /// For a test that CI runs on lavapipe: true if there is an adapter; without one it fails,
 /// unless `GRIN_ALLOW_NO_GPU=1`, when it prints the SKIPPED line and gives false.
 pub fn gpu_required() -> bool {
-    require_gpu(grin_gpu::GpuContext::new_headless()).is_some()
+    require_gpu(&test_name(), grin_gpu::GpuContext::new_headless()).is_some()
 }
 
 /// A temporary directory the test writes its files in.
@@ -191,28 +191,36 @@ pub fn exr_channels(path: &Path) -> (usize, HashMap<String, Vec<f64>>) {
 
 /// `grin render SCENE -o OUT --backend BACKEND`.
 pub fn render(scene: &Path, out: &Path, backend: &str) -> Output {
+    render_with(scene, out, &["--backend", backend])
+}
+
+/// `grin render SCENE -o OUT EXTRA`.
+pub fn render_with(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     grin()
         .arg("render")
         .arg(scene)
         .arg("-o")
         .arg(out)
-        .args(["--backend", backend])
+        .args(extra)
         .output()
         .expect("grin runs")
 }
 
+/// `grin bake SCENE -o OUT EXTRA`.
+pub fn bake_with(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    grin()
+        .arg("bake")
+        .arg(scene)
+        .arg("-o")
+        .arg(out)
+        .args(extra)
+        .output()
+        .expect("run grin")
+}
+
 /// [`render`] with `--json`, which must succeed: the summary.
 pub fn render_json(scene: &Path, out: &Path, backend: &str) -> serde_json::Value {
-    json(
-        &grin()
-            .arg("render")
-            .arg(scene)
-            .arg("-o")
-            .arg(out)
-            .args(["--backend", backend, "--json"])
-            .output()
-            .expect("grin runs"),
-    )
+    json(&render_with(scene, out, &["--backend", backend, "--json"]))
 }
 
 /// The BOS tests' set-up as scene text: a Gaussian plume of hot air (a = 2e-3, s = 0.3)

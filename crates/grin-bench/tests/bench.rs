@@ -4,6 +4,10 @@
 // Tests: a failed unwrap is the failure message.
 #![allow(clippy::unwrap_used)]
 
+/// The workspace's GPU-presence policy (tests/common/skip.rs).
+#[path = "../../../tests/common/skip.rs"]
+mod skip;
+
 use grin_bench::accuracy::{self, Point, log_slope, pareto, reference, run_point};
 use grin_bench::cases::{self, Suite};
 use grin_bench::methods::{Method, Policy, Precision};
@@ -217,12 +221,7 @@ fn quick_sweep_writes_csv_markdown_and_charts() {
     match &run.gpu.adapter {
         None => {
             let why = run.gpu.skipped.clone().unwrap_or_default();
-            assert_eq!(
-                std::env::var("GRIN_ALLOW_NO_GPU").as_deref(),
-                Ok("1"),
-                "no GPU column: {why}"
-            );
-            eprintln!("*** SKIPPED the GPU column: {why}");
+            skip::missing_gpu(&skip::test_name(), &format!("no GPU column: {why}"));
         }
         Some(adapter) => {
             assert_eq!(gpu_rows.len(), 1, "{gpu_rows:?}");
@@ -414,12 +413,7 @@ fn stability_matrix_verdicts() {
     // amplified by the crossings. Where the bake is fine the default converges.
     let gpu_rows: Vec<_> = m.columns.iter().filter(|c| c.ends_with(" gpu")).collect();
     if gpu_rows.is_empty() {
-        assert_eq!(
-            std::env::var("GRIN_ALLOW_NO_GPU").as_deref(),
-            Ok("1"),
-            "no GPU rows: {:?}",
-            m.gpu
-        );
+        skip::missing_gpu(&skip::test_name(), &format!("no GPU rows: {:?}", m.gpu));
     } else {
         assert_eq!(gpu_rows.len(), 3, "{gpu_rows:?}");
         for case in [
@@ -684,9 +678,8 @@ fn grazing_rays_through_a_bake_say_degraded_on_both_backends() {
         last.crossing_uncertainty > grin_trace::estimate::CROSSING_FACTOR * s.accuracy,
         "{last:?}"
     );
-    let Ok(ctx) = grin_gpu::GpuContext::new_headless() else {
-        assert_eq!(std::env::var("GRIN_ALLOW_NO_GPU").as_deref(), Ok("1"));
-        eprintln!("*** SKIPPED the GPU half: no adapter");
+    let Some(ctx) = skip::require_gpu(&skip::test_name(), grin_gpu::GpuContext::new_headless())
+    else {
         return;
     };
     let mut gpu = grin_gpu::GpuRayTracer::new(&ctx, baked).unwrap();

@@ -135,29 +135,22 @@ fn controller(s: &Setup, ds_adapt: f32) -> StepController {
     }
 }
 
-/// A small deterministic generator (xorshift64*), uniform in [0, 1).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f32 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32) / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.next()
-    }
-    fn unit(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-            );
-            let l = v.length();
-            if l > 0.1 && l <= 1.0 {
-                return v / l;
-            }
+/// The tests' one deterministic generator (xorshift64*).
+#[path = "../../../tests/common/rng.rs"]
+mod rng;
+use rng::Rng;
+
+/// A random unit vector (by rejection from the cube).
+fn unit(rng: &mut Rng) -> Vec3 {
+    loop {
+        let v = Vec3::new(
+            rng.range_f32(-1.0, 1.0),
+            rng.range_f32(-1.0, 1.0),
+            rng.range_f32(-1.0, 1.0),
+        );
+        let l = v.length();
+        if l > 0.1 && l <= 1.0 {
+            return v / l;
         }
     }
 }
@@ -188,16 +181,16 @@ fn states(
     (0..BATCH)
         .map(|i| {
             let sphere = matches!(bounds, grin_field::Bounds::Sphere { .. });
-            let u = rng.unit();
-            let f = rng.range(inner, outer);
+            let u = unit(&mut rng);
+            let f = rng.range_f32(inner, outer);
             let offset = if sphere {
                 u * f
             } else {
                 // A point of the box shell at fraction f: one axis pushed to f.
                 let mut v = Vec3::new(
-                    rng.range(-outer, outer),
-                    rng.range(-outer, outer),
-                    rng.range(-outer, outer),
+                    rng.range_f32(-outer, outer),
+                    rng.range_f32(-outer, outer),
+                    rng.range_f32(-outer, outer),
                 );
                 let axis = i % 3;
                 v[axis] = f * u[axis].signum();
@@ -211,11 +204,11 @@ fn states(
                 a[i % 3] = u[i % 3].signum();
                 a
             };
-            let d = (rng.unit() * (1.0 - outward) + out * outward).normalize();
+            let d = (unit(&mut rng) * (1.0 - outward) + out * outward).normalize();
             let n = field.sample_f32(r).n;
             StageIn {
                 r: r.to_array(),
-                h: rng.range(h.0, h.1),
+                h: rng.range_f32(h.0, h.1),
                 t: (d * n).to_array(),
                 ds_adapt: ds_adapt[i % ds_adapt.len()],
             }
@@ -680,7 +673,7 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
     let (lo, hi) = s.baked.geometry().world_box();
     let mut rng = Rng(23);
     for inp in input.iter_mut().skip(BATCH / 2) {
-        let f = Vec3::new(rng.next(), rng.next(), rng.next());
+        let f = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
         inp.r = (lo.as_vec3() + (hi - lo).as_vec3() * f).to_array();
     }
     let Some(out) = gpu(&s, Stage::Flight, &input) else {
@@ -832,17 +825,17 @@ material = "mirror"
     let input: Vec<StageIn> = (0..BATCH)
         .map(|i| {
             let r = Vec3::new(
-                rng.range(-2.5, 2.5),
-                rng.range(-1.5, 1.5),
-                rng.range(-3.0, 2.0),
+                rng.range_f32(-2.5, 2.5),
+                rng.range_f32(-1.5, 1.5),
+                rng.range_f32(-3.0, 2.0),
             );
             // A quarter aimed near the sphere, a quarter near the box.
             let aim = match i % 4 {
                 1 => Vec3::new(1.2, 0.4, 0.5),
                 2 => Vec3::new(-1.6, -0.4, 0.1),
-                _ => r + rng.unit(),
+                _ => r + unit(&mut rng),
             };
-            let t = ((aim - r).normalize() + rng.unit() * 0.3).normalize();
+            let t = ((aim - r).normalize() + unit(&mut rng) * 0.3).normalize();
             StageIn {
                 r: r.to_array(),
                 h: if i % 8 == 0 { 0.0 } else { 1e-3 },

@@ -16,30 +16,15 @@ use grin_render::scene::RenderScene;
 use grin_scene::Scene;
 use grin_trace::render::render_cpu;
 
+/// The workspace's GPU-presence policy (tests/common/skip.rs).
+#[path = "../../../../tests/common/skip.rs"]
+mod skip;
+
 /// The device, or `None` when no adapter exists and `GRIN_ALLOW_NO_GPU=1` is set (after
-/// printing a prominent SKIPPED line). Without that variable a missing adapter fails
-/// the test: GPU tests must never pass silently.
+/// printing a prominent `SKIPPED (no GPU adapter): <test>` line). Without that variable a
+/// missing adapter fails the test: GPU tests must never pass silently.
 pub fn context(test: &str) -> Option<GpuContext> {
-    match GpuContext::new_headless() {
-        Ok(ctx) => Some(ctx),
-        Err(e) => {
-            if std::env::var("GRIN_ALLOW_NO_GPU").as_deref() == Ok("1") {
-                eprintln!(
-                    "\n**********************************************************************"
-                );
-                eprintln!("*** SKIPPED {test}: no GPU adapter ({e})");
-                eprintln!("*** (GRIN_ALLOW_NO_GPU=1 is set; unset it to make this a failure)");
-                eprintln!(
-                    "**********************************************************************\n"
-                );
-                None
-            } else {
-                panic!(
-                    "{test}: no GPU adapter: {e}\n(install mesa-vulkan-drivers for lavapipe, or set GRIN_ALLOW_NO_GPU=1 to skip loudly)"
-                );
-            }
-        }
-    }
+    skip::require_gpu(test, GpuContext::new_headless())
 }
 
 /// Where failing comparisons write their images.
