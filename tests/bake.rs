@@ -3,7 +3,10 @@
 //! and clear errors with no output file.
 
 mod common;
-use common::{TestDir as Dir, assert_err, grin, json, run_err, run_ok, scenes, stderr, stdout};
+use common::{
+    TestDir as Dir, assert_err, bake_with, grin, json, num, read_table, run_err, run_ok, scenes,
+    stderr, stdout,
+};
 use std::path::Path;
 use std::process::Output;
 
@@ -15,16 +18,9 @@ fn scene(medium: &str, render: &str) -> String {
 
 const LUNEBURG: &str = "bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }\nfield = { kind = \"luneburg\" }";
 
+/// `grin bake SCENE -o OUT --json EXTRA`.
 fn bake(scene: &Path, out: &Path, extra: &[&str]) -> Output {
-    grin()
-        .arg("bake")
-        .arg(scene)
-        .arg("-o")
-        .arg(out)
-        .arg("--json")
-        .args(extra)
-        .output()
-        .expect("run grin bake")
+    bake_with(scene, out, &[&["--json"], extra].concat())
 }
 
 /// Parse `grin trace` CSV output: (status, exit point, exit direction, evals) per ray.
@@ -44,25 +40,14 @@ fn trace(
             .arg(out)
             .args(extra),
     );
-    let text = std::fs::read_to_string(out).expect("trace output");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .unwrap_or_else(|| panic!("no column {name}"))
-    };
-    let (st, px, qx, ev) = (col("status"), col("px"), col("qx"), col("evals"));
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            let num = |i: usize| f[i].parse::<f64>().expect("number");
+    read_table(out)
+        .iter()
+        .map(|r| {
             (
-                f[st].to_string(),
-                [num(px), num(px + 1), num(px + 2)],
-                [num(qx), num(qx + 1), num(qx + 2)],
-                f[ev].parse::<u64>().expect("evals"),
+                r["status"].clone(),
+                ["px", "py", "pz"].map(|k| num(r, k)),
+                ["qx", "qy", "qz"].map(|k| num(r, k)),
+                r["evals"].parse::<u64>().expect("evals"),
             )
         })
         .collect()

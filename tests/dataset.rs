@@ -6,28 +6,30 @@ mod common;
 use common::{assert_ok, grin, json, run_err, run_ok};
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Stdio;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Samples of the tests' dataset, and its (small) image size.
 const COUNT: u64 = 200;
 const SIZE: &str = "48x32";
 
+/// `grin dataset bos -o DIR --count COUNT --seed 11 --size SIZE`: the tests' dataset.
+fn dataset(dir: &Path) -> Command {
+    let mut c = grin();
+    c.args(["dataset", "bos", "-o"]).arg(dir).args([
+        "--count",
+        &COUNT.to_string(),
+        "--seed",
+        "11",
+        "--size",
+        SIZE,
+    ]);
+    c
+}
+
+/// [`dataset`] with `extra`, which must succeed.
 fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
-    run_ok(
-        grin()
-            .args(["dataset", "bos", "-o"])
-            .arg(dir)
-            .args([
-                "--count",
-                &COUNT.to_string(),
-                "--seed",
-                "11",
-                "--size",
-                SIZE,
-            ])
-            .args(extra),
-    )
+    run_ok(dataset(dir).args(extra))
 }
 
 /// Every file of the folder by name, with its bytes.
@@ -87,17 +89,7 @@ fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
     assert_eq!(files(&a), files(&b), "two runs of one seed differ");
     // Two processes at once, one shard each: the same files, byte for byte.
     let shard = |i: u32| {
-        grin()
-            .args(["dataset", "bos", "-o"])
-            .arg(&s)
-            .args([
-                "--count",
-                &COUNT.to_string(),
-                "--seed",
-                "11",
-                "--size",
-                SIZE,
-            ])
+        dataset(&s)
             .args(["--shard", &format!("{i}/2")])
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -116,12 +108,12 @@ fn the_same_seed_gives_the_same_dataset_and_shards_add_up_to_it() {
     );
     // Another seed is another dataset.
     let c = tmp.path().join("c");
-    grin()
-        .args(["dataset", "bos", "-o"])
-        .arg(&c)
-        .args(["--count", "2", "--seed", "12", "--size", SIZE])
-        .output()
-        .expect("run grin");
+    run_ok(
+        grin()
+            .args(["dataset", "bos", "-o"])
+            .arg(&c)
+            .args(["--count", "2", "--seed", "12", "--size", SIZE]),
+    );
     assert_ne!(
         std::fs::read(c.join("bos_000000.exr")).expect("test step"),
         files(&a)["bos_000000.exr"]
@@ -137,17 +129,7 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
     for signal in ["TERM", "KILL"] {
         let _ = std::fs::remove_dir_all(&dir);
         // Each commit waits a little, so the run is stopped in the middle of writing.
-        let mut child = grin()
-            .args(["dataset", "bos", "-o"])
-            .arg(&dir)
-            .args([
-                "--count",
-                &COUNT.to_string(),
-                "--seed",
-                "11",
-                "--size",
-                SIZE,
-            ])
+        let mut child = dataset(&dir)
             .env("GRIN_TEST_PAUSE_BEFORE_COMMIT_MS", "20")
             .stdout(Stdio::null())
             .stderr(Stdio::null())

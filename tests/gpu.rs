@@ -4,7 +4,7 @@
 //! which turns them into a loud SKIPPED line.
 
 mod common;
-use common::{assert_failed, gpu_required, grin, json, run_ok, scenes, stderr};
+use common::{assert_failed, gpu_required, grin, json, render_with, run_ok, scenes, stderr};
 
 #[test]
 fn render_gpu_writes_exr_png_and_summary() {
@@ -13,23 +13,19 @@ fn render_gpu_writes_exr_png_and_summary() {
     }
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("lens.exr");
-    let o = run_ok(
-        grin()
-            .args([
-                "render",
-                "--backend",
-                "gpu",
-                "--size",
-                "64x36",
-                "--spp",
-                "1",
-                "--json",
-                "-o",
-            ])
-            .arg(&out)
-            .arg(scenes().join("luneburg.toml")),
-    );
-    let summary = json(&o);
+    let summary = json(&render_with(
+        &scenes().join("luneburg.toml"),
+        &out,
+        &[
+            "--backend",
+            "gpu",
+            "--size",
+            "64x36",
+            "--spp",
+            "1",
+            "--json",
+        ],
+    ));
     assert_eq!(summary["backend"], "gpu", "{summary}");
     assert!(
         !summary["adapter"].as_str().unwrap_or("").is_empty(),
@@ -119,21 +115,11 @@ fn rays_past_lavapipes_loop_limit_are_named_as_such() {
     }
     let dir = tempfile::tempdir().expect("tmp");
     let path = common::long_luneburg_scene(dir.path());
-    let o = run_ok(
-        grin()
-            .args([
-                "render",
-                "--backend",
-                "gpu",
-                "--size",
-                "6x4",
-                "--json",
-                "-o",
-            ])
-            .arg(dir.path().join("long.exr"))
-            .arg(&path),
-    );
-    let v = json(&o);
+    let v = json(&render_with(
+        &path,
+        &dir.path().join("long.exr"),
+        &["--backend", "gpu", "--size", "6x4", "--json"],
+    ));
     let adapter = v["adapter"].as_str().expect("adapter").to_string();
     let errors = v["status_counts"]["error"].as_u64().expect("error count");
     let warned = v["warnings"]

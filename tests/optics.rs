@@ -7,7 +7,8 @@
 mod common;
 use common::{
     assert_err, assert_failed, assert_ok as ok, bos_plume_scene, exr_channels as channels,
-    gpu_or_skip, grin, grin_args as run, render, render_json, scenes, stderr, stdout,
+    gpu_or_skip, grin, grin_args as run, read_table, render, render_json, render_with, scenes,
+    stderr, stdout, vec3,
 };
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -21,12 +22,13 @@ const S: f64 = 0.25;
 const WIDTH: u32 = 48;
 const HEIGHT: u32 = 36;
 
-fn camera() -> PinholeCamera {
+/// A pinhole camera at `position` looking at `look_at` (up +y), WIDTH x HEIGHT.
+fn pinhole(position: [f64; 3], look_at: [f64; 3], fov_y_deg: f64) -> PinholeCamera {
     let c = grin_scene::Camera {
-        position: [0.05, 0.03, -6.0],
-        look_at: [0.05, 0.03, 0.0],
+        position,
+        look_at,
         up: [0.0, 1.0, 0.0],
-        fov_y_deg: 9.0,
+        fov_y_deg,
         focal_length_mm: None,
         sensor_height_mm: None,
         pixel_pitch_um: None,
@@ -34,6 +36,10 @@ fn camera() -> PinholeCamera {
         focus_distance: None,
     };
     PinholeCamera::new(&c, WIDTH, HEIGHT).expect("camera")
+}
+
+fn camera() -> PinholeCamera {
+    pinhole([0.05, 0.03, -6.0], [0.05, 0.03, 0.0], 9.0)
 }
 
 /// A scene with one Gaussian plume (n = 1 - a exp(-r^2 / s^2)) at the origin, seen by
@@ -268,14 +274,7 @@ fn interferogram_phase_is_the_line_integral_of_the_index() {
                 continue;
             }
             let out = dir.path().join(format!("fringes-{backend}.exr"));
-            let o = run(&[
-                "render",
-                "--backend",
-                backend,
-                "-o",
-                out.to_str().expect("utf8"),
-                scene.to_str().expect("utf8"),
-            ]);
+            let o = render(&scene, &out, backend);
             ok(&o);
             let (_, ch) = channels(&out);
             let (mut worst, mut deepest, mut centre) = (0.0f64, 0.0f64, 0.0f64);
@@ -344,20 +343,10 @@ fn example_interferogram_agrees_across_backends() {
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");
-    let scene =
-        scenes().join("optics/interferogram.toml");
+    let scene = scenes().join("optics/interferogram.toml");
     let phase = |backend: &str| {
         let out = dir.path().join(format!("{backend}.exr"));
-        let o = run(&[
-            "render",
-            "--backend",
-            backend,
-            "--size",
-            "64x64",
-            "-o",
-            out.to_str().expect("utf8"),
-            scene.to_str().expect("utf8"),
-        ]);
+        let o = render_with(&scene, &out, &["--backend", backend, "--size", "64x64"]);
         ok(&o);
         channels(&out).1["phase_waves"].clone()
     };
@@ -404,27 +393,9 @@ plane = {{ point = [0.0, 0.0, 3.0], normal = [0.0, 0.2, -1.0] }}
     )
     .expect("scene");
     let out = d.join("lens.exr");
-    ok(&run(&[
-        "render",
-        "--backend",
-        "cpu",
-        "-o",
-        out.to_str().expect("utf8"),
-        scene.to_str().expect("utf8"),
-    ]));
+    ok(&render(&scene, &out, "cpu"));
     let (_, ch) = channels(&out);
-    let c = grin_scene::Camera {
-        position: [0.1, 0.05, -5.0],
-        look_at: [0.0, 0.0, 0.0],
-        up: [0.0, 1.0, 0.0],
-        fov_y_deg: 25.0,
-        focal_length_mm: None,
-        sensor_height_mm: None,
-        pixel_pitch_um: None,
-        f_number: None,
-        focus_distance: None,
-    };
-    let cam = PinholeCamera::new(&c, WIDTH, HEIGHT).expect("camera");
+    let cam = pinhole([0.1, 0.05, -5.0], [0.0, 0.0, 0.0], 25.0);
     let plane = Plane::new(
         &grin_scene::PlaneSpec {
             point: [0.0, 0.0, 3.0],
@@ -452,25 +423,13 @@ plane = {{ point = [0.0, 0.0, 3.0], normal = [0.0, 0.2, -1.0] }}
         "-o",
         traced.to_str().expect("utf8"),
     ]));
-    let text = std::fs::read_to_string(&traced).expect("table");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |row: &[&str], name: &str| -> f64 {
-        row[header.iter().position(|h| *h == name).expect("column")]
-            .parse()
-            .expect("number")
-    };
     let (mut worst, mut bent) = (0.0f64, 0);
-    for (idx, line) in lines.enumerate() {
-        let row: Vec<&str> = line.split(',').collect();
+    for (idx, row) in read_table(&traced).iter().enumerate() {
         let (i, j) = ((idx as u32) % WIDTH, (idx as u32) / WIDTH);
-        let status = row[header.iter().position(|h| *h == "status").expect("status")];
+        let status = row["status"].as_str();
         let d0 = cam.primary_ray(i, j, 0.5, 0.5);
         let (p, q) = match status {
-            "exited" => (
-                DVec3::new(col(&row, "px"), col(&row, "py"), col(&row, "pz")),
-                DVec3::new(col(&row, "qx"), col(&row, "qy"), col(&row, "qz")),
-            ),
+            "exited" => (vec3(row, ["px", "py", "pz"]), vec3(row, ["qx", "qy", "qz"])),
             "missed" => (cam.origin, d0),
             other => panic!("pixel {i},{j}: {other}"),
         };
@@ -870,22 +829,21 @@ fn bos_images_go_through_the_lens() {
 fn one_scene_gives_its_optics_output_and_its_beauty() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
-    let scene =
-        scenes().join("optics/displacement.toml");
+    let scene = scenes().join("optics/displacement.toml");
     let (out, beauty) = (d.join("disp.exr"), d.join("plate.exr"));
-    let o = run(&[
-        "render",
-        scene.to_str().expect("utf8"),
-        "-o",
-        out.to_str().expect("utf8"),
-        "--beauty",
-        beauty.to_str().expect("utf8"),
-        "--backend",
-        "cpu",
-        "--size",
-        "48x48",
-        "--json",
-    ]);
+    let o = render_with(
+        &scene,
+        &out,
+        &[
+            "--beauty",
+            beauty.to_str().expect("utf8"),
+            "--backend",
+            "cpu",
+            "--size",
+            "48x48",
+            "--json",
+        ],
+    );
     ok(&o);
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert_eq!(v.as_array().map(Vec::len), Some(2), "{v}");
@@ -902,36 +860,31 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
     )
     .expect("write");
     let alone = d.join("alone.exr");
-    ok(&run(&[
-        "render",
-        bare.to_str().expect("utf8"),
-        "-o",
-        alone.to_str().expect("utf8"),
-        "--backend",
-        "cpu",
-        "--size",
-        "48x48",
-    ]));
+    ok(&render_with(
+        &bare,
+        &alone,
+        &["--backend", "cpu", "--size", "48x48"],
+    ));
     let (_, want) = channels(&alone);
     for ch in ["R", "G", "B", "aov.exit_dir.X", "aov.opd"] {
         assert_eq!(plate[ch], want[ch], "channel {ch}");
     }
     // A sequence: each frame's output and its beauty beside it.
-    let o = run(&[
-        "render",
-        scene.to_str().expect("utf8"),
-        "-o",
-        d.join("st.####.exr").to_str().expect("utf8"),
-        "--beauty",
-        d.join("plate.####.exr").to_str().expect("utf8"),
-        "--frames",
-        "0..1",
-        "--backend",
-        "cpu",
-        "--size",
-        "16x16",
-        "--json",
-    ]);
+    let o = render_with(
+        &scene,
+        &d.join("st.####.exr"),
+        &[
+            "--beauty",
+            d.join("plate.####.exr").to_str().expect("utf8"),
+            "--frames",
+            "0..1",
+            "--backend",
+            "cpu",
+            "--size",
+            "16x16",
+            "--json",
+        ],
+    );
     ok(&o);
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert_eq!(v.as_array().map(Vec::len), Some(4), "{v}");
@@ -945,23 +898,13 @@ fn one_scene_gives_its_optics_output_and_its_beauty() {
     }
     // Refused: a scene with no [optics], and a beauty named as the output.
     let lens = scenes().join("luneburg.toml");
-    let o = run(&[
-        "render",
-        lens.to_str().expect("utf8"),
-        "-o",
-        d.join("l.exr").to_str().expect("utf8"),
-        "--beauty",
-        d.join("lb.exr").to_str().expect("utf8"),
-    ]);
+    let o = render_with(
+        &lens,
+        &d.join("l.exr"),
+        &["--beauty", d.join("lb.exr").to_str().expect("utf8")],
+    );
     assert_err(&o, "has no [optics] output");
-    let o = run(&[
-        "render",
-        scene.to_str().expect("utf8"),
-        "-o",
-        out.to_str().expect("utf8"),
-        "--beauty",
-        out.to_str().expect("utf8"),
-    ]);
+    let o = render_with(&scene, &out, &["--beauty", out.to_str().expect("utf8")]);
     assert_err(&o, "needs a name of its own");
 }
 
@@ -979,16 +922,7 @@ fn optics_errors_name_the_scene() {
     )
     .expect("write");
     let out = dir.path().join("beam.exr");
-    let o = run(&[
-        "render",
-        scene.to_str().expect("utf8"),
-        "-o",
-        out.to_str().expect("utf8"),
-        "--backend",
-        "gpu",
-        "--size",
-        "512x512",
-    ]);
+    let o = render_with(&scene, &out, &["--backend", "gpu", "--size", "512x512"]);
     let err = assert_failed(&o);
     assert!(
         err.contains(&format!(

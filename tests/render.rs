@@ -3,7 +3,10 @@
 //! errors before any work, and no broken output when a render is interrupted.
 
 mod common;
-use common::{assert_err, assert_failed, assert_ok, grin, json, run_ok, scenes, stderr};
+use common::{
+    assert_err, assert_failed, assert_ok, grin, json, read_table, render_with, run_ok, scenes,
+    stderr, vec3,
+};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -29,16 +32,9 @@ fn png_size(path: &Path) -> (u32, u32) {
     (be(16), be(20))
 }
 
+/// `grin render SCENE -o OUT --backend cpu EXTRA`.
 fn run_render(scene: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
-    grin()
-        .arg("render")
-        .arg(scene)
-        .arg("-o")
-        .arg(out)
-        .args(["--backend", "cpu"])
-        .args(extra)
-        .output()
-        .expect("grin runs")
+    render_with(scene, out, &[&["--backend", "cpu"], extra].concat())
 }
 
 #[test]
@@ -187,41 +183,22 @@ fn luneburg_scene_focuses_as_the_exact_solution_predicts() {
             .arg("-o")
             .arg(&traced),
     );
-    let text = std::fs::read_to_string(&traced).expect("trace output");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .unwrap_or_else(|| panic!("column {name}"))
-    };
-    let (ip, iq, is) = (col("px"), col("qx"), col("status"));
-    for (line, &(px, py)) in lines.zip(&pixels) {
-        let f: Vec<&str> = line.split(',').collect();
-        let v = |i: usize| {
-            DVec3::new(
-                f[i].parse().expect("num"),
-                f[i + 1].parse().expect("num"),
-                f[i + 2].parse().expect("num"),
-            )
-        };
-        assert_eq!(f[is], "exited", "pixel ({px}, {py})");
+    for (row, &(px, py)) in read_table(&traced).iter().zip(&pixels) {
+        let (p, q) = (vec3(row, ["px", "py", "pz"]), vec3(row, ["qx", "qy", "qz"]));
+        assert_eq!(row["status"], "exited", "pixel ({px}, {py})");
         let d = cam.primary_ray(px, py, 0.5, 0.5);
         let (p_exact, q_exact) = luneburg_exit(c, radius, cam.origin, d).expect("hits the lens");
         assert!(
-            (v(ip) - p_exact).length() < 1e-3,
-            "pixel ({px}, {py}): exit {} vs {p_exact}",
-            v(ip)
+            (p - p_exact).length() < 1e-3,
+            "pixel ({px}, {py}): exit {p} vs {p_exact}"
         );
         assert!(
-            v(iq).angle_between(q_exact) < 2e-3,
-            "pixel ({px}, {py}): direction {} vs {q_exact}",
-            v(iq)
+            q.angle_between(q_exact) < 2e-3,
+            "pixel ({px}, {py}): direction {q} vs {q_exact}"
         );
         // The render agrees with the trace for the same ray.
         let aov = frame.pixels[(py * w + px) as usize].exit_dir.map(f64::from);
-        assert!(DVec3::from(aov).angle_between(v(iq)) < 1e-5);
+        assert!(DVec3::from(aov).angle_between(q) < 1e-5);
     }
 }
 

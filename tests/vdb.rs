@@ -4,7 +4,10 @@
 
 mod common;
 use common::rng::Rng;
-use common::{assert_failed, assert_ok, grin, grin_args as run, json, run_ok, stdout};
+use common::{
+    Row, assert_failed, assert_ok, bake_with, grin, grin_args as run, json, num, read_table,
+    run_ok, stderr, stdout,
+};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -96,7 +99,7 @@ fn info_lists_grids_with_transform_and_half_flag() {
     assert!(text.contains("grid `temperature`: float"), "{text}");
 
     let out = run(&["info", data("test/nonfinite.vdb").to_str().expect("utf8")]);
-    assert!(String::from_utf8_lossy(&out.stdout).contains("NaN/Inf voxels: 4"));
+    assert!(stdout(&out).contains("NaN/Inf voxels: 4"));
 }
 
 #[test]
@@ -156,21 +159,24 @@ height = 8
     p
 }
 
+/// A VDB field's parameters: `mapping` of the grid's values in world units, non-finite
+/// values refused, ambient 1, within `bounds` and under `max_bytes`, placed as the file
+/// says.
+fn field_params(mapping: Mapping, bounds: Bounds, max_bytes: u64) -> VdbFieldParams {
+    VdbFieldParams {
+        mapping,
+        units: 1.0,
+        non_finite: NonFinitePolicy::Reject,
+        bounds,
+        ambient: Some(1.0),
+        max_bytes,
+        placement: grin_field::vdb::IDENTITY,
+    }
+}
+
 const GD: &str = "{ gladstone-dale = {} }";
 /// n of air at 293.15 K, 101325 Pa (what GD maps the background to).
 const N_AIR_20C: f64 = 1.000_272_131;
-
-/// `grin bake SCENE -o OUT EXTRA`.
-fn bake_with(scene: &Path, out: &Path, extra: &[&str]) -> Output {
-    grin()
-        .arg("bake")
-        .arg(scene)
-        .arg("-o")
-        .arg(out)
-        .args(extra)
-        .output()
-        .expect("run grin")
-}
 
 /// A quick bake: `--resolution 24 --error 0.5`.
 fn bake(scene: &Path, out: &Path) -> Output {
@@ -199,9 +205,9 @@ fn bake_of_the_example_vdb_scene_succeeds() {
     let out = bake_with(&data("fire-haze.toml"), &capped, &["--max-memory", "1k"]);
     fails_cleanly(&out, "data box", Some(&capped));
     assert!(
-        String::from_utf8_lossy(&out.stderr).contains("memory cap of 1024 bytes"),
+        stderr(&out).contains("memory cap of 1024 bytes"),
         "{}",
-        String::from_utf8_lossy(&out.stderr)
+        stderr(&out)
     );
 }
 
@@ -212,21 +218,24 @@ fn bake_refuses_bad_vdb_input_with_clear_errors() {
     let out = d.join("out.grinf");
     let blender = data("blender_fire.vdb");
 
-    let s = vdb_scene(d, &blender, "smoke", GD, "", N_AIR_20C);
-    fails_cleanly(
-        &bake(&s, &out),
+    // A scene over `vdb`'s `grid` (Gladstone-Dale, air's ambient) whose bake is refused
+    // with `needle`, writing nothing.
+    let refused = |vdb: &Path, grid: &str, needle: &str| {
+        let s = vdb_scene(d, vdb, grid, GD, "", N_AIR_20C);
+        let o = bake(&s, &out);
+        fails_cleanly(&o, needle, Some(&out));
+        o
+    };
+    let e = refused(
+        &blender,
+        "smoke",
         "grid `smoke` not found; available grids:",
-        Some(&out),
     );
-    let e = bake(&s, &out);
-    assert!(String::from_utf8_lossy(&e.stderr).contains("temperature (float)"));
-
-    let s = vdb_scene(d, &data("houdini_pyro.vdb"), "vel", GD, "", N_AIR_20C);
-    fails_cleanly(&bake(&s, &out), "has value type `vec3s`", Some(&out));
+    assert!(stderr(&e).contains("temperature (float)"));
+    refused(&data("houdini_pyro.vdb"), "vel", "has value type `vec3s`");
 
     let nf = data("test/nonfinite.vdb");
-    let s = vdb_scene(d, &nf, "temperature", GD, "", N_AIR_20C);
-    fails_cleanly(&bake(&s, &out), "4 NaN/Inf voxel(s)", Some(&out));
+    refused(&nf, "temperature", "4 NaN/Inf voxel(s)");
     let s = vdb_scene(
         d,
         &nf,
@@ -237,64 +246,37 @@ fn bake_refuses_bad_vdb_input_with_clear_errors() {
     );
     let ok = bake(&s, &out);
     assert_ok(&ok);
-    let report = String::from_utf8_lossy(&ok.stdout);
+    let report = stdout(&ok);
     assert!(
         report.contains("4 NaN/Inf voxels replaced by ambient"),
         "{report}"
     );
     std::fs::remove_file(&out).expect("remove");
 
-    let s = vdb_scene(
-        d,
-        &data("test/empty_grid.vdb"),
-        "temperature",
-        GD,
-        "",
-        N_AIR_20C,
-    );
-    fails_cleanly(&bake(&s, &out), "the grid is empty", Some(&out));
-
-    let s = vdb_scene(
-        d,
-        &data("test/huge_bbox.vdb"),
-        "temperature",
-        GD,
-        "",
-        N_AIR_20C,
-    );
-    fails_cleanly(&bake(&s, &out), "more than the memory cap", Some(&out));
-
-    let s = vdb_scene(
-        d,
-        &data("test/frustum.vdb"),
-        "temperature",
-        GD,
-        "",
-        N_AIR_20C,
-    );
-    fails_cleanly(&bake(&s, &out), "non-linear transform", Some(&out));
-
-    let s = vdb_scene(d, &d.join("nope.vdb"), "temperature", GD, "", N_AIR_20C);
-    fails_cleanly(&bake(&s, &out), "no such file", Some(&out));
+    for (file, needle) in [
+        ("test/empty_grid.vdb", "the grid is empty"),
+        ("test/huge_bbox.vdb", "more than the memory cap"),
+        ("test/frustum.vdb", "non-linear transform"),
+    ] {
+        refused(&data(file), "temperature", needle);
+    }
+    refused(&d.join("nope.vdb"), "temperature", "no such file");
 
     let truncated = d.join("truncated.vdb");
     let bytes = std::fs::read(&blender).expect("fixture");
     std::fs::write(&truncated, &bytes[..bytes.len() - 1000]).expect("write");
-    let s = vdb_scene(d, &truncated, "temperature", GD, "", N_AIR_20C);
-    fails_cleanly(&bake(&s, &out), "truncated or corrupt", Some(&out));
+    refused(&truncated, "temperature", "truncated or corrupt");
 
     let empty = d.join("empty.vdb");
     std::fs::write(&empty, b"").expect("write");
-    let s = vdb_scene(d, &empty, "temperature", GD, "", N_AIR_20C);
-    fails_cleanly(&bake(&s, &out), "the file is empty", Some(&out));
+    refused(&empty, "temperature", "the file is empty");
 
     let random = d.join("random.vdb");
     let junk: Vec<u8> = (0u32..4096)
         .map(|i| (i.wrapping_mul(2_246_822_519) >> 9) as u8)
         .collect();
     std::fs::write(&random, junk).expect("write");
-    let s = vdb_scene(d, &random, "temperature", GD, "", N_AIR_20C);
-    fails_cleanly(&bake(&s, &out), "not a readable OpenVDB file", Some(&out));
+    refused(&random, "temperature", "not a readable OpenVDB file");
 
     // Gladstone-Dale background (air at 20 C) against a vacuum ambient index.
     let s = vdb_scene(d, &blender, "temperature", GD, "", 1.0);
@@ -376,15 +358,11 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
         c,
         bounds,
     };
-    let params = VdbFieldParams {
-        mapping: Mapping::Index { delta: true },
-        units: 1.0,
-        non_finite: NonFinitePolicy::Reject,
+    let params = field_params(
+        Mapping::Index { delta: true },
         bounds,
-        ambient: Some(1.0),
-        max_bytes: DEFAULT_MAX_DENSE_BYTES,
-        placement: grin_field::vdb::IDENTITY,
-    };
+        DEFAULT_MAX_DENSE_BYTES,
+    );
     let vdb = VdbField::load(&data("test/gaussian.vdb"), "delta_n", &params).expect("load");
 
     // Point samples: n and grad n (deterministic pseudo-random points in the ball).
@@ -550,16 +528,15 @@ fn vdb_field_places_voxels_at_their_world_positions() {
         .collect();
     let (k, units) = (1e-3, 3.0);
     let params = VdbFieldParams {
-        mapping: Mapping::Linear { k },
         units,
-        non_finite: NonFinitePolicy::Reject,
-        bounds: Bounds::Sphere {
-            center: DVec3::ZERO,
-            radius: 10.0,
-        },
-        ambient: Some(1.0),
-        max_bytes: DEFAULT_MAX_DENSE_BYTES,
-        placement: grin_field::vdb::IDENTITY,
+        ..field_params(
+            Mapping::Linear { k },
+            Bounds::Sphere {
+                center: DVec3::ZERO,
+                radius: 10.0,
+            },
+            DEFAULT_MAX_DENSE_BYTES,
+        )
     };
     let field = VdbField::load(&data("test/aniso.vdb"), "value", &params).expect("load");
     let nx = dims[0] as usize;
@@ -647,18 +624,10 @@ step = {{ fixed = 0.01 }}
         traced.to_str().expect("utf8"),
     ]);
     assert_ok(&out);
-    let text = std::fs::read_to_string(&traced).expect("table");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let row: Vec<&str> = lines.next().expect("row").split(',').collect();
-    let col = |name: &str| {
-        let i = header.iter().position(|h| *h == name).expect("column");
-        row[i].parse::<f64>().expect("number")
-    };
-    assert_eq!(
-        row[header.iter().position(|h| *h == "status").expect("status")],
-        "exited"
-    );
+    let rows = read_table(&traced);
+    let row = &rows[0];
+    let col = |name: &str| num(row, name);
+    assert_eq!(row["status"], "exited");
     let (opl, length) = (col("opl"), col("length"));
     assert!((length - 0.6).abs() < 1e-9, "length {length}");
     let n = opl / length;
@@ -860,7 +829,7 @@ jitter = false
         .output()
         .expect("grin");
     fails_cleanly(&o, "frame 2:", None);
-    assert!(String::from_utf8_lossy(&o.stderr).contains("blob_0002.vdb"));
+    assert!(stderr(&o).contains("blob_0002.vdb"));
     assert!(!dir.path().join("again.0001.exr").exists());
 
     // The pattern without --frames: what to do, not "no such file".
@@ -969,7 +938,7 @@ step = {{ fixed = 0.004 }}
     let plain = table("rays.csv", &rays);
     let moved_rays: Vec<_> = rays.iter().map(|(o, v)| (shift(*o), turn(*v))).collect();
     let moved_table = table("moved-rays.csv", &moved_rays);
-    let trace = |scene: &Path, rays: &Path| -> Vec<std::collections::HashMap<String, String>> {
+    let trace = |scene: &Path, rays: &Path| -> Vec<Row> {
         let out_csv = d.join(format!(
             "{}.out.csv",
             scene.file_stem().expect("stem").to_string_lossy()
@@ -983,26 +952,7 @@ step = {{ fixed = 0.004 }}
             out_csv.to_str().expect("utf8"),
         ]);
         assert_ok(&out);
-        let text = std::fs::read_to_string(&out_csv).expect("table");
-        let mut lines = text.lines();
-        let header: Vec<String> = lines
-            .next()
-            .expect("header")
-            .split(',')
-            .map(str::to_owned)
-            .collect();
-        lines
-            .map(|l| {
-                header
-                    .iter()
-                    .cloned()
-                    .zip(l.split(',').map(str::to_owned))
-                    .collect()
-            })
-            .collect()
-    };
-    let num = |row: &std::collections::HashMap<String, String>, k: &str| -> f64 {
-        row[k].parse().expect("number")
+        read_table(&out_csv)
     };
     let a = trace(&y_up, &plain);
     let b = trace(&z_up, &plain);
@@ -1129,7 +1079,7 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
     assert_eq!(v["source_limited"], true, "{v}");
     assert!(capped.exists());
     assert_eq!(v["memory_capped"], true, "{v}");
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(
         err.contains("not met by the grids tried at and past the source's own voxel size")
             && err.contains("--max-memory above"),
@@ -1180,7 +1130,7 @@ fn a_sharp_blob_the_budget_cannot_resolve_says_how_to_go_finer() {
     assert_eq!(v["memory_capped"], false, "{v}");
     assert!(out_file.exists());
     let res = v["resolution"].as_u64().expect("resolution");
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(
         err.contains("the search stops 4x finer than the source's voxels")
             && err.contains(&format!("(2x: {})", 2 * (res - 1) + 1))
@@ -1191,18 +1141,14 @@ fn a_sharp_blob_the_budget_cannot_resolve_says_how_to_go_finer() {
 
 /// n = 1 + 1e-4 * value in the box [lo, hi]^3 (world), ambient 1, under `max_bytes`.
 fn temperature_in_box(lo: f64, hi: f64, max_bytes: u64) -> VdbFieldParams {
-    VdbFieldParams {
-        mapping: Mapping::Linear { k: 1e-4 },
-        units: 1.0,
-        non_finite: NonFinitePolicy::Reject,
-        bounds: Bounds::Box {
+    field_params(
+        Mapping::Linear { k: 1e-4 },
+        Bounds::Box {
             min: DVec3::splat(lo),
             max: DVec3::splat(hi),
         },
-        ambient: Some(1.0),
         max_bytes,
-        placement: grin_field::vdb::IDENTITY,
-    }
+    )
 }
 
 /// A cache whose active box is its whole domain (a 200^3 fill of background-valued active
@@ -1369,14 +1315,14 @@ height = 8
     };
     let (o, first) = render("1..3");
     fails_cleanly(&o, "frame 2: ", Some(&first));
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = stderr(&o);
     assert!(
         err.contains("s_0002.vdb: grid `delta_n` not found; available grids: dn"),
         "{err}"
     );
     let (o, _) = render("3..3");
     fails_cleanly(&o, "frame 3: ", None);
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = stderr(&o);
     assert!(
         err.contains("s_0003.vdb: grid `delta_n` has value type `vec3s`"),
         "{err}"

@@ -170,6 +170,38 @@ impl TestDir {
     }
 }
 
+/// One row of a `grin trace` table: each field by its column's name.
+pub type Row = HashMap<String, String>;
+
+/// The rows of the CSV table `grin trace` wrote to `path`.
+pub fn read_table(path: &Path) -> Vec<Row> {
+    let text = std::fs::read_to_string(path).expect("trace output");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .map(|h| (*h).to_owned())
+                .zip(l.split(',').map(str::to_owned))
+                .collect()
+        })
+        .collect()
+}
+
+/// The number in `row`'s column `name`.
+pub fn num(row: &Row, name: &str) -> f64 {
+    row.get(name)
+        .unwrap_or_else(|| panic!("no column {name}: {row:?}"))
+        .parse()
+        .unwrap_or_else(|e| panic!("column {name} ({e}): {row:?}"))
+}
+
+/// The vector in `row`'s columns `names`.
+pub fn vec3(row: &Row, names: [&str; 3]) -> glam::DVec3 {
+    glam::DVec3::from_array(names.map(|k| num(row, k)))
+}
+
 /// Every channel of an EXR's first layer by name, and the layer's width.
 pub fn exr_channels(path: &Path) -> (usize, HashMap<String, Vec<f64>>) {
     use exr::prelude::*;
