@@ -212,12 +212,7 @@ fn sigterm_in_the_write_phase_leaves_the_old_pair_and_no_temp_files() {
         .expect("kill");
     assert!(killed.success());
     let out = child.wait_with_output().expect("wait");
-    assert_eq!(
-        out.status.code(),
-        Some(130),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     assert!(
         temp_files(dir.path()).is_empty(),
         "{:?}",
