@@ -2,8 +2,9 @@
 //! list its grids and metadata, read scalar and vec3 grids into dense arrays with their
 //! `world_from_index` transform, and write float/vec3 grids with metadata.
 //!
-//! This crate is the only place in grin with `unsafe` code; all of it is in this file and
-//! in [`ffi`], which loads the shim. Every shim call returns a status code and message (the
+//! This crate holds grin's FFI `unsafe` code, all of it in this file and in [`ffi`], which
+//! loads the shim (the other `unsafe` in grin: grin-gpu's pipeline-cache load and
+//! grin-field's compiled formulas, `expr_jit`). Every shim call returns a status code and message (the
 //! shim catches every C++ exception), so errors come back as [`VdbError`].
 //!
 //! OpenVDB is not linked into the program: build.rs links the shim as a shared library
@@ -12,9 +13,7 @@
 //! OpenVDB's symbols, and a machine without OpenVDB gets [`VdbError::Unavailable`] from
 //! those two calls rather than a program that cannot start.
 //!
-//! Why one file of ~1000 lines: it holds all of grin's FFI `unsafe` (the only other
-//! `unsafe` is the driver's pipeline-cache load in grin-gpu); every FFI call and its
-//! safety argument stays in one place to be read (and reviewed) together.
+//! One concept, one file: every FFI call and its safety argument, reviewed together.
 
 #![expect(
     unsafe_code,

@@ -14,8 +14,7 @@
 //!   truth is that it never leaves or meets an invalid field. A silent cell is a confident
 //!   wrong answer: the thing this matrix exists to find.
 //!
-//! Why ~650 lines: the hard cases are data (one block each, with its truth), and the
-//! classification needs all of them in view.
+//! One concept, one file: the hard cases are data, and their classification sees them all.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};

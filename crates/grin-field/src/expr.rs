@@ -11,9 +11,7 @@
 //! parse runs on a thread with its own large stack: no formula can overflow grin's stack
 //! or keep it busy for minutes.
 //!
-//! Why ~740 lines: ~400 of code (the parser's guards: size, nesting, unary minus before
-//! `^`; the big-stack parse thread; the load check and its interval proof, all serving
-//! one formula), the rest tests.
+//! One concept, one file: one formula's parse guards, load check and interval proof.
 
 use exmex::prelude::*;
 use exmex::{FloatOpsFactory, MatchLiteral, literal_matcher_from_pattern};

@@ -8,9 +8,7 @@
 //! a counterexample, others are halved along their longest side, down to
 //! [`MIN_BOX_REL`] of the bounds, where the box's centre is evaluated exactly.
 //!
-//! Why ~540 lines: the interval type, the operator table exmex needs (one enclosure per
-//! operator of its float set) and the branch and bound belong together; about 150 are
-//! tests.
+//! One concept, one file: the interval type, exmex's operator enclosures, branch and bound.
 
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::str::FromStr;

@@ -38,9 +38,7 @@
 //! sent more samples across brick edges, 16 made fire-haze's bake 1.33 -> 1.7 s). `max_bytes` caps the bricks
 //! kept, and the box itself at one voxel a byte (reading costs time for every voxel).
 //!
-//! Why ~1220 lines of code in one file (tests after): the mapping, the crop to the active
-//! region and the interpolation of one VDB grid share their state; split, each part would
-//! need the others' internals.
+//! One concept, one file: mapping, crop and interpolation of a grid share their state.
 
 use std::path::{Path, PathBuf};
 

@@ -10,8 +10,7 @@
 //! flips) and ~50x on p99, and still catch any systematic error: a wrong checker
 //! orientation gave mean 0.1, p99 0.49.
 //!
-//! Why ~560 lines: one test per scene feature the two backends must agree on, sharing
-//! the comparison helpers above.
+//! One concept, one file: a test per feature both backends must agree on, one comparison.
 
 mod harness;
 

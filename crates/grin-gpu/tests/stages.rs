@@ -13,8 +13,7 @@
 //! what a changed constant, floor or coefficient does (docs/architecture.md, "Twins and
 //! what keeps them equal", lists the one-line changes shown to fail).
 //!
-//! Why ~710 lines: one test per WGSL stage, each with its CPU twin's call sequence
-//! written out, sharing the state generator and the report.
+//! One concept, one file: a test per WGSL stage beside its CPU twin's call sequence.
 
 #![allow(clippy::unwrap_used)]
 

@@ -1,7 +1,7 @@
 //! Scene parsing and validation errors: one test per kind of error, asserting on the
 //! message text (file:line:column: key: reason).
 //!
-//! Why ~510 lines: one test per kind of scene error, each a few lines.
+//! One concept, one file: a test per kind of scene error, each a few lines.
 
 use std::path::Path;
 

@@ -2,8 +2,7 @@
 //! Vectors are `[f64; 3]` in world space; lengths are world units (metres where a
 //! scene says so).
 //!
-//! Why ~660 lines: one type per TOML table with its serde attributes and defaults, the
-//! scene contract in one place (no logic).
+//! One concept, one file: a type per TOML table, the scene contract in one place.
 
 use serde::{Deserialize, Serialize};
 

@@ -2,9 +2,7 @@
 //! the chosen integrator and step policy, find where the ray leaves, refract out (Fresnel
 //! weight, total internal reflection sends it back in), and account for the optical path.
 //!
-//! Why ~510 lines: entry, the step loop, straight flights, the tunnelling check and the
-//! exit search share the ray's state and its compensated sums; split, each part would
-//! take that state apart.
+//! One concept, one file: the parts of a ray's march share its state and compensated sums.
 
 use glam::DVec3;
 use grin_field::{Bounds, FieldSample, IndexField, Real, Vec3Like};

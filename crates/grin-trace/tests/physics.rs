@@ -2,7 +2,7 @@
 //! period, linear n^2 parabolas, convergence orders, invariants, refraction at a
 //! constant-index ball and box, exit points on the surface, the f32 path and bad input.
 //!
-//! Why ~860 lines: one test per exact solution or invariant, each self-contained.
+//! One concept, one file: a test per exact solution or invariant, each self-contained.
 
 mod common;
 

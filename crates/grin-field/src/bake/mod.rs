@@ -6,8 +6,7 @@
 //! random points inside the medium, relative to the field's delta_n range
 //! max |n - n_ambient| over the grid.
 //!
-//! Why ~670 lines: the resolution search, the crop and the error measurement are one
-//! policy and call each other; the GPU's variant of the policy is device.rs.
+//! One concept, one file: resolution search, crop and error measurement are one policy.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;

@@ -8,9 +8,7 @@
 //! world unit); voxel index `i + nx * (j + ny * k)` (x fastest). Storage is f32, or i16
 //! with a per-channel scale (value = q * scale[c]).
 //!
-//! Why ~720 lines: the sampler's hot path (trilinear and tricubic taps, the macro-cell
-//! query) reads the grid's private layout directly; layout.rs, bspline.rs and
-//! macrocell.rs hold what can stand apart.
+//! One concept, one file: the sampler's hot path reads the grid's private layout directly.
 
 pub mod bspline;
 mod layout;
