@@ -445,10 +445,7 @@ fn bake<'py>(
             scene.label
         )));
     };
-    let gradient = match medium.field {
-        grin_scene::FieldSpec::Vdb(_) => grin_field::bake::GradientMode::CentralDifference,
-        _ => grin_field::bake::GradientMode::Exact,
-    };
+    let gradient = grin_field::bake::GradientMode::for_field(&medium.field);
     let opts = bake_options(resolution, error_budget, interp, max_memory, gradient)?;
     let field = py
         .detach(|| grin_field::build_field(medium, &scene.dir))

@@ -7,7 +7,6 @@ use std::sync::Mutex;
 use anyhow::Context;
 use grin_field::bake::{self, BakeOptions, BakeReport, GradientMode};
 use grin_field::baked::{Interp, Storage};
-use grin_scene::FieldSpec;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin bake`.
@@ -182,7 +181,7 @@ fn bake_one(
             StorageArg::I16 => Storage::I16,
         }),
         crop: !args.no_crop,
-        gradient: gradient_mode(&medium.field),
+        gradient: GradientMode::for_field(&medium.field),
         ..Default::default()
     };
     let bar = ProgressBar::new(1);
@@ -243,14 +242,6 @@ fn bake_one(
         crate::report(to_stream, summary_text(output, &field.describe(), &report));
     }
     Ok(summary)
-}
-
-/// VDB grids have no exact gradient: difference the source at sub-voxel spacing.
-fn gradient_mode(spec: &FieldSpec) -> GradientMode {
-    match spec {
-        FieldSpec::Vdb(_) => GradientMode::CentralDifference,
-        _ => GradientMode::Exact,
-    }
 }
 
 /// The summary of a bake, a line per aspect.

@@ -65,6 +65,17 @@ pub enum GradientMode {
     CentralDifference,
 }
 
+impl GradientMode {
+    /// The mode for a scene's field: VDB grids have no exact gradient, so their source is
+    /// differenced at sub-voxel spacing; every other kind gives its own.
+    pub fn for_field(spec: &grin_scene::FieldSpec) -> Self {
+        match spec {
+            grin_scene::FieldSpec::Vdb(_) => GradientMode::CentralDifference,
+            _ => GradientMode::Exact,
+        }
+    }
+}
+
 /// What to bake and how.
 #[derive(Debug, Clone)]
 pub struct BakeOptions {
