@@ -533,12 +533,11 @@ impl Dataset {
                 angles.iter().map(|a| a[1] as f32).collect(),
             );
         }
-        let medium = sample
-            .scene
-            .medium
-            .as_ref()
+        // The field the render read, not read again (a VDB pool's file).
+        let field = rendered
+            .field
+            .clone()
             .context("a dataset sample has a medium")?;
-        let field = grin_field::build_field(medium, dir)?;
         let (gx, gy) = line_gradient(field.as_ref(), &rendered.camera);
         image.push("grad_n_line.X", gx);
         image.push("grad_n_line.Y", gy);
@@ -573,12 +572,7 @@ impl Dataset {
         } = self.render_sample(renderer, dir, index)?;
         let [exr, slice_exr, png, reference_png, json_path] = self.files(dir, index);
         let size = (image.width as usize, image.height as usize);
-        let named: Vec<(&str, Vec<f32>)> = image
-            .channels
-            .iter()
-            .map(|(n, d)| (n.as_str(), d.clone()))
-            .collect();
-        let mut staged = vec![stage_channels_exr(&exr, size, named)?];
+        let mut staged = vec![stage_channels_exr(&exr, size, image.channels)?];
         staged.push(stage_channels_exr(
             &slice_exr,
             (SLICE, SLICE),

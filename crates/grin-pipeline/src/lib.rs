@@ -194,6 +194,8 @@ pub struct Rendered {
     pub frame: Option<Frame>,
     /// The camera the frame was rendered through.
     pub camera: grin_render::camera::PinholeCamera,
+    /// The medium's field (none without a medium).
+    pub field: Option<std::sync::Arc<dyn grin_field::IndexField>>,
     pub report: Report,
 }
 
@@ -348,6 +350,7 @@ impl Renderer {
                 image,
                 frame: None,
                 camera: rs.camera,
+                field,
                 report,
             });
         }
@@ -451,6 +454,7 @@ impl Renderer {
         Ok(Rendered {
             frame: Some(frame),
             camera: rs.camera,
+            field,
             image,
             report,
         })

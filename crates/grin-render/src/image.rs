@@ -203,14 +203,14 @@ impl Frame {
 
 /// Named f32 channels of one `width` x `height` part as a lossless (ZIP) EXR, staged for
 /// [`grin_output::commit`].
-pub fn stage_channels_exr(
+pub fn stage_channels_exr<N: AsRef<str>>(
     path: &Path,
     size: (usize, usize),
-    named: Vec<(&str, Vec<f32>)>,
+    named: Vec<(N, Vec<f32>)>,
 ) -> Result<Staged, RenderError> {
     let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = named
         .into_iter()
-        .map(|(name, data)| AnyChannel::new(name, FlatSamples::F32(data)))
+        .map(|(name, data)| AnyChannel::new(name.as_ref(), FlatSamples::F32(data)))
         .collect();
     let layer = Layer::new(
         size,

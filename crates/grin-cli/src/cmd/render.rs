@@ -630,12 +630,7 @@ fn render_one(
     // in place together: a failure or a signal leaves the previous set as it was.
     let exr_to_stream = png.is_none();
     let size = (image.width as usize, image.height as usize);
-    let named = image
-        .channels
-        .iter()
-        .map(|(n, d)| (n.as_str(), d.clone()))
-        .collect();
-    let mut staged = vec![stage_channels_exr(output, size, named)?];
+    let mut staged = vec![stage_channels_exr(output, size, image.channels)?];
     let mut pngs = Vec::new();
     if let Some(png) = &png {
         for preview in &image.previews {
