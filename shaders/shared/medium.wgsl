@@ -187,15 +187,16 @@ fn estimate_step(e: ptr<function, ErrorEstimate>, t0: vec3<f32>, t1: vec3<f32>, 
     (*e).prev_h = h;
 }
 
-// At a step end inside, `depth` from the surface of outward unit `normal`: a near miss
-// if the path's closest approach is within the position error of the surface.
-fn estimate_check_approach(e: ptr<function, ErrorEstimate>, depth: f32, normal: vec3<f32>, t: vec3<f32>, n: f32, d: vec3<f32>) {
+// At a step end inside, `depth` from the surface of outward unit `normal`, after a step
+// of length h: a near miss if the path's closest approach is within the position error
+// of the surface, where the path's parabola turns within a step (ErrorEstimate::check_approach).
+fn estimate_check_approach(e: ptr<function, ErrorEstimate>, depth: f32, normal: vec3<f32>, t: vec3<f32>, n: f32, d: vec3<f32>, h: f32) {
     if (*e).near_miss || !(n > 0.0) {
         return;
     }
     let v = dot(normalize_or_zero(t), normal);
     let kappa = -dot(d, normal) / (n * n);
-    if v > 0.0 && kappa > 0.0 {
+    if v > 0.0 && kappa > 0.0 && v <= kappa * abs(h) {
         let closest = depth - v * v / (2.0 * kappa);
         if abs(closest) < POSITION_SAFETY * (*e).pos {
             (*e).near_miss = true;
@@ -852,7 +853,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 seg = accumulate(stats, state, s0, next, s1, taken.h);
                 let d1 = s1.n * s1.grad_n;
                 estimate_step(&est, state.t, next.t, s0.n * s0.grad_n, d1, taken.h, s0.n, reported_error(taken.step, d1, taken.h, false));
-                estimate_check_approach(&est, -bounds_signed_distance(next.r), bounds_normal(next.r), next.t, s1.n, d1);
+                estimate_check_approach(&est, -bounds_signed_distance(next.r), bounds_normal(next.r), next.t, s1.n, d1, taken.h);
             }
             (*stats).steps += 1u;
             hit = chord_hit(seg);

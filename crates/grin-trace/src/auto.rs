@@ -3,9 +3,11 @@
 //! pilots' reference), then with the per-length error control an unresolved `auto` runs
 //! (tightened by 10 while it misses), then with fixed steps of each candidate integrator,
 //! jumping by the measured order (at least halving) until the worst pilot's exit
-//! direction is within [`PILOT_TARGET`] of the asked error. The cheapest candidate that
-//! meets it on every pilot traces the rest; if none does, the closest, and the choice
-//! says so (`met`).
+//! direction is within [`PILOT_TARGET`] of the asked error, then bisecting back towards
+//! the last miss. The cheapest candidate that meets it on every pilot traces the rest,
+//! its rays held to a limit on their own estimates that the pilots calibrate
+//! ([`Candidate::calibration`]); if none does, the closest, and the choice says so
+//! (`met`).
 //!
 //! Why: error control pays six evaluations a dopri step and keeps its steps short enough
 //! for the worst place in the field everywhere; on a weak field a low-order method with
@@ -37,6 +39,10 @@ pub const MAX_TRIES: u32 = 10;
 /// The first fixed step tried, as a fraction of the medium's radius (the tracer's
 /// feature and length-scale caps shorten it where the field needs).
 pub const FIRST_STEP_REL: f64 = 0.5;
+/// Bisections of the steps between a candidate's last miss and its first met step.
+pub const REFINE_TRIES: u32 = 2;
+/// Steps closer than this ratio are not bisected (the cost differs by less).
+pub const REFINE_RATIO: f64 = 1.25;
 /// No fixed step shorter than this fraction of the radius is tried: error control is
 /// cheaper long before.
 pub const SHORTEST_STEP_REL: f64 = 1.0 / 4096.0;
@@ -71,6 +77,11 @@ pub struct Candidate {
     /// `RayResult::error_estimate`) where they left the medium.
     pub estimate: f64,
     pub evals_per_ray: f64,
+    /// How pessimistic the pilots' own estimates were: the least, over the pilots, of a
+    /// pilot's estimate over its measured error (that error taken at least at the
+    /// reference's own accuracy), within 1 ..= [`MAX_CALIBRATION`]. A chosen candidate
+    /// that met the request holds its rays to [`VOUCH_FACTOR`] x this x the asked error.
+    pub calibration: f64,
 }
 
 /// What a pilot's error is measured in: the knob's unit for this output.
@@ -208,6 +219,16 @@ fn px_distance(a: [f64; 2], b: [f64; 2]) -> f64 {
 /// verlet estimates were ~4,000x their pilots' measured errors.
 pub const VOUCH_FACTOR: f64 = 10.0;
 
+/// The most the pilots' calibration ([`Candidate::calibration`]) raises the limit a ray's
+/// estimate is held to. The estimates of the fourth-order methods are their third-order
+/// companions' errors, pessimistic by a factor that grows as the step shrinks: at 1e-8 rad
+/// on Maxwell's fish-eye, sharma's pilots estimated up to 4e-7 rad, so only error control
+/// (1.85x the cost of the cheapest step that met it) could be vouched for. Where every
+/// pilot's estimate is at least P times its real error, a ray is flagged when its estimate
+/// says it is over 10x the asked error at that pessimism; the cap bounds how far over a
+/// ray less pessimistic than every pilot can pass.
+pub const MAX_CALIBRATION: f64 = 30.0;
+
 /// A pixel output's accuracy is at most this fraction of the largest displacement the
 /// pilots' reference shows: heat haze that moves the background by a hundredth of a pixel
 /// is measured to 1e-5 px, not to the 0.01 px asked of a visible distortion.
@@ -225,7 +246,8 @@ pub struct AutoChoice {
     #[serde(skip)]
     pub settings: TraceSettings,
     /// Rays whose own error estimate is above this (rad) end `degraded`:
-    /// [`VOUCH_FACTOR`] x `asked_rad`.
+    /// [`VOUCH_FACTOR`] x `asked_rad`, times the chosen candidate's calibration where it
+    /// met the request.
     pub vouched_to: f64,
     /// The chosen candidate (its error and cost on the pilots).
     pub chosen: Candidate,
@@ -295,14 +317,16 @@ fn measure(
     rays: &[(DVec3, DVec3)],
     metric: &Metric,
     (far, n_amb): (f64, f64),
-) -> (f64, f64) {
+    (to_rad, floor_rad): (f64, f64),
+) -> (f64, f64, f64) {
     let mut worst: f64 = 0.0;
     let mut evals = 0u64;
+    let mut calibration = MAX_CALIBRATION;
     for ((r, e), ray) in runs.iter().zip(reference).zip(rays) {
         evals += r.evals;
-        // A ray the reference vouches for that this run cannot (its own estimate is
-        // above the asked error) does not meet it; a `degraded` ray left as a degraded
-        // reference did: its error is measured.
+        // A ray the reference vouches for that this run cannot (a bake's n error
+        // amplified at its crossings) does not meet it; a `degraded` ray left as a
+        // degraded reference did: its error is measured.
         let unvouched = r.status == RayStatus::Degraded && e.status == RayStatus::Exited;
         if unvouched || (r.status != e.status && !(r.status.left() && e.status.left())) {
             worst = f64::INFINITY;
@@ -311,9 +335,18 @@ fn measure(
         if r.status.left() {
             let err = metric.error(r, e, *ray, far, n_amb);
             worst = worst.max(if err.is_nan() { f64::INFINITY } else { err });
+            if r.error_estimate.is_finite() {
+                let real = (err * to_rad).max(floor_rad);
+                calibration = calibration.min(r.error_estimate / real);
+            }
         }
     }
-    (worst, evals as f64 / runs.len().max(1) as f64)
+    let calibration = if calibration.is_nan() {
+        1.0
+    } else {
+        calibration.max(1.0)
+    };
+    (worst, evals as f64 / runs.len().max(1) as f64, calibration)
 }
 
 /// Angle between two directions (accurate for tiny angles: atan2 of |a x b| and a . b).
@@ -370,9 +403,9 @@ pub fn choose_in<R: Real>(
     };
     let radius = field.bounds().radius();
     let asked_rad = metric.as_radians(asked, radius);
-    // Every run (the pilots' and the chosen one's) flags only rays whose own estimate is
-    // above VOUCH_FACTOR x the asked error; a candidate that leaves such rays where the
-    // reference did not does not meet it.
+    // The reference flags only rays whose own estimate is above VOUCH_FACTOR x the asked
+    // error (the candidates below flag none; the chosen one is held to the calibrated
+    // limit).
     let held_to = |asked_rad: f64| TraceSettings {
         accuracy: asked_rad,
         estimate_limit: VOUCH_FACTOR * asked_rad,
@@ -429,13 +462,22 @@ pub fn choose_in<R: Real>(
         } else {
             (asked, asked_rad, reference)
         };
-    let base = held_to(asked_rad);
+    // The candidates flag nothing on their own estimates: the pilots measure their real
+    // errors (a ray the reference vouches for and a candidate misses fails it) and how
+    // pessimistic their estimates are; the chosen one is held to the calibrated limit.
+    let base = TraceSettings {
+        estimate_limit: f64::INFINITY,
+        ..held_to(asked_rad)
+    };
     let settings = &base;
+    // A pilot's error in rad, and the least real error the reference can tell.
+    let scale = (asked_rad / asked, REFERENCE_FRACTION * asked_rad);
     let mut tried = Vec::new();
     let mut run = |s: &TraceSettings, fixed_step: Option<f64>| {
         let out = trace_all::<R>(field, s, &rays);
         spent += out.iter().map(|r| r.evals).sum::<u64>();
-        let (error, evals_per_ray) = measure(&out, &reference, &rays, metric, geometry);
+        let (error, evals_per_ray, calibration) =
+            measure(&out, &reference, &rays, metric, geometry, scale);
         let estimate = out
             .iter()
             .filter(|r| r.status.left())
@@ -447,11 +489,17 @@ pub fn choose_in<R: Real>(
             error,
             estimate,
             evals_per_ray,
+            calibration,
         };
         tried.push(c);
         c
     };
     let target = PILOT_TARGET * asked;
+    // The first fixed step is measured against the medium's longest half-extent (a box's
+    // `radius` is its shortest: a rod 2 long and 1 wide was first tried at a quarter of
+    // the step that met its request).
+    let (lo, hi) = field.bounds().aabb();
+    let reach = (0.5 * (hi - lo)).max_element().max(radius);
     // Error control per length (what an unresolved `auto` runs), tightened by 10 while
     // the pilots say it misses (rays whose exit is ill-conditioned: grazing ones).
     let mut best: Option<(Candidate, TraceSettings)> = None;
@@ -486,7 +534,9 @@ pub fn choose_in<R: Real>(
     };
     for kind in kinds {
         let order = f64::from(crate::integrate::order(kind));
-        let mut ds = FIRST_STEP_REL * radius;
+        let mut ds = FIRST_STEP_REL * reach;
+        // The longest step that missed the target (a met step below it is refined).
+        let mut missed: Option<f64> = None;
         for _ in 0..MAX_TRIES {
             let s = TraceSettings {
                 integrator: kind,
@@ -501,8 +551,36 @@ pub fn choose_in<R: Real>(
             }
             if c.error <= target {
                 best = Some((c, s));
+                // The jump that met it was at least a halving: the steps between the
+                // last miss and it are bisected (geometrically) while a bisection is
+                // cheaper than what is met (a jump of 2 in step is 2x in cost).
+                let mut met = ds;
+                if let Some(mut miss) = missed {
+                    for _ in 0..REFINE_TRIES {
+                        if miss < REFINE_RATIO * met {
+                            break;
+                        }
+                        let mid = (miss * met).sqrt();
+                        let s = TraceSettings {
+                            step: StepSpec::Fixed(mid),
+                            ..s
+                        };
+                        let c = run(&s, Some(mid));
+                        keep_closest(c, s);
+                        let cheaper = best
+                            .as_ref()
+                            .is_none_or(|(b, _)| c.evals_per_ray < b.evals_per_ray);
+                        if c.error <= target && cheaper {
+                            best = Some((c, s));
+                            met = mid;
+                        } else {
+                            miss = mid;
+                        }
+                    }
+                }
                 break;
             }
+            missed = Some(ds);
             // Jump by the measured order (a little past, so the next try is likely to
             // meet the target), at least halving, at most by 8.
             let factor = if c.error.is_finite() && c.error > 0.0 {
@@ -519,6 +597,10 @@ pub fn choose_in<R: Real>(
     // Nothing met it: the closest candidate, and the choice says so.
     let met = best.is_some();
     let (chosen, chosen_settings) = best.or(closest)?;
+    let chosen_settings = TraceSettings {
+        estimate_limit: VOUCH_FACTOR * asked_rad * if met { chosen.calibration } else { 1.0 },
+        ..chosen_settings
+    };
     Some(AutoChoice {
         asked,
         unit: metric.unit(),

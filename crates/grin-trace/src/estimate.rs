@@ -178,17 +178,30 @@ impl ErrorEstimate {
     }
 
     /// At a step end inside, `depth` (>= 0) from the surface of unit outward `normal`,
-    /// with T = `t`, index `n`, D = `d`: if the path heads for the surface and bends
-    /// away from it, its closest approach is about depth - v^2 / (2 kappa_n) (v the
-    /// direction's normal component, kappa_n the curvature away from the surface); within
-    /// the position error of the surface it is a near miss.
-    pub fn check_approach(&mut self, depth: f64, normal: DVec3, t: DVec3, n: f64, d: DVec3) {
+    /// with T = `t`, index `n`, D = `d`, after a step of length `h`: if the path heads for
+    /// the surface and bends away from it, its closest approach is about
+    /// depth - v^2 / (2 kappa_n) (v the direction's normal component, kappa_n the
+    /// curvature away from the surface); within the position error of the surface it is a
+    /// near miss. The parabola is the path's Taylor expansion, so it is trusted only where
+    /// it turns within a step (v / kappa_n <= h): from deeper in, it extrapolates over a
+    /// length the path's curvature changes on (every Luneburg ray heads out and bends
+    /// back towards the centre, and half way out its parabola "grazed" the surface the ray
+    /// crosses at 58 degrees; the step ends near the surface decide).
+    pub fn check_approach(
+        &mut self,
+        depth: f64,
+        normal: DVec3,
+        t: DVec3,
+        n: f64,
+        d: DVec3,
+        h: f64,
+    ) {
         if self.near_miss || n.is_nan() || n <= 0.0 {
             return;
         }
         let v = t.normalize_or_zero().dot(normal);
         let kappa = -d.dot(normal) / (n * n);
-        if v > 0.0 && kappa > 0.0 {
+        if v > 0.0 && kappa > 0.0 && v <= kappa * h.abs() {
             let closest = depth - v * v / (2.0 * kappa);
             if closest.abs() < POSITION_SAFETY * self.pos {
                 self.near_miss = true;

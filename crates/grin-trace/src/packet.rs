@@ -598,6 +598,7 @@ fn march_packet(
             if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
                 && v.0[i] > 0.0
                 && kappa.0[i] > 0.0
+                && v.0[i] <= kappa.0[i] * h.0[i].abs()
                 && closest.0[i].abs() < POSITION_SAFETY * s.pos.0[i]
             {
                 s.near_miss[i] = true;

@@ -500,6 +500,7 @@ impl<R: Real> March<R> {
                         next.t.to_dvec3(),
                         s1.n.to_f64(),
                         d1,
+                        h64,
                     );
                 }
             }
