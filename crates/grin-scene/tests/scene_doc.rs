@@ -3,11 +3,12 @@
 //! error lists every key the table accepts. The reference section of that table in
 //! docs/scene.md must list exactly those keys; every named choice (`integrator`, `kind`,
 //! `shape`, ...) probed the same way must have each of its values in its row; and every
-//! default the page gives as a single value must be what the parser fills in.
+//! default the page gives as a single value must be what the parser fills in. The page's
+//! TOML examples parse.
 //!
 //! The page's reference sections are headings whose backtick spans name the table
-//! (`### `[render]``, `#### `medium.field` with `kind = "expr"``), each followed by a
-//! table of rows `| `key` | type | default | unit | allowed values | meaning |`.
+//! (``### `[render]` ``, ``#### `medium.field` with `kind = "expr"` ``), each followed by a
+//! table of rows ``| `key` | type | default | unit | allowed values | meaning |``.
 //!
 //! A new table in the schema needs a [`Site`] here (a new key of an existing table fails
 //! this test until the page lists it).
