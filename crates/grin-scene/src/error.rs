@@ -6,7 +6,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The io::Error is in the message only (as a `source()` too, `{:#}` printed it twice).
-    #[error("{}: cannot read scene file: {}", path.display(), grin_output::plain(err))]
+    #[error("{}: cannot read scene file: {}", path.display(), without_os_code(err))]
     Io { path: PathBuf, err: std::io::Error },
     /// TOML syntax or a value of the wrong shape (unknown key, unknown field kind, ...).
     #[error("{path}:{line}:{column}: {key}: {message}")]
@@ -26,4 +26,10 @@ pub enum SceneError {
         key: String,
         message: String,
     },
+}
+
+/// An io::Error's text without Rust's " (os error N)" suffix, for one-line messages.
+fn without_os_code(e: &std::io::Error) -> String {
+    let text = e.to_string();
+    text.split(" (os error ").next().unwrap_or(&text).to_owned()
 }
