@@ -1,5 +1,6 @@
 //! End-to-end tests of `grin` on the GPU backend (lavapipe in CI): `grin render
-//! --backend gpu`, the no-adapter error, scene errors before GPU work, and
+//! --backend gpu`, the no-adapter error, the default backend's choice, scene errors
+//! before GPU work, and
 //! `grin bench speed`. A missing adapter fails these tests unless GRIN_ALLOW_NO_GPU=1,
 //! which turns them into a loud SKIPPED line.
 
@@ -170,6 +171,59 @@ fn no_adapter_is_a_clear_error_and_writes_nothing() {
         0,
         "no output on failure"
     );
+}
+
+/// `grin render` without `--backend` renders on the GPU marcher only where wgpu's adapter
+/// is a GPU: with no adapter, or a CPU one (lavapipe), the CPU tracer renders (faster
+/// there), and the summary says which backend and why.
+#[test]
+fn the_default_backend_is_the_gpu_marcher_only_on_a_gpu() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let scene = scenes().join("luneburg.toml");
+    let args = ["--size", "32x18", "--spp", "1", "--json"];
+    let none = json(&run_ok(
+        grin()
+            .env("WGPU_ADAPTER_NAME", "no-such-adapter-anywhere")
+            .arg("render")
+            .arg(&scene)
+            .arg("-o")
+            .arg(dir.path().join("none.exr"))
+            .args(args),
+    ));
+    assert_eq!(none["backend"], "cpu", "{none}");
+    let note = none["backend_note"].as_str().expect("a backend note");
+    assert!(
+        note.starts_with("backend auto: cpu: wgpu finds no GPU adapter"),
+        "{note}"
+    );
+    if !gpu_required() {
+        return;
+    }
+    let chosen = json(&render_with(&scene, &dir.path().join("auto.exr"), &args));
+    let gpu = json(&render_with(
+        &scene,
+        &dir.path().join("gpu.exr"),
+        &[
+            "--backend",
+            "gpu",
+            "--size",
+            "32x18",
+            "--spp",
+            "1",
+            "--json",
+        ],
+    ));
+    let adapter = gpu["adapter"].as_str().expect("adapter");
+    let note = chosen["backend_note"].as_str().expect("a backend note");
+    if adapter.ends_with(", Cpu)") {
+        assert_eq!(chosen["backend"], "cpu", "{chosen}");
+        assert!(note.contains("only adapter is a CPU one"), "{note}");
+    } else {
+        assert_eq!(chosen["backend"], "gpu", "{chosen}");
+        assert!(note.starts_with("backend auto: gpu"), "{note}");
+    }
+    // The backend named is the one that ran: no note where it was asked for.
+    assert!(gpu.get("backend_note").is_none(), "{gpu}");
 }
 
 #[test]

@@ -22,6 +22,10 @@ use grin_scene::{OpticsMode, Scene};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
+    /// The GPU marcher where wgpu finds a GPU, else the CPU tracer: on a CPU adapter
+    /// (Mesa's lavapipe where a machine has no GPU) the marcher, built for GPUs, renders
+    /// the same frame on the same cores several times slower.
+    Auto,
     /// The WGSL marcher through wgpu (lavapipe without a GPU).
     Gpu,
     /// The CPU reference (rayon).
@@ -31,6 +35,7 @@ pub enum Backend {
 impl Backend {
     pub fn name(self) -> &'static str {
         match self {
+            Backend::Auto => "auto",
             Backend::Gpu => "gpu",
             Backend::Cpu => "cpu",
         }
@@ -41,9 +46,10 @@ impl std::str::FromStr for Backend {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
+            "auto" => Ok(Backend::Auto),
             "gpu" => Ok(Backend::Gpu),
             "cpu" => Ok(Backend::Cpu),
-            _ => Err(format!("unknown backend `{s}` (gpu or cpu)")),
+            _ => Err(format!("unknown backend `{s}` (auto, gpu or cpu)")),
         }
     }
 }
@@ -143,7 +149,11 @@ pub struct GpuField {
 /// How a render went, for the summary.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Report {
+    /// The backend that rendered (`gpu` or `cpu`; what `auto` chose).
     pub backend: &'static str,
+    /// `--backend auto`: which backend it chose and why.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backend_note: Option<String>,
     pub adapter: String,
     pub width: u32,
     pub height: u32,
@@ -206,6 +216,8 @@ pub struct Renderer {
     backend: Backend,
     use_cache: bool,
     gpu: Mutex<Option<std::sync::Arc<grin_gpu::GpuContext>>>,
+    /// What `Backend::Auto` chose, and why (made on first use).
+    chosen: std::sync::OnceLock<(Backend, Option<String>)>,
 }
 
 impl Renderer {
@@ -216,11 +228,45 @@ impl Renderer {
             backend,
             use_cache,
             gpu: Mutex::new(None),
+            chosen: std::sync::OnceLock::new(),
         }
     }
 
+    /// The backend asked for (`Auto` stays `Auto`: [`Renderer::chosen`] says what runs).
     pub fn backend(&self) -> Backend {
         self.backend
+    }
+
+    /// The backend that renders (`Gpu` or `Cpu`) and, for `Auto`, why: the GPU marcher
+    /// where wgpu's adapter is a GPU, else the CPU tracer (a CPU adapter, or none).
+    pub fn chosen(&self) -> (Backend, Option<String>) {
+        self.chosen
+            .get_or_init(|| match self.backend {
+                Backend::Auto => match self.gpu() {
+                    Ok(ctx) if !ctx.is_cpu_adapter() => (
+                        Backend::Gpu,
+                        Some(format!("backend auto: gpu ({})", ctx.adapter_name())),
+                    ),
+                    Ok(ctx) => (
+                        Backend::Cpu,
+                        Some(format!(
+                            "backend auto: cpu: wgpu's only adapter is a CPU one ({}), where \
+                             the CPU tracer is faster than the GPU marcher (--backend gpu \
+                             runs the marcher there anyway)",
+                            ctx.adapter_name()
+                        )),
+                    ),
+                    Err(e) => (
+                        Backend::Cpu,
+                        Some(format!(
+                            "backend auto: cpu: wgpu finds no GPU adapter ({})",
+                            first_line(&e)
+                        )),
+                    ),
+                },
+                b => (b, None),
+            })
+            .clone()
     }
 
     fn bake_cache(&self) -> Option<grin_gpu::cache::BakeCache> {
@@ -283,7 +329,8 @@ impl Renderer {
             p
         });
         let target = pilot_rs.as_mut().unwrap_or(&mut rs);
-        let auto = match self.backend {
+        let (backend, backend_note) = self.chosen();
+        let auto = match backend {
             Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(target, metric),
             _ => grin_trace::auto::resolve_scene_in::<f64>(target, metric),
         };
@@ -327,7 +374,8 @@ impl Renderer {
             let seconds = start.elapsed().as_secs_f64();
             let rays = optics["rays_launched"].as_f64().unwrap_or(0.0);
             let report = Report {
-                backend: self.backend.name(),
+                backend: backend.name(),
+                backend_note,
                 adapter: frame_report.adapter,
                 width: scene.render.width,
                 height: scene.render.height,
@@ -432,7 +480,8 @@ impl Renderer {
             ));
         }
         let report = Report {
-            backend: self.backend.name(),
+            backend: backend.name(),
+            backend_note,
             adapter: fr.adapter,
             width: frame.width,
             height: frame.height,
@@ -473,8 +522,8 @@ impl Renderer {
             .medium
             .as_ref()
             .with_context(|| format!("{}: [optics] a shadowgraph needs a [medium]", job.label))?;
-        let (sg, report) = match self.backend {
-            Backend::Cpu => {
+        let (sg, report) = match self.chosen().0 {
+            Backend::Auto | Backend::Cpu => {
                 let sg = grin_trace::shadowgraph::shadowgraph(
                     medium.field.as_ref(),
                     &medium.trace,
@@ -537,8 +586,8 @@ impl Renderer {
     ) -> anyhow::Result<(Frame, FrameReport)> {
         let cancel = AtomicBool::new(false);
         let tick = |rows: u32| job.progress.advance(rows);
-        match self.backend {
-            Backend::Cpu => {
+        match self.chosen().0 {
+            Backend::Auto | Backend::Cpu => {
                 let start = Instant::now();
                 let frame = grin_trace::render::render_cpu(rs, &tick, &cancel)?;
                 let report = FrameReport {
@@ -707,4 +756,9 @@ pub fn status_counts(frame: &Frame) -> std::collections::BTreeMap<&'static str, 
         }
     }
     counts
+}
+
+/// An error's first line (wgpu's adapter errors run on with advice for the GPU backend).
+fn first_line(e: &anyhow::Error) -> String {
+    e.to_string().lines().next().unwrap_or_default().to_owned()
 }

@@ -18,7 +18,7 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Renderer.
-    #[arg(long, value_enum, default_value_t = Backend::Gpu)]
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Image size, overriding the scene's [render] width and height.
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
@@ -721,6 +721,9 @@ fn print_summary(summary: &Summary, json: bool, exr_to_stream: bool) -> anyhow::
             summary.report.evals_per_ray,
             wrote,
         ));
+        if let Some(note) = &summary.report.backend_note {
+            report(note.clone());
+        }
         if let Some(a) = &summary.report.auto {
             report(a.summary_line());
         }

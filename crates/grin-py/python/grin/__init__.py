@@ -128,8 +128,9 @@ def render(
 ) -> Render:
     """Render a scene (a :class:`Scene`, a file path or a dict) to numpy channels.
 
-    ``backend`` is ``"cpu"`` or ``"gpu"`` (wgpu; Mesa's lavapipe on a machine without a
-    GPU). Pass a :class:`Renderer` to keep its GPU device and pipelines across renders.
+    ``backend`` is ``"cpu"``, ``"gpu"`` (wgpu; Mesa's lavapipe on a machine without a
+    GPU) or ``"auto"`` (the GPU where wgpu finds one, else the CPU; the report's
+    ``backend`` and ``backend_note`` say which ran). Pass a :class:`Renderer` to keep its GPU device and pipelines across renders.
     ``width``, ``height`` and ``spp`` override the scene's ``[render]``; ``frame`` renders
     that frame of its sequence. Warnings grin reports are issued as ``RuntimeWarning``.
     """
