@@ -4,13 +4,14 @@
 
 use std::path::Path;
 
+use glam::{DAffine3, DVec3};
 use grin_scene::{MediumSpec, NonFinitePolicy, VdbSpec};
 use vdb_sys::{DenseGrid, IndexBox, VdbError, VdbFile};
 
 use super::bricks::{BRICK, Bricks, ReadBrick};
 use super::locate::{DATA_FRACTION, check_data_placement};
 use super::mapping::Mapping;
-use super::placement::{compose, placement};
+use super::placement::{affine_from_rows, placement};
 use super::{AMBIENT_MATCH_TOLERANCE, PAD_VOXELS, VdbField, resolve};
 use crate::bounds::Bounds;
 use crate::field::FieldError;
@@ -28,9 +29,10 @@ pub struct VdbFieldParams {
     pub ambient: Option<f64>,
     /// Cap on the bytes the loaded voxels (the stored bricks) may use.
     pub max_bytes: u64,
-    /// Where the grid (in metres, after `units`) goes in the scene: [`placement`] of the
-    /// scene's `up`, `scale`, `rotate_deg` and `translate`; [`IDENTITY`] for none.
-    pub placement: [[f64; 4]; 3],
+    /// Where the grid (in metres, after `units`) goes in the scene: [`placement()`] of the
+    /// scene's `up`, `scale`, `rotate_deg` and `translate`; [`IDENTITY`](super::IDENTITY)
+    /// for none.
+    pub placement: DAffine3,
 }
 
 fn field_error(e: VdbError) -> FieldError {
@@ -183,18 +185,19 @@ impl VdbField {
                 "{label}: the grid's box is empty"
             )));
         }
-        let mut in_metres = grid_transform.world_from_index;
-        for row in &mut in_metres {
-            for v in row.iter_mut() {
-                *v *= params.units;
-            }
+        let grid = affine_from_rows(&grid_transform.world_from_index);
+        let in_metres = DAffine3::from_mat3_translation(
+            grid.matrix3 * params.units,
+            grid.translation * params.units,
+        );
+        let world_from_grid = params.placement * in_metres;
+        let det = world_from_grid.matrix3.determinant();
+        if !det.is_finite() || det.abs() < f64::MIN_POSITIVE {
+            return Err(FieldError::Other(format!(
+                "{label}: the grid transform is singular"
+            )));
         }
-        let world_from_grid = compose(&params.placement, &in_metres);
-        let inverse = vdb_sys::Transform {
-            world_from_index: world_from_grid,
-        }
-        .inverse()
-        .ok_or_else(|| FieldError::Other(format!("{label}: the grid transform is singular")))?;
+        let grid_from_world = world_from_grid.inverse();
 
         let mapping = params.mapping;
         // "auto": the index the background maps to. A relative mapping (`index` with
@@ -238,10 +241,8 @@ impl VdbField {
         // crop sees only the voxels that differ from the background.
         let shift = ambient - n_background;
 
-        let transform = vdb_sys::Transform {
-            world_from_index: world_from_grid,
-        };
-        let world_of = |ijk: [i32; 3]| transform.index_to_world(ijk.map(f64::from));
+        let world_of =
+            |ijk: [i32; 3]| world_from_grid.transform_point3(DVec3::from_array(ijk.map(f64::from)));
 
         // Reading costs time for every voxel of the box (the background too), memory only
         // for the bricks kept: a box of more voxels than the cap has bytes is refused as
@@ -369,7 +370,7 @@ impl VdbField {
             voxels,
             bbox,
             dims,
-            grid_from_world: inverse.world_from_index,
+            grid_from_world,
             world_from_grid,
             n_range: (lo, hi),
             max_grad: 0.0,

@@ -1,11 +1,10 @@
 //! Where a grid's data is: [`DataBox`] (the voxels that change the index), found over a
 //! file's grid by [`locate_data`] and checked against the medium's bounds.
 
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 use vdb_sys::{IndexBox, VdbFile};
 
 use super::bricks::Bricks;
-use super::placement::apply;
 use crate::bounds::Bounds;
 use crate::field::FieldError;
 
@@ -111,7 +110,7 @@ impl DataBox {
 
     /// World box of the box's voxel centres widened by `pad` voxels, through the affine
     /// `world_from_index`.
-    pub fn world(&self, world_from_index: &[[f64; 4]; 3], pad: f64) -> (DVec3, DVec3) {
+    pub fn world(&self, world_from_index: &DAffine3, pad: f64) -> (DVec3, DVec3) {
         let (mut lo, mut hi) = (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
         for c in 0..8 {
             let ijk: [f64; 3] = std::array::from_fn(|a| {
@@ -121,7 +120,7 @@ impl DataBox {
                     self.max[a] as f64 + pad
                 }
             });
-            let w = DVec3::from_array(apply(world_from_index, ijk));
+            let w = world_from_index.transform_point3(DVec3::from_array(ijk));
             lo = lo.min(w);
             hi = hi.max(w);
         }
@@ -129,7 +128,7 @@ impl DataBox {
     }
 
     /// The `bounds` line of a scene that holds the data (half a voxel past the centres).
-    pub fn bounds_line(&self, world_from_index: &[[f64; 4]; 3]) -> String {
+    pub fn bounds_line(&self, world_from_index: &DAffine3) -> String {
         let (lo, hi) = self.world(world_from_index, 0.5);
         format!(
             "bounds = {{ box = {{ min = {}, max = {} }} }}",
@@ -149,7 +148,7 @@ fn fmt3(v: DVec3) -> String {
 pub(super) fn check_data_placement(
     label: &str,
     data: Option<DataBox>,
-    world_from_index: &[[f64; 4]; 3],
+    world_from_index: &DAffine3,
     bounds: &Bounds,
 ) -> Result<(), FieldError> {
     let Some(data) = data else {

@@ -55,18 +55,17 @@ mod tests;
 
 use std::path::{Path, PathBuf};
 
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 use vdb_sys::IndexBox;
 
 use crate::bounds::Bounds;
 use crate::field::{FieldSample, IndexField};
 use bricks::Bricks;
-use placement::apply;
 
 pub use load::VdbFieldParams;
 pub use locate::{DATA_FRACTION, DataBox, locate_data};
 pub use mapping::{GladstoneDale, Mapping};
-pub use placement::{IDENTITY, compose, placement};
+pub use placement::{IDENTITY, affine_from_rows, placement};
 pub use sequence::check_sequence;
 
 /// Default cap on the memory of a grid's voxels as loaded (the stored bricks of mapped
@@ -93,9 +92,9 @@ pub struct VdbField {
     bbox: IndexBox,
     dims: [usize; 3],
     /// index = grid_from_world * (p, 1), p in scene metres.
-    grid_from_world: [[f64; 4]; 3],
+    grid_from_world: DAffine3,
     /// world = world_from_grid * (ijk, 1), in scene metres.
-    world_from_grid: [[f64; 4]; 3],
+    world_from_grid: DAffine3,
     n_range: (f64, f64),
     max_grad: f64,
     non_finite_replaced: u64,
@@ -120,12 +119,12 @@ impl VdbField {
 
     /// World (scene metres) position of index coordinates.
     pub fn world_from_index(&self, ijk: DVec3) -> DVec3 {
-        DVec3::from_array(apply(&self.world_from_grid, ijk.to_array()))
+        self.world_from_grid.transform_point3(ijk)
     }
 
     /// Fractional index coordinates of a world point.
     pub fn index_from_world(&self, p: DVec3) -> DVec3 {
-        DVec3::from_array(apply(&self.grid_from_world, p.to_array()))
+        self.grid_from_world.transform_point3(p)
     }
 
     /// World-space axis-aligned box around the dense data.
@@ -159,12 +158,9 @@ impl VdbField {
 
     /// Gradient (world) from index-space derivatives: grad_world = A^-T grad_index.
     fn grad_to_world(&self, g: [f64; 3]) -> DVec3 {
-        let m = &self.grid_from_world;
-        DVec3::new(
-            m[0][0] * g[0] + m[1][0] * g[1] + m[2][0] * g[2],
-            m[0][1] * g[0] + m[1][1] * g[1] + m[2][1] * g[2],
-            m[0][2] * g[0] + m[1][2] * g[1] + m[2][2] * g[2],
-        )
+        self.grid_from_world
+            .matrix3
+            .transpose_mul_vec3(DVec3::from_array(g))
     }
 
     /// The largest |grad n| of the voxels' central differences: over the stored bricks
@@ -249,9 +245,10 @@ impl IndexField for VdbField {
 
     /// The voxel size: the shortest column of the grid-to-world transform.
     fn source_spacing(&self) -> Option<f64> {
-        let m = &self.world_from_grid;
-        let voxel = (0..3)
-            .map(|c| DVec3::new(m[0][c], m[1][c], m[2][c]).length())
+        let m = &self.world_from_grid.matrix3;
+        let voxel = [m.x_axis, m.y_axis, m.z_axis]
+            .iter()
+            .map(|c| c.length())
             .fold(f64::INFINITY, f64::min);
         (voxel > 0.0 && voxel.is_finite()).then_some(voxel)
     }

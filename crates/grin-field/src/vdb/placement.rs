@@ -1,65 +1,63 @@
-//! The affine maths of a grid's placement: [`IDENTITY`], the scene's [`placement()`] of a
-//! grid, [`compose`] and `apply` of the 3x4 maps.
+//! Where a grid goes in the scene, as glam's [`DAffine3`]: [`IDENTITY`], the scene's
+//! [`placement()`] of a grid, and [`affine_from_rows`] for a grid's own transform.
 
+use glam::{DAffine3, DVec3};
 use grin_scene::UpAxis;
 
 /// The affine map that changes nothing.
-pub const IDENTITY: [[f64; 4]; 3] = [
-    [1.0, 0.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0, 0.0],
-    [0.0, 0.0, 1.0, 0.0],
-];
+pub const IDENTITY: DAffine3 = DAffine3::IDENTITY;
 
 /// The scene's placement of a VDB grid (world = placement * grid metres): first the up
 /// axis (a Z-up cache, as Blender writes, is turned so its +z is the scene's +y and its +y
 /// the scene's -z), then the uniform `scale`, then rotations by `rotate_deg` about the
 /// scene's x, then y, then z axes (right-handed, degrees), then `translate` (metres).
-pub fn placement(
-    up: UpAxis,
-    scale: f64,
-    rotate_deg: [f64; 3],
-    translate: [f64; 3],
-) -> [[f64; 4]; 3] {
+pub fn placement(up: UpAxis, scale: f64, rotate_deg: [f64; 3], translate: [f64; 3]) -> DAffine3 {
     let up_m = match up {
         UpAxis::Y => IDENTITY,
-        UpAxis::Z => [
-            [1.0, 0.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0, 0.0],
-            [0.0, -1.0, 0.0, 0.0],
-        ],
+        // Columns: grid +x -> +x, grid +y -> -z, grid +z -> +y.
+        UpAxis::Z => DAffine3::from_cols(DVec3::X, DVec3::NEG_Z, DVec3::Y, DVec3::ZERO),
     };
-    let scaled = IDENTITY.map(|row| row.map(|v| v * scale));
-    let rot = |axis: usize, deg: f64| {
-        let (s, c) = deg.to_radians().sin_cos();
-        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
-        let mut m = IDENTITY;
-        m[a][a] = c;
-        m[a][b] = -s;
-        m[b][a] = s;
-        m[b][b] = c;
-        m
-    };
-    let mut m = compose(&scaled, &up_m);
-    for (axis, &deg) in rotate_deg.iter().enumerate() {
-        m = compose(&rot(axis, deg), &m);
+    let rotations = [
+        DAffine3::from_rotation_x,
+        DAffine3::from_rotation_y,
+        DAffine3::from_rotation_z,
+    ];
+    let mut m = DAffine3::from_scale(DVec3::splat(scale)) * up_m;
+    for (rotation, deg) in rotations.iter().zip(rotate_deg) {
+        m = rotation(deg.to_radians()) * m;
     }
-    for (row, t) in m.iter_mut().zip(translate) {
-        row[3] += t;
-    }
+    m.translation += DVec3::from_array(translate);
     m
 }
 
-/// The affine map `a` after `b` (a * b).
-pub fn compose(a: &[[f64; 4]; 3], b: &[[f64; 4]; 3]) -> [[f64; 4]; 3] {
-    std::array::from_fn(|r| {
-        std::array::from_fn(|c| {
-            let lin: f64 = (0..3).map(|k| a[r][k] * b[k][c]).sum();
-            if c == 3 { lin + a[r][3] } else { lin }
-        })
-    })
+/// The affine map of a row-major 3x4 `[A | t]` (a grid's `world_from_index` as vdb-sys
+/// reads it: world = A * ijk + t).
+pub fn affine_from_rows(rows: &[[f64; 4]; 3]) -> DAffine3 {
+    let column = |c: usize| DVec3::new(rows[0][c], rows[1][c], rows[2][c]);
+    DAffine3::from_cols(column(0), column(1), column(2), column(3))
 }
 
-/// `m` applied to the point `p`.
-pub(super) fn apply(m: &[[f64; 4]; 3], p: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3])
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The affine map of a grid's rows places points as the grid's transform does, and
+    /// its inverse undoes it.
+    #[test]
+    fn affine_from_rows_maps_as_the_grid_transform() {
+        let xf = vdb_sys::Transform {
+            world_from_index: [
+                [0.04, 0.01, 0.0, -0.3],
+                [0.0, 0.05, 0.0, 0.7],
+                [0.005, 0.0, 0.06, -1.1],
+            ],
+        };
+        let m = affine_from_rows(&xf.world_from_index);
+        for ijk in [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0], [-4.5, 0.25, 7.0]] {
+            let w = m.transform_point3(DVec3::from_array(ijk));
+            assert_eq!(w.to_array(), xf.index_to_world(ijk), "{ijk:?}");
+            let back = m.inverse().transform_point3(w);
+            assert!((back - DVec3::from_array(ijk)).length() < 1e-12, "{back}");
+        }
+    }
 }

@@ -1,12 +1,11 @@
 //! Unit tests of [`VdbField`](super::VdbField): interpolation, mapping checks, crop,
 //! placement and the ambient index, on dense grids built here.
 
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 use grin_scene::{NonFinitePolicy, UpAxis};
 use vdb_sys::{DenseGrid, IndexBox, Transform};
 
 use super::mapping::tests::gd_default;
-use super::placement::apply;
 use super::*;
 use crate::bounds::Bounds;
 use crate::field::IndexField;
@@ -337,7 +336,7 @@ fn catmull_rom_converges_at_third_order_in_n_and_second_in_grad() {
 /// (right-handed), scale and translate come after; composed on the grid's transform.
 #[test]
 fn placement_turns_scales_rotates_then_translates() {
-    let at = |m: &[[f64; 4]; 3], p: [f64; 3]| DVec3::from_array(apply(m, p));
+    let at = |m: &DAffine3, p: [f64; 3]| m.transform_point3(DVec3::from_array(p));
     let close = |a: DVec3, b: DVec3| (a - b).length() < 1e-12;
     let up = placement(UpAxis::Z, 1.0, [0.0; 3], [0.0; 3]);
     assert!(close(at(&up, [0.0, 0.0, 1.0]), DVec3::Y));
@@ -355,9 +354,7 @@ fn placement_turns_scales_rotates_then_translates() {
     assert!(close(at(&rxy, [0.0, 1.0, 0.0]), DVec3::X));
 
     // Through a field: the voxel at index 0 of a unit grid, placed, lands there.
-    let xf = Transform {
-        world_from_index: IDENTITY,
-    };
+    let xf = Transform::uniform(1.0, [0.0; 3]);
     let dense = cube(
         |i, j, k| if (i, j, k) == (0, 0, 0) { 1e-3 } else { 0.0 },
         3,
