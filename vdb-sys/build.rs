@@ -11,12 +11,13 @@ const SHIM_FILE: &str = "libgrin_vdb_shim.so";
 /// Debian packages that provide the headers and libraries the shim needs.
 const APT_PACKAGES: &str = "libopenvdb-dev libboost-dev libtbb-dev";
 
-/// Where OpenVDB's headers live unless `OPENVDB_INCLUDE_DIR` says otherwise.
+/// Where OpenVDB's headers live unless `OPENVDB_INCLUDE_DIR` says otherwise (the include
+/// directories of the pkg-config files found are looked in too).
 const DEFAULT_INCLUDE_DIRS: &[&str] = &["/usr/include", "/usr/local/include"];
 
 /// Where the OpenVDB, TBB and Imath shared libraries are looked for after what the system
-/// publishes (pkg-config, then the dynamic linker's cache `ldconfig -p`), unless
-/// `OPENVDB_LIB_DIR` says otherwise: Debian's multiarch paths, then the usual ones.
+/// publishes (pkg-config files, else for OpenVDB the dynamic linker's cache `ldconfig -p`),
+/// unless `OPENVDB_LIB_DIR` says otherwise: Debian's multiarch paths, then the usual ones.
 const FALLBACK_LIB_DIRS: &[&str] = &[
     "/usr/lib/x86_64-linux-gnu",
     "/usr/lib/aarch64-linux-gnu",
@@ -38,7 +39,13 @@ fn main() {
             .map(|s| (*s).to_owned())
             .collect(),
     };
-    let has = |rel: &str| include_dirs.iter().any(|d| Path::new(d).join(rel).exists());
+    let published = Published::find();
+    let has = |rel: &str| {
+        include_dirs
+            .iter()
+            .chain(&published.include_dirs)
+            .any(|d| Path::new(d).join(rel).exists())
+    };
     let mut missing = Vec::new();
     if !has("openvdb/openvdb.h") {
         missing.push("OpenVDB headers (openvdb/openvdb.h)");
@@ -49,7 +56,6 @@ fn main() {
     if !has("tbb/tbb.h") && !has("oneapi/tbb.h") {
         missing.push("TBB headers (tbb/tbb.h)");
     }
-    let published = Published::find();
     let lib_dirs: Vec<String> = match std::env::var("OPENVDB_LIB_DIR") {
         Ok(dir) => vec![dir],
         Err(_) => {
@@ -60,7 +66,7 @@ fn main() {
         }
     };
     let libs = [
-        "openvdb".to_owned(),
+        published.openvdb.clone(),
         published.tbb.clone(),
         published.imath.clone(),
     ];
@@ -168,10 +174,14 @@ fn openvdb_soname(lib_dirs: &[String]) -> String {
         .unwrap_or_else(|| "libopenvdb.so".to_owned())
 }
 
-/// What the system says about TBB and Imath (pkg-config) and where the dynamic linker
-/// finds OpenVDB (`ldconfig -p`; Debian ships no OpenVDB.pc).
+/// What the system publishes about OpenVDB, TBB and Imath: their pkg-config files where
+/// it has them (OpenVDB's as `OpenVDB` or `openvdb`; Debian ships tbb.pc and Imath.pc,
+/// none for OpenVDB), and without an OpenVDB one, where the dynamic linker finds OpenVDB
+/// (`ldconfig -p`).
 #[derive(Debug)]
 struct Published {
+    /// OpenVDB's library name (`openvdb`).
+    openvdb: String,
     /// TBB's library name (`tbb`).
     tbb: String,
     /// Imath's versioned library name (`Imath-3_1` on Debian 12).
@@ -182,34 +192,43 @@ struct Published {
 
 impl Published {
     fn find() -> Self {
-        println!("cargo:rerun-if-env-changed=PKG_CONFIG_PATH");
         let mut found = Published {
+            openvdb: "openvdb".to_owned(),
             tbb: "tbb".to_owned(),
             imath: "Imath-3_1".to_owned(),
             lib_dirs: Vec::new(),
             include_dirs: Vec::new(),
         };
-        for (package, prefix) in [("tbb", "tbb"), ("Imath", "Imath")] {
-            let Some(flags) = pkg_config(package) else {
+        let mut openvdb_pc = false;
+        for (package, prefix) in [
+            ("OpenVDB", "openvdb"),
+            ("openvdb", "openvdb"),
+            ("tbb", "tbb"),
+            ("Imath", "Imath"),
+        ] {
+            if prefix == "openvdb" && openvdb_pc {
+                continue;
+            }
+            let Some(library) = pkg_config_probe(package) else {
                 continue;
             };
-            for flag in flags.split_whitespace() {
-                if let Some(lib) = flag.strip_prefix("-l")
-                    && lib.starts_with(prefix)
-                {
-                    if package == "tbb" {
-                        found.tbb = lib.to_owned();
-                    } else {
-                        found.imath = lib.to_owned();
-                    }
-                } else if let Some(dir) = flag.strip_prefix("-L") {
-                    found.lib_dirs.push(dir.to_owned());
-                } else if let Some(dir) = flag.strip_prefix("-I") {
-                    found.include_dirs.push(dir.to_owned());
+            for lib in library.libs.iter().filter(|l| l.starts_with(prefix)) {
+                match prefix {
+                    "openvdb" => found.openvdb = lib.clone(),
+                    "tbb" => found.tbb = lib.clone(),
+                    _ => found.imath = lib.clone(),
                 }
             }
+            let shown = |dirs: &[PathBuf]| {
+                dirs.iter()
+                    .map(|d| d.display().to_string())
+                    .collect::<Vec<_>>()
+            };
+            found.lib_dirs.extend(shown(&library.link_paths));
+            found.include_dirs.extend(shown(&library.include_paths));
+            openvdb_pc |= prefix == "openvdb";
         }
-        if let Some(cache) = command_output("ldconfig", &["-p"]) {
+        if !openvdb_pc && let Some(cache) = command_output("ldconfig", &["-p"]) {
             for line in cache.lines() {
                 if let Some((name, path)) = line.trim().split_once(" => ")
                     && name.starts_with("libopenvdb.so ")
@@ -223,9 +242,18 @@ impl Published {
     }
 }
 
-/// `pkg-config --cflags --libs PACKAGE`, or `None` where pkg-config or the package is absent.
-fn pkg_config(package: &str) -> Option<String> {
-    command_output("pkg-config", &["--cflags", "--libs", package])
+/// The `-l`, `-L` and `-I` flags of `package`'s pkg-config file, as
+/// `pkg-config --cflags --libs PACKAGE` gives them (system directories left out), or `None`
+/// where pkg-config or the file is absent. Nothing is linked into the crate from them: the
+/// shim and the checker link these libraries themselves.
+fn pkg_config_probe(package: &str) -> Option<pkg_config::Library> {
+    pkg_config::Config::new()
+        .cargo_metadata(false)
+        .print_system_libs(false)
+        .print_system_cflags(false)
+        .statik(false)
+        .probe(package)
+        .ok()
 }
 
 fn command_output(program: &str, args: &[&str]) -> Option<String> {

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use grin_field::vdb::{DATA_FRACTION, DataBox, compose, locate_data, placement};
+use grin_field::vdb::{DATA_FRACTION, DataBox, affine_from_rows, locate_data, placement};
 use grin_scene::UpAxis;
 use serde_json::{Value, json};
 use vdb_sys::{GridInfo, Meta, MetaValue, VdbFile};
@@ -17,7 +17,7 @@ const DATA_READ_CAP: u64 = 2 << 30;
 struct DataPlace {
     data: DataBox,
     /// Scene-from-index of the grid (its transform, then the up-axis turn).
-    world_from_index: [[f64; 4]; 3],
+    world_from_index: glam::DAffine3,
 }
 
 impl DataPlace {
@@ -74,7 +74,7 @@ fn data_place(file: &VdbFile, g: &GridInfo, up: UpArg) -> Result<Option<DataPlac
     );
     Ok(locate_data(file, g, DATA_READ_CAP)?.map(|data| DataPlace {
         data,
-        world_from_index: compose(&turn, &g.transform.world_from_index),
+        world_from_index: turn * affine_from_rows(&g.transform.world_from_index),
     }))
 }
 
