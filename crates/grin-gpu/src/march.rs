@@ -186,7 +186,7 @@ impl<'a> GpuRayTracer<'a> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GpuRay {
     /// `grin_trace::RayStatus`'s code: 0 missed, 1 exited, 2 absorbed, 3 max_steps,
-    /// 4 error, 5 degraded (`STATUS_*` in shaders/shared/medium.wgsl).
+    /// 4 error, 5 degraded (`STATUS_*` in shaders/shared/trace.wgsl).
     pub status: u32,
     /// Where the ray left the medium (or stopped).
     pub position: DVec3,
