@@ -636,4 +636,34 @@ mod tests {
             end
         );
     }
+
+    /// The kernel declares one input and one output variable per stage at the same two
+    /// bindings; each stage's specialised module keeps only its own pair.
+    #[test]
+    fn each_specialised_stage_binds_only_its_own_structs() {
+        fn io_of<S: Stage>() -> Vec<(u32, String)> {
+            let module = specialize::specialise(specialize::Kernel::Stages, S::ENTRY_POINT, &[])
+                .expect("the stage specialises and validates");
+            let mut io: Vec<(u32, String)> = module
+                .global_variables
+                .iter()
+                .filter_map(|(_, g)| {
+                    let b = g.binding.as_ref().filter(|b| b.group == 1)?;
+                    Some((b.binding, g.name.clone().unwrap_or_default()))
+                })
+                .collect();
+            io.sort();
+            io
+        }
+        let pair =
+            |input: &str, output: &str| vec![(0, input.to_string()), (1, output.to_string())];
+        assert_eq!(io_of::<Sample>(), pair("sample_in", "sample_out"));
+        assert_eq!(io_of::<Integrate>(), pair("integrate_in", "integrate_out"));
+        assert_eq!(io_of::<Take>(), pair("take_in", "take_out"));
+        assert_eq!(io_of::<Leave>(), pair("take_in", "leave_out"));
+        assert_eq!(io_of::<Flight>(), pair("ray_in", "flight_out"));
+        assert_eq!(io_of::<Surface>(), pair("surface_in", "surface_out"));
+        assert_eq!(io_of::<Scene>(), pair("scene_in", "scene_out"));
+        assert_eq!(io_of::<March>(), pair("ray_in", "march_out"));
+    }
 }
