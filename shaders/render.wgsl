@@ -1,4 +1,4 @@
-// #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/surface.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/medium.wgsl shared/shade.wgsl
+// #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/surface.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/estimate.wgsl shared/boundary.wgsl shared/trace.wgsl shared/medium.wgsl shared/shade.wgsl
 //
 // The render kernels: one invocation per pixel of a band of rows (render_main), or per
 // pixel PASS_FIRST listed (render_deferred); all samples of the pixel, the mean radiance

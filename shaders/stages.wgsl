@@ -1,4 +1,4 @@
-// #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/medium.wgsl
+// #import shared/types.wgsl shared/bindings.wgsl shared/rng.wgsl shared/camera.wgsl shared/primitives.wgsl shared/materials.wgsl shared/sky.wgsl shared/field.wgsl shared/integrate.wgsl shared/step.wgsl shared/estimate.wgsl shared/boundary.wgsl shared/trace.wgsl shared/medium.wgsl
 //
 // Test-only entry points: each runs one stage of the marcher on a batch of states, so the
 // stage can be held against its CPU twin in isolation (crates/grin-gpu/tests/stages.rs,
@@ -19,114 +19,226 @@
 // stage_march is also the GPU column of `grin bench accuracy` (grin_gpu::march): a ray
 // table traced by the render kernel's own medium loop.
 
-// Keep in sync with grin_gpu::stages::StageIn.
-struct StageIn {
+// Each stage reads and writes structs of its own (stage_take and stage_leave read the
+// same, as do stage_flight and stage_march), mirrored member by member in
+// grin_gpu::stages (its tests check the two agree). Every entry point binds its input
+// array at group 1, binding 0 and its output array at binding 1; the variables below
+// alias those two bindings, one pair per entry point, and the specialised pipeline keeps
+// only its entry point's pair.
+
+// stage_sample: a point.
+struct SampleIn {
     r: vec3<f32>,
-    h: f32,          // stage_integrate: the t-step
-    t: vec3<f32>,
-    ds_adapt: f32,   // stage_take, stage_leave: the controller's current step (0: its first)
 }
 
-// Keep in sync with grin_gpu::stages::StageOut.
-struct StageOut {
+// stage_sample: the field there.
+struct SampleOut {
+    grad_n: vec3<f32>,
+    n: f32,
+    delta_n: f32,
+}
+
+// stage_integrate: the state (r, t) and the t-step h.
+struct IntegrateIn {
+    r: vec3<f32>,
+    h: f32,
+    t: vec3<f32>,
+}
+
+// stage_integrate: the end state, the field evaluations (the start sample not counted),
+// the step's end sample where it made one (else zero), and the adaptive pair's embedded
+// error estimate (e_r, e_T).
+struct IntegrateOut {
+    r: vec3<f32>,
+    evals: u32,
+    t: vec3<f32>,
+    end_n: f32,
+    end_grad_n: vec3<f32>,
+    err_r: vec3<f32>,
+    err_t: vec3<f32>,
+}
+
+// stage_take, stage_leave: the state (r, t) and the controller's current error-controlled
+// step (0: its first).
+struct TakeIn {
+    r: vec3<f32>,
+    ds_adapt: f32,
+    t: vec3<f32>,
+}
+
+// stage_take: the end state, the step's t-length, the field evaluations, and the
+// controller's step after this one.
+struct TakeOut {
     r: vec3<f32>,
     h: f32,
     t: vec3<f32>,
     evals: u32,
-    grad_n: vec3<f32>,
-    n: f32,
-    err_r: vec3<f32>,
-    ds_next: f32,    // the controller's step after this one
-    err_t: vec3<f32>,
-    code: u32,       // stage_leave: 0 stayed inside, 1 the step ended outside, 2 it tunnelled;
-                     // stage_flight: may_fly; stage_surface: bounds met, refraction transmitted;
-                     // stage_march: STATUS_* | END_* << 8
+    ds_next: f32,
 }
 
-@group(1) @binding(0) var<storage, read> stage_in: array<StageIn>;
-@group(1) @binding(1) var<storage, read_write> stage_out: array<StageOut>;
+// stage_leave: as TakeOut, the state and t-length cut at the surface where the step
+// left, and the outcome: 0 stayed inside, 1 the step ended outside, 2 it left and came
+// back (tunnelled).
+struct LeaveOut {
+    r: vec3<f32>,
+    h: f32,
+    t: vec3<f32>,
+    evals: u32,
+    ds_next: f32,
+    outcome: u32,
+}
+
+// stage_flight, stage_march: a ray from r along t (any length).
+struct RayIn {
+    r: vec3<f32>,
+    t: vec3<f32>,
+}
+
+// stage_flight: the straight flight's length (-1: none) and may_fly (1 or 0).
+struct FlightOut {
+    span: f32,
+    may_fly: u32,
+}
+
+// stage_surface: the ray (r, t), and the indices n1 and n2 of a refraction from n1 into
+// n2 of t's direction at the surface.
+struct SurfaceIn {
+    r: vec3<f32>,
+    n1: f32,
+    t: vec3<f32>,
+    n2: f32,
+}
+
+// stage_surface: the refracted (or totally reflected) direction and whether it was
+// transmitted, at the normal of the surface point nearest r, with the Fresnel
+// reflectance; the ray's interval through the bounds (s_in, s_out) and whether it met
+// them; r's signed distance.
+struct SurfaceOut {
+    dir: vec3<f32>,
+    transmitted: u32,
+    normal: vec3<f32>,
+    reflectance: f32,
+    s_in: f32,
+    s_out: f32,
+    signed_distance: f32,
+    met: u32,
+}
+
+// stage_scene: the ray (r, t) and the least distance an object may be met at.
+struct SceneIn {
+    r: vec3<f32>,
+    t_min: f32,
+    t: vec3<f32>,
+}
+
+// stage_scene: the nearest object's normal facing the ray, its distance (-1: none) and
+// scene index + 1 (0: none), and the sky's radiance in t's direction.
+struct SceneOut {
+    normal: vec3<f32>,
+    distance: f32,
+    sky: vec3<f32>,
+    object: u32,
+}
+
+// stage_march: the end point and direction, the optical path and length, the field
+// evaluations and steps, the transmittance, the status (STATUS_*) and how the march
+// ended (END_*).
+struct MarchOut {
+    point: vec3<f32>,
+    opl: f32,
+    dir: vec3<f32>,
+    length: f32,
+    evals: u32,
+    steps: u32,
+    transmittance: f32,
+    status: u32,
+    end: u32,
+}
+
+@group(1) @binding(0) var<storage, read> sample_in: array<SampleIn>;
+@group(1) @binding(1) var<storage, read_write> sample_out: array<SampleOut>;
+@group(1) @binding(0) var<storage, read> integrate_in: array<IntegrateIn>;
+@group(1) @binding(1) var<storage, read_write> integrate_out: array<IntegrateOut>;
+@group(1) @binding(0) var<storage, read> take_in: array<TakeIn>;
+@group(1) @binding(1) var<storage, read_write> take_out: array<TakeOut>;
+@group(1) @binding(1) var<storage, read_write> leave_out: array<LeaveOut>;
+@group(1) @binding(0) var<storage, read> ray_in: array<RayIn>;
+@group(1) @binding(1) var<storage, read_write> flight_out: array<FlightOut>;
+@group(1) @binding(1) var<storage, read_write> march_out: array<MarchOut>;
+@group(1) @binding(0) var<storage, read> surface_in: array<SurfaceIn>;
+@group(1) @binding(1) var<storage, read_write> surface_out: array<SurfaceOut>;
+@group(1) @binding(0) var<storage, read> scene_in: array<SceneIn>;
+@group(1) @binding(1) var<storage, read_write> scene_out: array<SceneOut>;
 
 const STAGE_WORKGROUP: u32 = 64u;
 
-fn stage_blank() -> StageOut {
-    return StageOut(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u);
+// One controlled step from a TakeIn: the start state and sample, the step, and the
+// controller's step after it.
+struct Controlled {
+    s: RayState,
+    s0: FieldSample,
+    taken: Taken,
+    ds_next: f32,
 }
 
-fn stage_controller(ds_adapt: f32) -> StepController {
+fn controlled_step(input: TakeIn) -> Controlled {
+    let s = RayState(input.r, input.t);
+    let s0 = sample_field(s.r);
     var ctrl = step_controller_new(1.0);
-    if ds_adapt > 0.0 {
-        ctrl.ds_adapt = ds_adapt;
+    if input.ds_adapt > 0.0 {
+        ctrl.ds_adapt = input.ds_adapt;
     }
-    return ctrl;
+    let taken = take_step(&ctrl, s, s0);
+    return Controlled(s, s0, taken, ctrl.ds_adapt);
 }
 
 @compute @workgroup_size(64, 1, 1)
 fn stage_sample(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&sample_in) {
         return;
     }
-    let f = sample_field(stage_in[gid.x].r);
-    var out = stage_blank();
-    out.n = f.n;
-    out.grad_n = f.grad_n;
-    out.h = f.delta_n;
-    stage_out[gid.x] = out;
+    let f = sample_field(sample_in[gid.x].r);
+    sample_out[gid.x] = SampleOut(f.grad_n, f.n, f.delta_n);
 }
 
 @compute @workgroup_size(64, 1, 1)
 fn stage_integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&integrate_in) {
         return;
     }
-    let input = stage_in[gid.x];
+    let input = integrate_in[gid.x];
     let s = RayState(input.r, input.t);
     let s0 = sample_field(s.r);
     let step = integrate_step(s, s0.grad_n * s0.n, input.h);
-    var out = stage_blank();
-    out.r = step.state.r;
-    out.t = step.state.t;
-    out.h = input.h;
-    out.evals = step.evals;
-    out.err_r = step.err_r;
-    out.err_t = step.err_t;
+    var out = IntegrateOut(step.state.r, step.evals, step.state.t, 0.0, vec3<f32>(0.0), step.err_r, step.err_t);
     if step.has_end {
-        out.n = step.end.n;
-        out.grad_n = step.end.grad_n;
+        out.end_n = step.end.n;
+        out.end_grad_n = step.end.grad_n;
     }
-    stage_out[gid.x] = out;
+    integrate_out[gid.x] = out;
 }
 
 @compute @workgroup_size(64, 1, 1)
 fn stage_take(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&take_in) {
         return;
     }
-    let input = stage_in[gid.x];
-    let s = RayState(input.r, input.t);
-    let s0 = sample_field(s.r);
-    var ctrl = stage_controller(input.ds_adapt);
-    let taken = take_step(&ctrl, s, s0);
-    var out = stage_blank();
-    out.r = taken.step.state.r;
-    out.t = taken.step.state.t;
-    out.h = taken.h;
-    out.evals = taken.evals;
-    out.ds_next = ctrl.ds_adapt;
-    stage_out[gid.x] = out;
+    let c = controlled_step(take_in[gid.x]);
+    let end = c.taken.step.state;
+    take_out[gid.x] = TakeOut(end.r, c.taken.h, end.t, c.taken.evals, c.ds_next);
 }
 
 // One step of the march near the surface: the step, the tunnelling check, the exit
 // search (march_medium's order of them).
 @compute @workgroup_size(64, 1, 1)
 fn stage_leave(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&take_in) {
         return;
     }
-    let input = stage_in[gid.x];
-    let s = RayState(input.r, input.t);
-    let s0 = sample_field(s.r);
-    var ctrl = stage_controller(input.ds_adapt);
-    var taken = take_step(&ctrl, s, s0);
+    let c = controlled_step(take_in[gid.x]);
+    let s = c.s;
+    let s0 = c.s0;
+    var taken = c.taken;
     var evals = taken.evals;
     var code = 0u;
     if bounds_signed_distance(taken.step.state.r) > 0.0 {
@@ -147,93 +259,66 @@ fn stage_leave(@builtin(global_invocation_id) gid: vec3<u32>) {
         state = ex.state;
         h = ex.h;
     }
-    var out = stage_blank();
-    out.r = state.r;
-    out.t = state.t;
-    out.h = h;
-    out.evals = evals;
-    out.ds_next = ctrl.ds_adapt;
-    out.code = code;
-    stage_out[gid.x] = out;
+    leave_out[gid.x] = LeaveOut(state.r, h, state.t, evals, c.ds_next, code);
 }
 
-// A straight flight from r along t: its length (h; -1 for none) and may_fly (code).
+// A straight flight from r along t.
 @compute @workgroup_size(64, 1, 1)
 fn stage_flight(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&ray_in) {
         return;
     }
-    let input = stage_in[gid.x];
-    var out = stage_blank();
-    out.h = homogeneous_span(input.r, normalize_or_zero(input.t));
-    out.code = select(0u, 1u, may_fly(input.r));
-    stage_out[gid.x] = out;
+    let input = ray_in[gid.x];
+    let span = homogeneous_span(input.r, normalize_or_zero(input.t));
+    flight_out[gid.x] = FlightOut(span, select(0u, 1u, may_fly(input.r)));
 }
 
-// The medium's surface: the ray (r, t)'s interval through the bounds (h = s_in, n = s_out,
-// code bit 0 = found), r's signed distance (ds_next), and the refraction of t's direction
-// at the normal err_r from n1 = input.h into n2 = input.ds_adapt (out.t = direction,
-// err_t.x = reflectance, code bit 1 = transmitted).
+// The medium's surface: the ray's interval through the bounds, r's signed distance, and
+// the refraction of t's direction at the bounds' normal nearest r.
 @compute @workgroup_size(64, 1, 1)
 fn stage_surface(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&surface_in) {
         return;
     }
-    let input = stage_in[gid.x];
+    let input = surface_in[gid.x];
     let d = normalize_or_zero(input.t);
     let b = bounds_intersect(input.r, d);
     let nrm = bounds_normal(project_to_surface(input.r));
-    let i = refract(d, nrm, input.h, input.ds_adapt);
-    var out = stage_blank();
-    out.h = b.s_in;
-    out.n = b.s_out;
-    out.ds_next = bounds_signed_distance(input.r);
-    out.t = i.dir;
-    out.err_r = nrm;
-    out.err_t = vec3<f32>(i.reflectance, 0.0, 0.0);
-    out.code = select(0u, 1u, b.found) | select(0u, 2u, i.transmitted);
-    stage_out[gid.x] = out;
+    let i = refract(d, nrm, input.n1, input.n2);
+    surface_out[gid.x] = SurfaceOut(
+        i.dir,
+        select(0u, 1u, i.transmitted),
+        nrm,
+        i.reflectance,
+        b.s_in,
+        b.s_out,
+        bounds_signed_distance(input.r),
+        select(0u, 1u, b.found),
+    );
 }
 
-// The scene outside the medium: the nearest object along (r, t) beyond t_min = input.h
-// (h = its distance or -1, err_r = the normal facing the ray, code = scene index + 1 or 0)
-// and the sky's radiance in t's direction (grad_n).
+// The scene outside the medium: the nearest object along (r, t) beyond t_min, and the
+// sky's radiance in t's direction.
 @compute @workgroup_size(64, 1, 1)
 fn stage_scene(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&scene_in) {
         return;
     }
-    let input = stage_in[gid.x];
+    let input = scene_in[gid.x];
     let d = normalize_or_zero(input.t);
-    let hit = intersect_scene(input.r, d, input.h, INF);
-    var out = stage_blank();
-    out.h = select(-1.0, hit.t, hit.found);
-    out.err_r = hit.normal;
-    out.code = select(0u, hit.object + 1u, hit.found);
-    out.grad_n = sky_radiance(d);
-    stage_out[gid.x] = out;
+    let hit = intersect_scene(input.r, d, input.t_min, INF);
+    scene_out[gid.x] = SceneOut(hit.normal, select(-1.0, hit.t, hit.found), sky_radiance(d), select(0u, hit.object + 1u, hit.found));
 }
 
 // A whole ray through the medium from r along t (outside: entered with refraction, as a
-// camera ray is), no jitter: the end point (r), direction (t), optical path (h), length
-// (n), field evaluations, steps (ds_next, exact below 2^24), transmittance (err_t.x) and
-// status (code: STATUS_* in the low byte, END_* in the next).
+// camera ray is), no jitter.
 @compute @workgroup_size(64, 1, 1)
 fn stage_march(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= arrayLength(&stage_in) {
+    if gid.x >= arrayLength(&ray_in) {
         return;
     }
-    let input = stage_in[gid.x];
+    let input = ray_in[gid.x];
     var stats = march_stats_new(input.t);
     let end = march_medium(input.r, input.t, 1.0, &stats);
-    var out = stage_blank();
-    out.r = end.point;
-    out.t = end.dir;
-    out.h = stats.opl;
-    out.n = stats.length;
-    out.evals = stats.evals;
-    out.ds_next = f32(stats.steps);
-    out.err_t = vec3<f32>(end.transmittance, 0.0, 0.0);
-    out.code = end.status | (end.kind << 8u);
-    stage_out[gid.x] = out;
+    march_out[gid.x] = MarchOut(end.point, stats.opl, end.dir, stats.length, stats.evals, stats.steps, end.transmittance, end.status, end.kind);
 }

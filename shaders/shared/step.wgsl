@@ -192,3 +192,7 @@ fn normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     }
     return vec3<f32>(0.0);
 }
+
+fn finite3(v: vec3<f32>) -> bool {
+    return all(v - v == vec3<f32>(0.0));
+}

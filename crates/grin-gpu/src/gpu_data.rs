@@ -288,21 +288,21 @@ impl PixelOut {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::shaders::RENDER_WGSL;
 
-    /// Byte offset of every member of the WGSL struct `name` (naga's layouter on the
-    /// assembled render kernel).
-    fn wgsl_offsets(name: &str) -> (usize, Vec<(String, usize)>) {
-        let module = naga::front::wgsl::parse_str(RENDER_WGSL).expect("render.wgsl parses");
+    /// Size and byte offset of every member of the WGSL struct `name` (naga's layouter
+    /// on the assembled kernel `source`).
+    pub(crate) fn wgsl_offsets(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
+        let module = naga::front::wgsl::parse_str(source).expect("the kernel parses");
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).expect("layout");
         let (handle, ty) = module
             .types
             .iter()
             .find(|(_, t)| t.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("{name} not in render.wgsl"));
+            .unwrap_or_else(|| panic!("{name} not in the kernel"));
         let naga::TypeInner::Struct { members, .. } = &ty.inner else {
             panic!("{name} is not a struct");
         };
@@ -313,11 +313,11 @@ mod tests {
         (layouter[handle].size as usize, offsets)
     }
 
-    /// The WGSL struct has exactly these members, in this order, at the Rust offsets,
-    /// and the same size.
+    /// The WGSL struct of the kernel `source` has exactly these members, in this order,
+    /// at the Rust offsets, and the same size.
     macro_rules! same_layout {
-        ($ty:ident, $($field:ident),+ $(,)?) => {{
-            let (size, wgsl) = wgsl_offsets(stringify!($ty));
+        ($source:expr, $ty:ident, $($field:ident),+ $(,)?) => {{
+            let (size, wgsl) = $crate::gpu_data::tests::wgsl_offsets($source, stringify!($ty));
             let rust: Vec<(String, usize)> = vec![
                 $((stringify!($field).to_string(), std::mem::offset_of!($ty, $field))),+
             ];
@@ -325,12 +325,14 @@ mod tests {
             assert_eq!(size, std::mem::size_of::<$ty>(), "{} size", stringify!($ty));
         }};
     }
+    pub(crate) use same_layout;
 
     /// The named fields of the Rust structs and their WGSL twins agree member by member:
     /// a field added, dropped, renamed or moved on one side only fails here.
     #[test]
     fn struct_members_match_their_wgsl_twins() {
         same_layout!(
+            RENDER_WGSL,
             FrameParams,
             cam_origin,
             tan_half_fov_y,
@@ -396,6 +398,7 @@ mod tests {
             _pad3,
         );
         same_layout!(
+            RENDER_WGSL,
             GpuObject,
             a,
             radius,
@@ -415,7 +418,7 @@ mod tests {
             image_width,
             image_height,
         );
-        same_layout!(GpuLight, position, kind, intensity, _pad0);
+        same_layout!(RENDER_WGSL, GpuLight, position, kind, intensity, _pad0);
     }
 
     /// The Rust structs and their WGSL twins have the same size (naga's layouter on the

@@ -30,7 +30,7 @@ use grin_scene::RenderSettings;
 use crate::gpu_data::{FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
 use crate::pack::{copy_uploaded, frame_params};
 use crate::pipelines::pipeline_constants;
-use crate::stages::{Stage, StageIn, StageKit, StageOut};
+use crate::stages::{self, MarchOut, RayIn, StageKit, StagePipeline};
 use crate::{GpuContext, GpuError};
 
 /// Traces rays through one baked field on the GPU.
@@ -39,7 +39,7 @@ pub struct GpuRayTracer<'a> {
     field: Arc<BakedField>,
     /// The parameters as the field's upload left them (grid, macro cells, flags).
     uploaded: FrameParams,
-    pipelines: HashMap<Vec<u64>, wgpu::ComputePipeline>,
+    pipelines: HashMap<Vec<u64>, StagePipeline<stages::March>>,
 }
 
 impl std::fmt::Debug for GpuRayTracer<'_> {
@@ -157,18 +157,13 @@ impl<'a> GpuRayTracer<'a> {
             .map(|(_, v)| v.to_bits())
             .collect();
         if !self.pipelines.contains_key(&key) {
-            let pipeline = self.kit.pipeline(Stage::March, &params)?;
+            let pipeline = self.kit.pipeline::<stages::March>(&params)?;
             self.pipelines.insert(key.clone(), pipeline);
         }
         self.kit.set_params(params);
-        let input: Vec<StageIn> = (0..copies.max(1))
+        let input: Vec<RayIn> = (0..copies.max(1))
             .flat_map(|_| rays.iter())
-            .map(|&(o, d)| StageIn {
-                r: o.as_vec3().to_array(),
-                h: 0.0,
-                t: d.as_vec3().to_array(),
-                ds_adapt: 0.0,
-            })
+            .map(|&(o, d)| RayIn::new(o.as_vec3().to_array(), d.as_vec3().to_array()))
             .collect();
         let pipeline = self
             .pipelines
@@ -186,7 +181,7 @@ impl<'a> GpuRayTracer<'a> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GpuRay {
     /// `grin_trace::RayStatus`'s code: 0 missed, 1 exited, 2 absorbed, 3 max_steps,
-    /// 4 error, 5 degraded (`STATUS_*` in shaders/shared/medium.wgsl).
+    /// 4 error, 5 degraded (`STATUS_*` in shaders/shared/trace.wgsl).
     pub status: u32,
     /// Where the ray left the medium (or stopped).
     pub position: DVec3,
@@ -204,18 +199,18 @@ pub struct GpuRay {
     pub transmittance: f64,
 }
 
-impl From<&StageOut> for GpuRay {
-    fn from(o: &StageOut) -> Self {
+impl From<&MarchOut> for GpuRay {
+    fn from(o: &MarchOut) -> Self {
         let v = |a: [f32; 3]| glam::Vec3::from_array(a).as_dvec3();
         GpuRay {
-            status: o.code & 0xff,
-            position: v(o.r),
-            direction: v(o.t),
-            opl: f64::from(o.h),
-            length: f64::from(o.n),
-            steps: o.ds_next as u32,
+            status: o.status,
+            position: v(o.point),
+            direction: v(o.dir),
+            opl: f64::from(o.opl),
+            length: f64::from(o.length),
+            steps: o.steps,
             evals: o.evals,
-            transmittance: f64::from(o.err_t[0]),
+            transmittance: f64::from(o.transmittance),
         }
     }
 }

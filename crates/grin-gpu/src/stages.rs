@@ -1,14 +1,16 @@
 //! The marcher's stages one at a time: runs a test-only entry point of
 //! shaders/stages.wgsl (field sample, one integrator step, one controlled step, one step
-//! with the tunnelling check and the exit search, a straight flight) on a batch of states, with the frame
-//! parameters and field texture the renderer would use for the same scene. A test
-//! instrument (tests/stages.rs holds each stage against its CPU twin): it compiles one
-//! small pipeline per call.
+//! with the tunnelling check and the exit search, a straight flight, the medium's surface,
+//! the scene outside it, a whole march) on a batch of inputs, each stage with an input
+//! and a result struct of its own ([`Stage`]), with the frame parameters and field
+//! texture the renderer would use for the same scene. A test instrument (tests/stages.rs
+//! holds each stage against its CPU twin): it compiles one small pipeline per call.
 
 use bytemuck::{Pod, Zeroable};
 use grin_field::baked::BakedField;
 use grin_render::scene::RenderScene;
 
+use std::marker::PhantomData;
 use std::time::Instant;
 
 use crate::field::{FieldTextures, upload_field};
@@ -18,106 +20,309 @@ use crate::pipelines::{pipeline_constants, render_layout_entries};
 use crate::render::{output_buffers, read_buffer};
 use crate::{GpuContext, GpuError, specialize};
 
-/// The stages of shaders/stages.wgsl.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Stage {
-    /// `sample_field` at `r`.
-    Sample,
-    /// `integrate_step` from (`r`, `t`) by `h`, D sampled at `r`.
-    Integrate,
-    /// `take_step`: the step policy's step from (`r`, `t`) (controller at `ds_adapt`).
-    Take,
-    /// `take_step`, then `excursion_step` or `exit_medium` when the step leaves.
-    Leave,
-    /// `homogeneous_span` from `r` along `t` (in `h`; -1 for none) and `may_fly` (`code`).
-    Flight,
-    /// The bounds' interval along (`r`, `t`) (`h`, `n`; `code` bit 0 when met), the signed
-    /// distance of `r` (`ds_next`), and `refract` of `t` at the surface normal nearest `r`
-    /// (`err_r`) from n1 = `h` into n2 = `ds_adapt` (`t`, reflectance in `err_t[0]`,
-    /// `code` bit 1 when transmitted).
-    Surface,
-    /// `intersect_scene` along (`r`, `t`) beyond t_min = `h` (`h` = distance or -1,
-    /// `err_r` = normal facing the ray, `code` = scene index + 1 or 0) and `sky_radiance`
-    /// of `t`'s direction (`grad_n`).
-    Scene,
-    /// `march_medium` of a whole ray from `r` along `t` (no jitter): end point `r`,
-    /// direction `t`, optical path `h`, length `n`, steps `ds_next`, transmittance
-    /// `err_t[0]`, `code` = status | end kind << 8 ([`crate::march`] reads it).
-    March,
+/// A stage of shaders/stages.wgsl: its entry point and the structs it reads and writes
+/// (each mirrors the WGSL struct of the same name, member by member, as the test
+/// `stage_structs_match_their_wgsl_twins` checks).
+pub trait Stage {
+    /// The entry point.
+    const ENTRY_POINT: &'static str;
+    /// One input.
+    type In: Pod;
+    /// One result.
+    type Out: Pod;
 }
 
-impl Stage {
-    fn entry_point(self) -> &'static str {
-        match self {
-            Stage::Sample => "stage_sample",
-            Stage::Integrate => "stage_integrate",
-            Stage::Take => "stage_take",
-            Stage::Leave => "stage_leave",
-            Stage::Flight => "stage_flight",
-            Stage::Surface => "stage_surface",
-            Stage::Scene => "stage_scene",
-            Stage::March => "stage_march",
+macro_rules! stages {
+    ($($(#[$doc:meta])* $name:ident: $entry:literal, $input:ty => $output:ty;)+) => {$(
+        $(#[$doc])*
+        #[derive(Debug)]
+        pub enum $name {}
+        impl Stage for $name {
+            const ENTRY_POINT: &'static str = $entry;
+            type In = $input;
+            type Out = $output;
+        }
+    )+};
+}
+
+stages! {
+    /// `sample_field` at a point.
+    Sample: "stage_sample", SampleIn => SampleOut;
+    /// `integrate_step` by a t-step, D sampled at the start.
+    Integrate: "stage_integrate", IntegrateIn => IntegrateOut;
+    /// `take_step`: the step policy's step.
+    Take: "stage_take", TakeIn => TakeOut;
+    /// `take_step`, then `excursion_step` or `exit_medium` when the step leaves.
+    Leave: "stage_leave", TakeIn => LeaveOut;
+    /// `homogeneous_span` along a ray, and `may_fly` at its origin.
+    Flight: "stage_flight", RayIn => FlightOut;
+    /// The bounds' interval along a ray, the signed distance of its origin, and
+    /// `refract` at the surface normal nearest the origin.
+    Surface: "stage_surface", SurfaceIn => SurfaceOut;
+    /// `intersect_scene` along a ray, and `sky_radiance` of its direction.
+    Scene: "stage_scene", SceneIn => SceneOut;
+    /// `march_medium` of a whole ray (no jitter) ([`crate::march`] reads it).
+    March: "stage_march", RayIn => MarchOut;
+}
+
+/// [`Sample`]'s input: a point.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct SampleIn {
+    pub r: [f32; 3],
+    _pad: f32,
+}
+
+impl SampleIn {
+    pub fn new(r: [f32; 3]) -> Self {
+        SampleIn { r, _pad: 0.0 }
+    }
+}
+
+/// [`Sample`]'s result: the field at the point.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct SampleOut {
+    pub grad_n: [f32; 3],
+    pub n: f32,
+    pub delta_n: f32,
+    _pad: [f32; 3],
+}
+
+/// [`Integrate`]'s input: the state (`r`, `t`) and the t-step `h`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct IntegrateIn {
+    pub r: [f32; 3],
+    pub h: f32,
+    pub t: [f32; 3],
+    _pad: f32,
+}
+
+impl IntegrateIn {
+    pub fn new(r: [f32; 3], t: [f32; 3], h: f32) -> Self {
+        IntegrateIn { r, h, t, _pad: 0.0 }
+    }
+}
+
+/// [`Integrate`]'s result.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct IntegrateOut {
+    /// The end state.
+    pub r: [f32; 3],
+    /// Field evaluations, the start sample not counted.
+    pub evals: u32,
+    pub t: [f32; 3],
+    /// The step's end sample where it made one (else zero).
+    pub end_n: f32,
+    pub end_grad_n: [f32; 3],
+    _pad0: f32,
+    /// The adaptive pair's embedded error estimate (e_r, e_T).
+    pub err_r: [f32; 3],
+    _pad1: f32,
+    pub err_t: [f32; 3],
+    _pad2: f32,
+}
+
+/// [`Take`]'s and [`Leave`]'s input: the state (`r`, `t`) and the controller's current
+/// error-controlled step `ds_adapt` (0: its first).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct TakeIn {
+    pub r: [f32; 3],
+    pub ds_adapt: f32,
+    pub t: [f32; 3],
+    _pad: f32,
+}
+
+impl TakeIn {
+    pub fn new(r: [f32; 3], t: [f32; 3], ds_adapt: f32) -> Self {
+        TakeIn {
+            r,
+            ds_adapt,
+            t,
+            _pad: 0.0,
         }
     }
 }
 
-/// One input state. Keep in sync with `StageIn` in shaders/stages.wgsl.
+/// [`Take`]'s result.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
-pub struct StageIn {
+pub struct TakeOut {
+    /// The end state.
     pub r: [f32; 3],
-    /// [`Stage::Integrate`]: the t-step.
-    pub h: f32,
-    pub t: [f32; 3],
-    /// [`Stage::Take`], [`Stage::Leave`]: the controller's current error-controlled step
-    /// (0: its first).
-    pub ds_adapt: f32,
-}
-
-/// One result. Keep in sync with `StageOut` in shaders/stages.wgsl.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
-pub struct StageOut {
-    /// End state (sample: unused).
-    pub r: [f32; 3],
-    /// t-length of the step (sample: delta_n).
+    /// The step's t-length.
     pub h: f32,
     pub t: [f32; 3],
     /// Field evaluations, the start sample not counted.
     pub evals: u32,
-    /// Sample: the field at `r`; integrate: the step's end sample when it made one.
-    pub grad_n: [f32; 3],
-    pub n: f32,
-    /// Integrate: the adaptive pair's embedded error estimate (e_r, e_T).
-    pub err_r: [f32; 3],
-    /// Take, leave: the controller's step after this one.
+    /// The controller's step after this one.
     pub ds_next: f32,
-    pub err_t: [f32; 3],
-    /// Leave: 0 stayed inside, 1 the step ended outside, 2 it left and came back;
-    /// flight: 1 where `may_fly`.
-    pub code: u32,
+    _pad: [f32; 3],
 }
-const _: () = assert!(std::mem::size_of::<StageIn>() == 2 * 16);
-const _: () = assert!(std::mem::size_of::<StageOut>() == 5 * 16);
+
+/// [`Leave`]'s result: as [`TakeOut`], with the state and t-length cut at the surface
+/// where the step left.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct LeaveOut {
+    pub r: [f32; 3],
+    pub h: f32,
+    pub t: [f32; 3],
+    pub evals: u32,
+    pub ds_next: f32,
+    /// 0 stayed inside, 1 the step ended outside, 2 it left and came back.
+    pub outcome: u32,
+    _pad: [u32; 2],
+}
+
+/// [`Flight`]'s and [`March`]'s input: a ray from `r` along `t` (any length).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct RayIn {
+    pub r: [f32; 3],
+    _pad0: f32,
+    pub t: [f32; 3],
+    _pad1: f32,
+}
+
+impl RayIn {
+    pub fn new(r: [f32; 3], t: [f32; 3]) -> Self {
+        RayIn {
+            r,
+            _pad0: 0.0,
+            t,
+            _pad1: 0.0,
+        }
+    }
+}
+
+/// [`Flight`]'s result.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct FlightOut {
+    /// The straight flight's length (-1: none).
+    pub span: f32,
+    /// 1 where `may_fly`, else 0.
+    pub may_fly: u32,
+}
+
+/// [`Surface`]'s input: the ray (`r`, `t`), refracted at the surface from index `n1`
+/// into `n2`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct SurfaceIn {
+    pub r: [f32; 3],
+    pub n1: f32,
+    pub t: [f32; 3],
+    pub n2: f32,
+}
+
+/// [`Surface`]'s result.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct SurfaceOut {
+    /// The refracted (or totally reflected) direction.
+    pub dir: [f32; 3],
+    /// 1 where the refraction transmitted, else 0.
+    pub transmitted: u32,
+    /// The normal of the surface point nearest `r`, where it refracted.
+    pub normal: [f32; 3],
+    /// The Fresnel reflectance.
+    pub reflectance: f32,
+    /// The ray's interval through the bounds, where it met them.
+    pub s_in: f32,
+    pub s_out: f32,
+    /// `r`'s signed distance from the surface.
+    pub signed_distance: f32,
+    /// 1 where the ray met the bounds, else 0.
+    pub met: u32,
+}
+
+/// [`Scene`]'s input: the ray (`r`, `t`) and the least distance `t_min` an object may be
+/// met at.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct SceneIn {
+    pub r: [f32; 3],
+    pub t_min: f32,
+    pub t: [f32; 3],
+    _pad: f32,
+}
+
+impl SceneIn {
+    pub fn new(r: [f32; 3], t: [f32; 3], t_min: f32) -> Self {
+        SceneIn {
+            r,
+            t_min,
+            t,
+            _pad: 0.0,
+        }
+    }
+}
+
+/// [`Scene`]'s result.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct SceneOut {
+    /// The nearest object's normal, facing the ray.
+    pub normal: [f32; 3],
+    /// Its distance (-1: none).
+    pub distance: f32,
+    /// The sky's radiance in `t`'s direction.
+    pub sky: [f32; 3],
+    /// Its scene index + 1 (0: none).
+    pub object: u32,
+}
+
+/// [`March`]'s result.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct MarchOut {
+    /// The end point.
+    pub point: [f32; 3],
+    /// The optical path inside the medium.
+    pub opl: f32,
+    /// The unit direction at the end (after refraction out).
+    pub dir: [f32; 3],
+    /// The geometric length inside the medium.
+    pub length: f32,
+    pub evals: u32,
+    pub steps: u32,
+    /// The product of the Fresnel transmittances at the crossings.
+    pub transmittance: f32,
+    /// `STATUS_*` (shaders/shared/trace.wgsl).
+    pub status: u32,
+    /// How the march ended: `END_*` (shaders/shared/medium.wgsl).
+    pub end: u32,
+    _pad: [u32; 3],
+}
 
 /// Threads per workgroup of every stage entry point (`STAGE_WORKGROUP`).
 const STAGE_WORKGROUP: u32 = 64;
 
-/// Run `stage` on `input` with `scene`'s settings (integrator, step policy, exit method,
-/// bounds) over `baked`, as [`crate::GpuRenderer`] would upload them.
-pub fn run_stage(
+/// Run stage `S` on `input` with `scene`'s settings (integrator, step policy, exit
+/// method, bounds) over `baked`, as [`crate::GpuRenderer`] would upload them.
+pub fn run_stage<S: Stage>(
     ctx: &GpuContext,
     scene: &RenderScene,
     baked: &BakedField,
-    stage: Stage,
-    input: &[StageIn],
-) -> Result<Vec<StageOut>, GpuError> {
+    input: &[S::In],
+) -> Result<Vec<S::Out>, GpuError> {
     if input.is_empty() {
         return Ok(Vec::new());
     }
     let kit = StageKit::new(ctx, scene, baked)?;
-    let pipeline = kit.pipeline(stage, &kit.params)?;
+    let pipeline = kit.pipeline::<S>(&kit.params)?;
     kit.dispatch(&pipeline, input).map(|(out, _)| out)
+}
+
+/// The compute pipeline of stage `S`, for [`StageKit::dispatch`] of `S`'s structs.
+pub(crate) struct StagePipeline<S> {
+    pipeline: wgpu::ComputePipeline,
+    stage: PhantomData<S>,
 }
 
 /// What every stage dispatch shares: the layouts, the frame parameters
@@ -264,15 +469,14 @@ impl<'a> StageKit<'a> {
         Ok(())
     }
 
-    /// The pipeline of `stage` specialised for `params`' constants (integrator, step
+    /// The pipeline of stage `S` specialised for `params`' constants (integrator, step
     /// policy, flags, bounds).
-    pub(crate) fn pipeline(
+    pub(crate) fn pipeline<S: Stage>(
         &self,
-        stage: Stage,
         params: &FrameParams,
-    ) -> Result<wgpu::ComputePipeline, GpuError> {
+    ) -> Result<StagePipeline<S>, GpuError> {
         let constants = pipeline_constants(params, PASS_ALL);
-        let entry = stage.entry_point();
+        let entry = S::ENTRY_POINT;
         // Each pipeline gets the stage kernel with its constants folded in
         // (crate::specialize), as the render pipelines do.
         let compiled = self.ctx.scoped("compiling a marcher stage", || {
@@ -290,7 +494,10 @@ impl<'a> StageKit<'a> {
             message,
         })?;
         self.ctx.persist_pipeline_cache();
-        Ok(pipeline)
+        Ok(StagePipeline {
+            pipeline,
+            stage: PhantomData,
+        })
     }
 
     /// Write `params` for the next dispatches (their constants must be the pipeline's).
@@ -303,11 +510,11 @@ impl<'a> StageKit<'a> {
 
     /// Run `pipeline` on `input`: the outputs, and the seconds from the submission to
     /// the end of the kernel (buffer setup and readback not counted).
-    pub(crate) fn dispatch(
+    pub(crate) fn dispatch<S: Stage>(
         &self,
-        pipeline: &wgpu::ComputePipeline,
-        input: &[StageIn],
-    ) -> Result<(Vec<StageOut>, f64), GpuError> {
+        pipeline: &StagePipeline<S>,
+        input: &[S::In],
+    ) -> Result<(Vec<S::Out>, f64), GpuError> {
         if input.is_empty() {
             return Ok((Vec::new(), 0.0));
         }
@@ -318,7 +525,7 @@ impl<'a> StageKit<'a> {
             .ok_or_else(|| GpuError::Unsupported("no scene uploaded for the stages".into()))?;
         let count = u32::try_from(input.len())
             .map_err(|_| GpuError::Unsupported("more than 2^32 stage inputs".into()))?;
-        let out_bytes = (input.len() * std::mem::size_of::<StageOut>()) as u64;
+        let out_bytes = (input.len() * std::mem::size_of::<S::Out>()) as u64;
         let (readback, encoder) = ctx.scoped("running a marcher stage", || {
             use wgpu::util::DeviceExt;
             let device = &ctx.device;
@@ -350,7 +557,7 @@ impl<'a> StageKit<'a> {
                     label: Some("stage"),
                     timestamp_writes: None,
                 });
-                pass.set_pipeline(pipeline);
+                pass.set_pipeline(&pipeline.pipeline);
                 pass.set_bind_group(0, &frame.group, &[]);
                 pass.set_bind_group(1, &io_group, &[]);
                 pass.dispatch_workgroups(count.div_ceil(STAGE_WORKGROUP), 1, 1);
@@ -367,5 +574,96 @@ impl<'a> StageKit<'a> {
         ctx.wait()?;
         let seconds = start.elapsed().as_secs_f64();
         Ok((read_buffer(ctx, &readback, out_bytes)?, seconds))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu_data::tests::same_layout;
+    use crate::shaders::STAGES_WGSL;
+
+    /// Each stage's structs and their WGSL twins agree member by member (the padding
+    /// is WGSL's own, named only on the Rust side).
+    #[test]
+    fn stage_structs_match_their_wgsl_twins() {
+        let w = STAGES_WGSL;
+        same_layout!(w, SampleIn, r);
+        same_layout!(w, SampleOut, grad_n, n, delta_n);
+        same_layout!(w, IntegrateIn, r, h, t);
+        same_layout!(
+            w,
+            IntegrateOut,
+            r,
+            evals,
+            t,
+            end_n,
+            end_grad_n,
+            err_r,
+            err_t
+        );
+        same_layout!(w, TakeIn, r, ds_adapt, t);
+        same_layout!(w, TakeOut, r, h, t, evals, ds_next);
+        same_layout!(w, LeaveOut, r, h, t, evals, ds_next, outcome);
+        same_layout!(w, RayIn, r, t);
+        same_layout!(w, FlightOut, span, may_fly);
+        same_layout!(w, SurfaceIn, r, n1, t, n2);
+        same_layout!(
+            w,
+            SurfaceOut,
+            dir,
+            transmitted,
+            normal,
+            reflectance,
+            s_in,
+            s_out,
+            signed_distance,
+            met
+        );
+        same_layout!(w, SceneIn, r, t_min, t);
+        same_layout!(w, SceneOut, normal, distance, sky, object);
+        same_layout!(
+            w,
+            MarchOut,
+            point,
+            opl,
+            dir,
+            length,
+            evals,
+            steps,
+            transmittance,
+            status,
+            end
+        );
+    }
+
+    /// The kernel declares one input and one output variable per stage at the same two
+    /// bindings; each stage's specialised module keeps only its own pair.
+    #[test]
+    fn each_specialised_stage_binds_only_its_own_structs() {
+        fn io_of<S: Stage>() -> Vec<(u32, String)> {
+            let module = specialize::specialise(specialize::Kernel::Stages, S::ENTRY_POINT, &[])
+                .expect("the stage specialises and validates");
+            let mut io: Vec<(u32, String)> = module
+                .global_variables
+                .iter()
+                .filter_map(|(_, g)| {
+                    let b = g.binding.as_ref().filter(|b| b.group == 1)?;
+                    Some((b.binding, g.name.clone().unwrap_or_default()))
+                })
+                .collect();
+            io.sort();
+            io
+        }
+        let pair =
+            |input: &str, output: &str| vec![(0, input.to_string()), (1, output.to_string())];
+        assert_eq!(io_of::<Sample>(), pair("sample_in", "sample_out"));
+        assert_eq!(io_of::<Integrate>(), pair("integrate_in", "integrate_out"));
+        assert_eq!(io_of::<Take>(), pair("take_in", "take_out"));
+        assert_eq!(io_of::<Leave>(), pair("take_in", "leave_out"));
+        assert_eq!(io_of::<Flight>(), pair("ray_in", "flight_out"));
+        assert_eq!(io_of::<Surface>(), pair("surface_in", "surface_out"));
+        assert_eq!(io_of::<Scene>(), pair("scene_in", "scene_out"));
+        assert_eq!(io_of::<March>(), pair("ray_in", "march_out"));
     }
 }

@@ -25,7 +25,9 @@ use std::sync::Arc;
 use glam::Vec3;
 use grin_field::baked::{BakedField, Interp};
 use grin_field::{FieldSample, IndexField, Real};
-use grin_gpu::stages::{Stage, StageIn, StageOut, run_stage};
+use grin_gpu::stages::{
+    self, IntegrateIn, RayIn, SampleIn, SceneIn, Stage, SurfaceIn, TakeIn, TakeOut, run_stage,
+};
 use grin_render::scene::RenderScene;
 use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind, Scene, StepSpec, load_scene};
@@ -134,6 +136,12 @@ fn controller(s: &Setup, ds_adapt: f32) -> StepController {
     }
 }
 
+/// [`states`]' maker of the controlled stages' input: the controller starts at the
+/// cycled value.
+fn take_in(r: Vec3, t: Vec3, _: f32, ds_adapt: f32) -> TakeIn {
+    TakeIn::new(r.to_array(), t.to_array(), ds_adapt)
+}
+
 /// The tests' one deterministic generator (xorshift64*).
 #[path = "../../../tests/common/rng.rs"]
 mod rng;
@@ -156,16 +164,19 @@ fn unit(rng: &mut Rng) -> Vec3 {
 
 /// States inside the medium: position in the bounds shrunk by `inner..outer` of the
 /// way from the centre to the surface, T = n(r) times a unit direction (bent outward by
-/// `outward` in [0, 1]).
-fn states(
+/// `outward` in [0, 1]), each made a stage's input by `make` (r, T, a number drawn from
+/// the range `drawn`, the next of `cycled`).
+#[allow(clippy::too_many_arguments)]
+fn states<I>(
     setup: &Setup,
     seed: u64,
     inner: f32,
     outer: f32,
     outward: f32,
-    h: (f32, f32),
-    ds_adapt: &[f32],
-) -> Vec<StageIn> {
+    drawn: (f32, f32),
+    cycled: &[f32],
+    make: impl Fn(Vec3, Vec3, f32, f32) -> I,
+) -> Vec<I> {
     let field = setup.baked.as_ref();
     let bounds = field.bounds();
     let (center, half) = match bounds {
@@ -205,19 +216,15 @@ fn states(
             };
             let d = (unit(&mut rng) * (1.0 - outward) + out * outward).normalize();
             let n = field.sample_f32(r).n;
-            StageIn {
-                r: r.to_array(),
-                h: rng.range_f32(h.0, h.1),
-                t: (d * n).to_array(),
-                ds_adapt: ds_adapt[i % ds_adapt.len()],
-            }
+            let x = rng.range_f32(drawn.0, drawn.1);
+            make(r, d * n, x, cycled[i % cycled.len()])
         })
         .collect()
 }
 
-fn gpu(setup: &Setup, stage: Stage, input: &[StageIn]) -> Option<Vec<StageOut>> {
-    let ctx = harness::context(&format!("stage {stage:?}"))?;
-    Some(run_stage(&ctx, &setup.scene, &setup.baked, stage, input).unwrap())
+fn gpu<S: Stage>(setup: &Setup, input: &[S::In]) -> Option<Vec<S::Out>> {
+    let ctx = harness::context(&format!("stage {}", S::ENTRY_POINT))?;
+    Some(run_stage::<S>(&ctx, &setup.scene, &setup.baked, input).expect("the stage runs"))
 }
 
 fn v(a: [f32; 3]) -> Vec3 {
@@ -308,8 +315,10 @@ fn sample_field_matches_the_cpu_trilinear_and_tricubic_grids() {
             interp,
         );
         // Points in and just beyond the grid (beyond it the field is clamped or ambient).
-        let input = states(&s, 7, 0.0, 1.1, 0.0, (0.0, 0.0), &[0.0]);
-        let Some(out) = gpu(&s, Stage::Sample, &input) else {
+        let input = states(&s, 7, 0.0, 1.1, 0.0, (0.0, 0.0), &[0.0], |r, _, _, _| {
+            SampleIn::new(r.to_array())
+        });
+        let Some(out) = gpu::<stages::Sample>(&s, &input) else {
             return;
         };
         let field = s.baked.as_ref();
@@ -356,8 +365,10 @@ fn every_integrator_step_matches_its_cpu_twin() {
             Interp::Trilinear,
         );
         // Steps of 0.02..0.25 R from points well inside.
-        let input = states(&s, 11, 0.0, 0.7, 0.0, (0.02, 0.25), &[0.0]);
-        let Some(out) = gpu(&s, Stage::Integrate, &input) else {
+        let input = states(&s, 11, 0.0, 0.7, 0.0, (0.02, 0.25), &[0.0], |r, t, h, _| {
+            IntegrateIn::new(r.to_array(), t.to_array(), h)
+        });
+        let Some(out) = gpu::<stages::Integrate>(&s, &input) else {
             return;
         };
         let field = s.baked.as_ref();
@@ -377,7 +388,7 @@ fn every_integrator_step_matches_its_cpu_twin() {
                 rep.state(i, "e_T", v(o.err_t), et);
             }
             if let Some(end) = c.end {
-                rep.length(i, "end n", o.n, end.n);
+                rep.length(i, "end n", o.end_n, end.n);
             }
         }
         rep.check(&format!("integrate {kind:?}"), false);
@@ -397,8 +408,8 @@ const FLOOR_MEDIAN_TOL: f32 = 0.03;
 fn compare_take(
     label: &str,
     s: &Setup,
-    input: &[StageIn],
-    out: &[StageOut],
+    input: &[TakeIn],
+    out: &[TakeOut],
     flips: bool,
     floor: bool,
 ) {
@@ -520,8 +531,8 @@ fn the_step_controller_of_every_policy_matches_its_cpu_twin() {
             ExitMethod::Hermite,
             Interp::Trilinear,
         );
-        let input = states(&s, 13, 0.0, 0.9, 0.0, (0.0, 0.0), &starts);
-        let Some(out) = gpu(&s, Stage::Take, &input) else {
+        let input = states(&s, 13, 0.0, 0.9, 0.0, (0.0, 0.0), &starts, take_in);
+        let Some(out) = gpu::<stages::Take>(&s, &input) else {
             return;
         };
         let flips = !matches!(step, StepSpec::Fixed(_) | StepSpec::Heuristic { .. });
@@ -577,8 +588,8 @@ fn the_step_that_leaves_the_medium_matches_its_cpu_twin() {
     for (name, kind, step, exit) in cases {
         let s = setup(name, kind, step, exit, Interp::Trilinear);
         // Near the surface, heading out or grazing it.
-        let input = states(&s, 17, 0.9, 0.999, 0.5, (0.0, 0.0), &[0.1, 0.25]);
-        let Some(out) = gpu(&s, Stage::Leave, &input) else {
+        let input = states(&s, 17, 0.9, 0.999, 0.5, (0.0, 0.0), &[0.1, 0.25], take_in);
+        let Some(out) = gpu::<stages::Leave>(&s, &input) else {
             return;
         };
         let field = s.baked.as_ref();
@@ -619,7 +630,7 @@ fn the_step_that_leaves_the_medium_matches_its_cpu_twin() {
                 evals += ee;
             }
             codes[code as usize] += 1;
-            rep.count(i, "outcome", o.code, code);
+            rep.count(i, "outcome", o.outcome, code);
             rep.state(i, "r", v(o.r), state.r);
             rep.state(i, "T", v(o.t), state.t);
             rep.length(i, "h", o.h, h);
@@ -668,14 +679,16 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
     let s = setup_text("flights", &text);
     // Half from all over the bounds (most fly to the cropped grid), half inside the
     // grid's box (macro-cell walks).
-    let mut input = states(&s, 19, 0.0, 0.999, 0.0, (0.0, 0.0), &[0.0]);
+    let mut input = states(&s, 19, 0.0, 0.999, 0.0, (0.0, 0.0), &[0.0], |r, t, _, _| {
+        RayIn::new(r.to_array(), t.to_array())
+    });
     let (lo, hi) = s.baked.geometry().world_box();
     let mut rng = Rng(23);
     for inp in input.iter_mut().skip(BATCH / 2) {
         let f = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
         inp.r = (lo.as_vec3() + (hi - lo).as_vec3() * f).to_array();
     }
-    let Some(out) = gpu(&s, Stage::Flight, &input) else {
+    let Some(out) = gpu::<stages::Flight>(&s, &input) else {
         return;
     };
     let field = s.baked.as_ref();
@@ -685,8 +698,8 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
         let p = v(inp.r).as_dvec3();
         let dir = v(inp.t).normalize().as_dvec3();
         let cpu = field.homogeneous_span(p, dir);
-        let gpu = (o.h > 0.0).then_some(f64::from(o.h));
-        if o.code == 0 && cpu.is_some() {
+        let gpu = (o.span > 0.0).then_some(f64::from(o.span));
+        if o.may_fly == 0 && cpu.is_some() {
             problems.push(format!(
                 "state {i}: may_fly false but the CPU flies {cpu:?}"
             ));
@@ -736,14 +749,28 @@ fn the_surface_stage_matches_its_cpu_twin() {
             ExitMethod::Hermite,
             Interp::Trilinear,
         );
-        let mut input = states(&s, 29, 0.3, 1.4, 0.3, (1.0, 1.6), &[1.0, 1.33, 1.6]);
+        let mut input = states(
+            &s,
+            29,
+            0.3,
+            1.4,
+            0.3,
+            (1.0, 1.6),
+            &[1.0, 1.33, 1.6],
+            |r, t, n1, n2| SurfaceIn {
+                r: r.to_array(),
+                n1,
+                t: t.to_array(),
+                n2,
+            },
+        );
         // Ambient rays from outside aimed anywhere: many miss, many meet the bounds.
         for (i, inp) in input.iter_mut().enumerate() {
             if i % 2 == 1 {
                 inp.t = (-v(inp.t)).to_array();
             }
         }
-        let Some(out) = gpu(&s, Stage::Surface, &input) else {
+        let Some(out) = gpu::<stages::Surface>(&s, &input) else {
             return;
         };
         let bounds = s.baked.bounds();
@@ -756,39 +783,39 @@ fn the_surface_stage_matches_its_cpu_twin() {
             rep.state(
                 i,
                 "signed distance",
-                Vec3::splat(o.ds_next),
+                Vec3::splat(o.signed_distance),
                 Vec3::splat(cpu_sd),
             );
             match bounds.intersect(p, d) {
                 Some((s_in, s_out)) => {
                     met += 1;
-                    rep.count(i, "met", o.code & 1, 1);
+                    rep.count(i, "met", o.met, 1);
                     // Relative to the distance (f32 ulps of it; the slab test divides).
                     let rel = |x: f32, y: f64| Vec3::splat(x / (1.0 + y.abs() as f32));
                     let cpu = |y: f64| rel(y as f32, y);
-                    rep.state(i, "s_in", rel(o.h, s_in), cpu(s_in));
-                    rep.state(i, "s_out", rel(o.n, s_out), cpu(s_out));
+                    rep.state(i, "s_in", rel(o.s_in, s_in), cpu(s_in));
+                    rep.state(i, "s_out", rel(o.s_out, s_out), cpu(s_out));
                 }
-                None => rep.count(i, "met", o.code & 1, 0),
+                None => rep.count(i, "met", o.met, 0),
             }
-            let nrm = v(o.err_r).as_dvec3();
-            let n1 = f64::from(inp.h);
-            let n2 = f64::from(inp.ds_adapt);
+            let nrm = v(o.normal).as_dvec3();
+            let n1 = f64::from(inp.n1);
+            let n2 = f64::from(inp.n2);
             match grin_trace::boundary::refract(d, nrm, n1, n2) {
                 grin_trace::Interface::Transmitted { dir, reflectance } => {
-                    rep.count(i, "transmitted", o.code >> 1, 1);
-                    rep.state(i, "refracted", v(o.t), dir.as_vec3());
+                    rep.count(i, "transmitted", o.transmitted, 1);
+                    rep.state(i, "refracted", v(o.dir), dir.as_vec3());
                     rep.state(
                         i,
                         "reflectance",
-                        Vec3::splat(o.err_t[0]),
+                        Vec3::splat(o.reflectance),
                         Vec3::splat(reflectance as f32),
                     );
                 }
                 grin_trace::Interface::Reflected { dir } => {
                     tir += 1;
-                    rep.count(i, "transmitted", o.code >> 1, 0);
-                    rep.state(i, "reflected", v(o.t), dir.as_vec3());
+                    rep.count(i, "transmitted", o.transmitted, 0);
+                    rep.state(i, "reflected", v(o.dir), dir.as_vec3());
                 }
             }
         }
@@ -821,7 +848,7 @@ material = "mirror"
         );
     let s = setup_text("scene", &text);
     let mut rng = Rng(31);
-    let input: Vec<StageIn> = (0..BATCH)
+    let input: Vec<SceneIn> = (0..BATCH)
         .map(|i| {
             let r = Vec3::new(
                 rng.range_f32(-2.5, 2.5),
@@ -835,15 +862,11 @@ material = "mirror"
                 _ => r + unit(&mut rng),
             };
             let t = ((aim - r).normalize() + unit(&mut rng) * 0.3).normalize();
-            StageIn {
-                r: r.to_array(),
-                h: if i % 8 == 0 { 0.0 } else { 1e-3 },
-                t: t.to_array(),
-                ds_adapt: 0.0,
-            }
+            let t_min = if i % 8 == 0 { 0.0 } else { 1e-3 };
+            SceneIn::new(r.to_array(), t.to_array(), t_min)
         })
         .collect();
-    let Some(out) = gpu(&s, Stage::Scene, &input) else {
+    let Some(out) = gpu::<stages::Scene>(&s, &input) else {
         return;
     };
     let rs = &s.scene;
@@ -856,19 +879,24 @@ material = "mirror"
             &rs.objects,
             p,
             d,
-            f64::from(inp.h),
+            f64::from(inp.t_min),
             f64::INFINITY,
         ) {
             Some(hit) => {
                 hits[hit.object.min(3)] += 1;
-                rep.count(i, "object", o.code, hit.object as u32 + 1);
+                rep.count(i, "object", o.object, hit.object as u32 + 1);
                 let rel = |x: f32, y: f64| Vec3::splat(x / (1.0 + y.abs() as f32));
-                rep.state(i, "distance", rel(o.h, hit.t), rel(hit.t as f32, hit.t));
-                rep.state(i, "normal", v(o.err_r), hit.normal.as_vec3());
+                rep.state(
+                    i,
+                    "distance",
+                    rel(o.distance, hit.t),
+                    rel(hit.t as f32, hit.t),
+                );
+                rep.state(i, "normal", v(o.normal), hit.normal.as_vec3());
             }
-            None => rep.count(i, "object", o.code, 0),
+            None => rep.count(i, "object", o.object, 0),
         }
-        rep.state(i, "sky", v(o.grad_n), rs.sky.sky_radiance(d).as_vec3());
+        rep.state(i, "sky", v(o.sky), rs.sky.sky_radiance(d).as_vec3());
     }
     assert!(
         hits.iter().all(|&h| h >= 8),
