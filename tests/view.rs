@@ -113,7 +113,16 @@ fn view_screenshot_matches_render_of_the_same_camera() {
             .env("GRIN_CACHE_DIR", dir.path())
             .arg("render")
             .arg(&scene)
-            .args(["--size", "160x90", "--spp", "16", "--json", "-o"])
+            .args([
+                "--backend",
+                "gpu",
+                "--size",
+                "160x90",
+                "--spp",
+                "16",
+                "--json",
+                "-o",
+            ])
             .arg(&reference)
             .arg("--compare")
             .arg(&shot),
