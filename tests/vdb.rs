@@ -1348,3 +1348,57 @@ fn values_no_bake_can_carry_are_refused_with_the_limit() {
         Some(&out_file),
     );
 }
+
+/// Bounds that cut a grid's data load it with a warning (library code returns it), and
+/// every way in tells the user: `grin render` (stderr and `--json`), `grin trace` and
+/// `grin bake`.
+#[test]
+fn bounds_that_cut_the_data_warn_on_every_command() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = density_cube(d, "cut", "a[:, :, :] = 1.0");
+    // The cube spans x -0.1 .. 0.05: bounds ending at x = 0 cut it.
+    let text = std::fs::read_to_string(&scene).expect("scene");
+    let cut = text.replace("max = [0.6, 1.0, 0.6]", "max = [0.0, 1.0, 0.6]");
+    assert_ne!(cut, text, "the scene's bounds line moved");
+    std::fs::write(&scene, cut).expect("scene");
+    let warned = |o: &Output| {
+        let err = stderr(o);
+        assert!(
+            err.lines().any(|l| l.starts_with("grin: warning: ")
+                && l.contains("the [medium] bounds cut the grid's data")),
+            "{err}"
+        );
+    };
+
+    let render = run_ok(
+        grin()
+            .arg("render")
+            .arg(&scene)
+            .arg("-o")
+            .arg(d.join("cut.exr"))
+            .args(["--backend", "cpu", "--size", "8x8", "--json"]),
+    );
+    warned(&render);
+    let v = json(&render);
+    assert!(
+        v["warnings"].as_array().expect("warnings").iter().any(|w| w
+            .as_str()
+            .is_some_and(|w| w.contains("cut the grid's data"))),
+        "{v}"
+    );
+
+    let rays = d.join("rays.csv");
+    std::fs::write(&rays, "ox,oy,oz,dx,dy,dz\n-0.05,0.5,-2,0,0,1\n").expect("rays");
+    warned(&run_ok(
+        grin()
+            .arg("trace")
+            .arg(&scene)
+            .arg("--rays")
+            .arg(&rays)
+            .arg("-o")
+            .arg(d.join("out.csv")),
+    ));
+
+    warned(&bake(&scene, &d.join("cut.grinf")));
+}

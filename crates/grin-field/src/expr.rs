@@ -433,7 +433,6 @@ impl ExprField {
                      but could not be proven between them (interval bounds, {boxes} boxes): \
                      a pocket of n <= 0 narrower than the grid would not be seen"
                 );
-                eprintln!("grin: warning: {why}");
                 self.positivity = Some(why);
             }
         }
@@ -536,6 +535,10 @@ impl ExprField {
 }
 
 impl IndexField for ExprField {
+    fn warnings(&self) -> Vec<String> {
+        self.positivity.iter().cloned().collect()
+    }
+
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         match &self.native {
             Some(code) => {

@@ -84,6 +84,14 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// What the field's construction found worth telling the user without refusing the
+    /// field (a VDB grid whose data the bounds cut, an `expr` formula whose positivity
+    /// is unproven between the check grid's nodes): the binary and the viewer show them,
+    /// the library prints nothing.
+    fn warnings(&self) -> Vec<String> {
+        Vec::new()
+    }
+
     /// The longest step from `p` that cannot pass over a feature unseen, where the field
     /// knows its features locally (an `expr` formula's interval map,
     /// crate::features), looking `reach` around `p`; infinite elsewhere.

@@ -339,6 +339,9 @@ impl Renderer {
         }
         let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(&rs));
         let mut warnings = Warnings::new(progress);
+        for w in field.iter().flat_map(|f| f.warnings()) {
+            warnings.push(w);
+        }
         if let Some(w) = auto.as_ref().and_then(|a| a.unmet_warning("rendering")) {
             warnings.push(w);
         }

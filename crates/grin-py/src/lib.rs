@@ -423,6 +423,7 @@ fn bake_to<'py>(
         "max_err_n": report.errors.max_err_n,
         "max_err_grad": report.errors.max_err_grad,
         "seconds": report.seconds,
+        "warnings": field.warnings(),
     });
     Ok((arrays, info, report.to_string()))
 }

@@ -477,17 +477,20 @@ impl<'a> Session<'a> {
         let key = json(&(&applied.medium, interp, playing));
         let field = grin_field::build_field(spec, &self.dir)
             .with_context(|| format!("{}: [medium]", self.path.display()))?;
+        // The field's own warnings (a VDB grid its bounds cut, an unproven positivity)
+        // come first in the panel, then the bake's.
+        let mut warnings = field.warnings();
         if field.as_baked().is_some() {
             return Ok(Some(FieldEntry {
                 key,
                 field,
                 grid: None,
                 preview: OnceLock::new(),
-                warnings: Vec::new(),
+                warnings,
                 cache: None,
             }));
         }
-        let (grid, warnings, cache) = if playing {
+        let (grid, bake_warnings, cache) = if playing {
             let (g, report) =
                 grin_gpu::field::bake_for_gpu_with_report(field.as_ref(), PLAYBACK_BAKE_RESOLUTION)
                     .map_err(|e| {
@@ -521,6 +524,7 @@ impl<'a> Session<'a> {
             Some(Interpolation::Tricubic) => grid.with_interp(Interp::Tricubic),
         };
         let grid = Arc::new(grid);
+        warnings.extend(bake_warnings);
         Ok(Some(FieldEntry {
             key,
             field,

@@ -278,3 +278,42 @@ fn reload_follows_the_file_and_keeps_the_last_good_scene() {
     mine.rebase(&new_file, &newer);
     assert_eq!(mine.step, StepSpec::Fixed(0.05));
 }
+
+/// The field's own warnings (here a VDB grid whose data the bounds cut) reach the list
+/// the panel shows, before the bake's: library code returns them, the viewer shows them.
+#[test]
+fn the_fields_own_warnings_reach_the_panel() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let vdb = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/vdb/test/gaussian.vdb");
+    // A Gaussian of width 0.25 about (0.1, -0.05, 0.2): a sphere of radius 0.3 cuts it.
+    let text = format!(
+        r#"
+[camera]
+position = [0.1, -0.05, -3.0]
+look_at = [0.1, -0.05, 0.2]
+fov_y_deg = 30.0
+
+[medium]
+bounds = {{ sphere = {{ center = [0.1, -0.05, 0.2], radius = 0.3 }} }}
+field = {{ kind = "vdb", path = "{}", grid = "delta_n", map = {{ index = {{ delta = true }} }} }}
+
+[render]
+width = 48
+height = 32
+spp = 1
+"#,
+        vdb.display()
+    );
+    let path = scene_file(dir.path(), &text);
+    let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
+    let mut s = Session::new(&ctx, &path, None).expect("session");
+    let v = ViewSettings::from_scene(s.scene());
+    render(&mut s, &v);
+    assert!(
+        s.warnings
+            .first()
+            .is_some_and(|w| w.contains("the [medium] bounds cut the grid's data")),
+        "{:?}",
+        s.warnings
+    );
+}

@@ -167,6 +167,9 @@ fn bake_one(
         .unwrap_or(grin_field::vdb::DEFAULT_MAX_DENSE_BYTES);
     let field = grin_field::build_field_capped(medium, scene_dir, vdb_cap)
         .with_context(|| format!("{}: [medium]", args.scene.display()))?;
+    for w in field.warnings() {
+        eprintln!("grin: warning: {w}");
+    }
     let opts = BakeOptions {
         resolution: args.resolution,
         error_budget: args.error,

@@ -125,6 +125,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         f32: args.f32,
     };
     let plan = TracePlan::new(&scene, scene_dir, &label, &overrides, &rows)?;
+    for w in plan.field.warnings() {
+        eprintln!("grin: warning: {w}");
+    }
     if let Some(w) = plan.auto.as_ref().and_then(|a| a.unmet_warning("tracing")) {
         eprintln!("grin: warning: {w}");
     }

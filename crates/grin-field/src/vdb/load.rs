@@ -337,7 +337,7 @@ impl VdbField {
             )));
         }
 
-        check_data_placement(
+        let warnings = check_data_placement(
             &label,
             voxels.data_box(DATA_FRACTION),
             &world_from_grid,
@@ -376,6 +376,7 @@ impl VdbField {
             max_grad: 0.0,
             non_finite_replaced: non_finite,
             mapping,
+            warnings,
         };
         field.max_grad = field.max_node_gradient();
         Ok(field)

@@ -143,19 +143,18 @@ fn fmt3(v: DVec3) -> String {
 }
 
 /// Where the grid's data ([`DataBox`]) lies against the medium's bounds: bounds that miss
-/// it are an error, bounds that cut it and data that changes nothing are warnings on
-/// stderr. Each names the data's world box and a `bounds` line that holds it.
+/// it are an error, bounds that cut it and data that changes nothing are warnings,
+/// returned. Each names the data's world box and a `bounds` line that holds it.
 pub(super) fn check_data_placement(
     label: &str,
     data: Option<DataBox>,
     world_from_index: &DAffine3,
     bounds: &Bounds,
-) -> Result<(), FieldError> {
+) -> Result<Vec<String>, FieldError> {
     let Some(data) = data else {
-        eprintln!(
-            "grin: warning: {label}: every voxel maps to the background's index (a constant grid, or a mapping that changes nothing): the medium bends no ray"
-        );
-        return Ok(());
+        return Ok(vec![format!(
+            "{label}: every voxel maps to the background's index (a constant grid, or a mapping that changes nothing): the medium bends no ray"
+        )]);
     };
     // The data's world box through its voxel centres (what the bounds must hold), and
     // half a voxel out (what the suggested bounds give).
@@ -181,12 +180,13 @@ pub(super) fn check_data_placement(
         );
         bounds.signed_distance(p) <= 1e-9 * (1.0 + p.length())
     });
-    if !corners_inside {
-        eprintln!(
-            "grin: warning: {label}: the [medium] bounds cut the grid's data (world box {} .. {}): rays see only the part inside; to hold it all: {fix}",
+    Ok(if corners_inside {
+        Vec::new()
+    } else {
+        vec![format!(
+            "{label}: the [medium] bounds cut the grid's data (world box {} .. {}): rays see only the part inside; to hold it all: {fix}",
             fmt3(plo),
             fmt3(phi)
-        );
-    }
-    Ok(())
+        )]
+    })
 }

@@ -99,6 +99,8 @@ pub struct VdbField {
     max_grad: f64,
     non_finite_replaced: u64,
     mapping: Mapping,
+    /// Where the data lies against the bounds (cut by them, or changing nothing).
+    warnings: Vec<String>,
 }
 
 impl VdbField {
@@ -201,6 +203,10 @@ pub fn resolve(base_dir: &Path, path: &str) -> PathBuf {
 }
 
 impl IndexField for VdbField {
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let idx = self.index_from_world(p);
         let u = [

@@ -307,7 +307,23 @@ fn bounds_that_miss_the_data_are_refused_with_where_it_is() {
         min: DVec3::new(4.9, -1.0, -1.0),
         max: DVec3::new(6.0, 1.0, 1.0),
     };
-    assert!(VdbField::from_dense("blob".into(), &dense, 0.0, &cut).is_ok());
+    let cut_field = VdbField::from_dense("blob".into(), &dense, 0.0, &cut).expect("loads");
+    let warnings = cut_field.warnings();
+    assert!(
+        warnings.len() == 1
+            && warnings[0].starts_with("blob: the [medium] bounds cut the grid's data")
+            && warnings[0].contains("to hold it all: bounds = { box = { min = [4.7500"),
+        "{warnings:?}"
+    );
+    // Bounds that hold it all: nothing to say.
+    let held = VdbField::from_dense(
+        "blob".into(),
+        &dense,
+        0.0,
+        &params(Mapping::Index { delta: true }, 1.0),
+    )
+    .expect("loads");
+    assert!(held.warnings().is_empty(), "{:?}", held.warnings());
 }
 
 /// The stated interpolation error: O(h^3) in n and O(h^2) in grad n (Catmull-Rom).

@@ -241,6 +241,15 @@ def read_field(path: PathLike) -> Field:
     return Field(arrays["delta_n"], arrays["grad"], json.loads(info))
 
 
+def _baked(arrays: Mapping[str, Any], info: str, report: str) -> "Field":
+    """A bake's result as a :class:`Field`; the field's warnings (a VDB grid its bounds
+    cut, an expression's unproven positivity) are issued as ``RuntimeWarning``."""
+    parsed = json.loads(report)
+    for w in parsed.get("warnings", []):
+        warnings.warn(f"grin: {w}", RuntimeWarning, stacklevel=3)
+    return Field(arrays["delta_n"], arrays["grad"], json.loads(info), parsed)
+
+
 def bake(
     scene: Union[Scene, PathLike, Mapping[str, Any]],
     path: Optional[PathLike] = None,
@@ -263,7 +272,7 @@ def bake(
         interp,
         max_memory,
     )
-    return Field(arrays["delta_n"], arrays["grad"], json.loads(info), json.loads(report))
+    return _baked(arrays, info, report)
 
 
 #: Air's Gladstone-Dale constant (m^3/kg) and gas constant (J/(kg K)), as grin's VDB maps.
@@ -354,4 +363,4 @@ def bake_volume(
         interp,
         max_memory,
     )
-    return Field(arrays["delta_n"], arrays["grad"], json.loads(info), json.loads(report))
+    return _baked(arrays, info, report)
