@@ -5,6 +5,7 @@ import os
 import subprocess
 import threading
 import time
+import warnings
 import tomllib
 from pathlib import Path
 
@@ -224,3 +225,19 @@ def test_the_gil_is_released_while_grin_renders():
     t.join()
     # Python ran alongside the render: many ticks, not one at the end.
     assert ticks > 5
+
+
+def test_a_volume_its_bounds_cut_bakes_with_a_warning():
+    # Data in the voxels 2..5 of each axis (0.2 .. 0.5 m); bounds ending at 0.35 m in x
+    # cut it: the bake goes on, and grin's warning arrives as a RuntimeWarning.
+    values = np.zeros((8, 8, 8), dtype=np.float32)
+    values[2:6, 2:6, 2:6] = 1e-3
+    with pytest.warns(RuntimeWarning, match="bounds cut the grid's data"):
+        field = grin.bake_volume(values, voxel_size=0.1, quantity="delta",
+                                 bounds=((0.0, 0.0, 0.0), (0.35, 0.7, 0.7)), resolution=16)
+    assert field.report["warnings"], field.report
+    # Bounds that hold it all: no warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        field = grin.bake_volume(values, voxel_size=0.1, quantity="delta", resolution=16)
+    assert field.report["warnings"] == [], field.report

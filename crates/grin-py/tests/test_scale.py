@@ -13,7 +13,7 @@ import pytest
 import grin
 
 REPO = Path(__file__).resolve().parents[3]
-GRIN = Path(os.environ.get("GRIN_BIN", REPO / "target" / "debug" / "grin"))
+GRIN = Path(os.environ.get("GRIN_BIN", REPO / "target" / "debug" / "grin")).resolve()
 EXAMPLES = REPO / "scripts" / "scale"
 
 
