@@ -111,11 +111,24 @@ pub struct ViewSettings {
     pub target_fps: f64,
 }
 
+/// The centre of a medium's bounds: what the orbit turns about.
+fn medium_centre(m: &grin_scene::MediumSpec) -> glam::DVec3 {
+    match m.bounds {
+        grin_scene::BoundsSpec::Sphere { center, .. } => glam::DVec3::from_array(center),
+        grin_scene::BoundsSpec::Box { min, max } => {
+            (glam::DVec3::from_array(min) + glam::DVec3::from_array(max)) * 0.5
+        }
+    }
+}
+
 impl ViewSettings {
     /// The settings of the scene file as it is.
     pub fn from_scene(scene: &Scene) -> Self {
         ViewSettings {
-            camera: OrbitCamera::from_scene(&scene.camera),
+            camera: OrbitCamera::from_scene_about(
+                &scene.camera,
+                scene.medium.as_ref().map(medium_centre),
+            ),
             integrator: scene.render.integrator,
             step: scene.render.step,
             interpolation: match &scene.medium.as_ref().map(|m| &m.field) {
