@@ -449,6 +449,24 @@ pub fn baked(
     })
 }
 
+/// The cases `want` names (`grin bench accuracy --case`): the case of that whole name
+/// alone (`plume`, not `vdb-plume` and the baked plumes too), else every case whose name
+/// contains it (`baked`); an error naming the suite's cases where none does.
+pub fn select(mut cases: Vec<Case>, want: &str) -> anyhow::Result<Vec<Case>> {
+    let names: Vec<String> = cases.iter().map(|c| c.name.to_string()).collect();
+    if cases.iter().any(|c| c.name == want) {
+        cases.retain(|c| c.name == want);
+    } else {
+        cases.retain(|c| c.name.contains(want));
+    }
+    anyhow::ensure!(
+        !cases.is_empty(),
+        "--case {want}: no case of this suite matches (cases: {})",
+        names.join(", ")
+    );
+    Ok(cases)
+}
+
 /// The cases of a suite.
 pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
     Ok(match suite {
@@ -497,4 +515,32 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
             v
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn select_takes_a_whole_name_alone_else_every_name_containing_it() {
+        let lens = luneburg(2).expect("lens");
+        let lens_baked = baked(&lens, 16, Interp::Trilinear, Storage::F32).expect("baked lens");
+        let all = || vec![lens.clone(), lens_baked.clone()];
+        let names = |cases: Vec<Case>| cases.into_iter().map(|c| c.name).collect::<Vec<_>>();
+        assert_eq!(
+            names(select(all(), "luneburg").expect("a whole name")),
+            ["luneburg"]
+        );
+        assert_eq!(
+            names(select(all(), "baked").expect("part of a name")),
+            ["luneburg-baked16-trilinear-f32"]
+        );
+        let err = select(all(), "nope")
+            .expect_err("no case matches")
+            .to_string();
+        assert!(
+            err.contains("--case nope") && err.contains("luneburg, luneburg-baked16"),
+            "{err}"
+        );
+    }
 }

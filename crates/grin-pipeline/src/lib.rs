@@ -3,17 +3,21 @@
 //! the renderer of either backend, to the output's named channels (the EXR's) and
 //! previews with a report of how it went. `grin render` writes what [`Renderer::render`]
 //! returns to files; the Python package hands the same channels out as arrays.
+//! [`build_field`] and [`Renderer::prepare`] (the render description and `auto`'s
+//! choice) are its first steps on their own: `grin bench speed` renders its own bake of
+//! the field, prepared the same way.
 
 pub mod dataset;
 pub mod optics;
 pub mod trace;
 
 use std::path::Path;
-use std::sync::Mutex;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use anyhow::Context;
+use grin_field::IndexField;
 use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
 use grin_scene::{OpticsMode, Scene};
@@ -209,6 +213,32 @@ pub struct Rendered {
     pub report: Report,
 }
 
+/// The field of `scene`'s medium (read from `scene_dir`; `label` names it in errors),
+/// `None` without a medium.
+pub fn build_field(
+    scene: &Scene,
+    scene_dir: &Path,
+    label: &str,
+) -> anyhow::Result<Option<Arc<dyn IndexField>>> {
+    scene
+        .medium
+        .as_ref()
+        .map(|m| grin_field::build_field(m, scene_dir))
+        .transpose()
+        .with_context(|| format!("{label}: [medium]"))
+}
+
+/// A scene ready for a backend to render: [`Renderer::prepare`]'s result.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// The render description, with `auto`'s choice applied.
+    pub render_scene: RenderScene,
+    /// `step = { auto = ... }`: what the pilot rays chose (and every candidate tried).
+    pub auto: Option<grin_trace::auto::AutoChoice>,
+    /// `step = { auto = ... }` resolved without pilots (a render too small for them): why.
+    pub auto_note: Option<String>,
+}
+
 /// Renders scenes on one backend, keeping the GPU device and its compiled pipelines from
 /// one scene to the next (a sequence's frames, a dataset's samples).
 #[derive(Debug)]
@@ -287,31 +317,20 @@ impl Renderer {
         Ok(ctx)
     }
 
-    /// Render `scene` (read from `scene_dir`; `label` names it in errors, usually its
-    /// file): its `[optics]` output when it has one, else its beauty and AOVs.
-    pub fn render(
+    /// `scene` (read from `scene_dir`; `label` names it in errors) as this renderer's
+    /// backend renders it: its [`RenderScene`] on `field` (the medium's, from
+    /// [`build_field`], or a bake of it), with `step = { auto = ... }` resolved by pilot
+    /// rays in the backend's precision (f32 for the GPU, but f64 for an OPD in waves),
+    /// for an `[optics]` output to the accuracy it asks in its own unit.
+    pub fn prepare(
         &self,
-        mut scene: Scene,
+        scene: &Scene,
         scene_dir: &Path,
         label: &str,
-        progress: &dyn Progress,
-    ) -> anyhow::Result<Rendered> {
-        let field = scene
-            .medium
-            .as_ref()
-            .map(|m| grin_field::build_field(m, scene_dir))
-            .transpose()
-            .with_context(|| format!("{label}: [medium]"))?;
-        // BOS images through the camera's lens or anti-aliased: rendered as beauty images
-        // of the dots on the plane, with and without the medium, at the scene's spp.
-        let bos_scene = bos_image_scene(&scene)?;
-        if scene.optics.is_some() {
-            scene.render.spp = 1;
-            scene.render.jitter = false;
-        }
-        let mut rs =
-            RenderScene::new(&scene, scene_dir, field.clone()).with_context(|| label.to_owned())?;
-        let metric = output_metric(&scene, &rs);
+        field: Option<Arc<dyn IndexField>>,
+    ) -> anyhow::Result<Prepared> {
+        let mut rs = RenderScene::new(scene, scene_dir, field).with_context(|| label.to_owned())?;
+        let metric = output_metric(scene, &rs);
         // The GPU's pilots trace in f32 as it does, but for an OPD in waves: a CPU f32
         // trace holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre),
         // where the GPU sums n - n_amb, so its OPD is as good as f64's.
@@ -329,8 +348,7 @@ impl Renderer {
             p
         });
         let target = pilot_rs.as_mut().unwrap_or(&mut rs);
-        let (backend, backend_note) = self.chosen();
-        let auto = match backend {
+        let auto = match self.chosen().0 {
             Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(target, metric),
             _ => grin_trace::auto::resolve_scene_in::<f64>(target, metric),
         };
@@ -338,6 +356,36 @@ impl Renderer {
             grin_trace::auto::apply(&mut rs, &a.settings);
         }
         let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(&rs));
+        Ok(Prepared {
+            render_scene: rs,
+            auto,
+            auto_note,
+        })
+    }
+
+    /// Render `scene` (read from `scene_dir`; `label` names it in errors, usually its
+    /// file): its `[optics]` output when it has one, else its beauty and AOVs.
+    pub fn render(
+        &self,
+        mut scene: Scene,
+        scene_dir: &Path,
+        label: &str,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Rendered> {
+        let field = build_field(&scene, scene_dir, label)?;
+        // BOS images through the camera's lens or anti-aliased: rendered as beauty images
+        // of the dots on the plane, with and without the medium, at the scene's spp.
+        let bos_scene = bos_image_scene(&scene)?;
+        if scene.optics.is_some() {
+            scene.render.spp = 1;
+            scene.render.jitter = false;
+        }
+        let Prepared {
+            render_scene: rs,
+            auto,
+            auto_note,
+        } = self.prepare(&scene, scene_dir, label, field.clone())?;
+        let (backend, backend_note) = self.chosen();
         let mut warnings = Warnings::new(progress);
         for w in field.iter().flat_map(|f| f.warnings()) {
             warnings.push(w);

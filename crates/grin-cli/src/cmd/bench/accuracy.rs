@@ -45,19 +45,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     eprintln!("building the reference cases ...");
     let mut cases = cases::suite(suite)?;
     if let Some(want) = &args.case {
-        let names: Vec<String> = cases.iter().map(|c| c.name.to_string()).collect();
-        // A name that is a case's whole name selects that case alone (`plume`, not
-        // `vdb-plume` and the baked plumes too).
-        if cases.iter().any(|c| c.name == *want) {
-            cases.retain(|c| c.name == *want);
-        } else {
-            cases.retain(|c| c.name.contains(want.as_str()));
-        }
-        anyhow::ensure!(
-            !cases.is_empty(),
-            "--case {want}: no case of this suite matches (cases: {})",
-            names.join(", ")
-        );
+        cases = cases::select(cases, want)?;
     }
     let bar = ProgressBar::new(1);
     // Where stderr is not a terminal (a CI log) the bar is hidden: a line per 10% instead.

@@ -1,49 +1,12 @@
 //! `grin bench speed`: the GPU marcher (wgpu, lavapipe without a GPU) and the CPU
-//! reference on the same baked fields, in one run: rays/s and ms/frame for the paper's
-//! scene (a) (analytic sphere), (c) (Perlin noise) and the heat-haze scene; the
-//! noise/analytic frame-time ratio (the paper had 2.0); and the marcher's field-sample
-//! rate as a fraction of the adapter's raw trilinear 3D-texture sample rate measured by
-//! a microbenchmark (shaders/texture_bench.wgsl).
+//! reference on the same baked fields (grin-bench's `speed`), printed as a table or
+//! JSON.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
-use std::time::Instant;
+use std::cell::OnceCell;
+use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-use grin_field::IndexField;
-use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
-use grin_render::image::Frame;
-use grin_render::scene::RenderScene;
-use grin_trace::render::render_cpu;
+use grin_bench::speed::{self, Options};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
-
-/// The benchmarked scenes (files in the scene directory) and their labels.
-const SCENES: [(&str, &str); 3] = [
-    ("paper-a.toml", "paper (a) analytic"),
-    ("paper-c.toml", "paper (c) noise"),
-    ("heat-haze.toml", "heat haze"),
-];
-
-/// Label of the close-up of paper (c) where every ray marches the medium (sharma, as
-/// the scene), and of the same close-up marched with verlet.
-const MARCH_ONLY: &str = "(c) medium only";
-const MARCH_ONLY_VERLET: &str = "(c) medium, verlet";
-
-/// The close-up's frame corners at this fraction of the medium's angular radius.
-const CLOSEUP_FILL: f64 = 0.95;
-
-/// Image size of the full run (the 640x360) and of `--quick`.
-const FULL_SIZE: (u32, u32) = (640, 360);
-const QUICK_SIZE: (u32, u32) = (160, 90);
-/// Bake resolution (nodes along the longest axis) for both backends: the bake helper's
-/// default, so analytic and noise media cost the same to sample.
-const FULL_BAKE: usize = 128;
-const QUICK_BAKE: usize = 48;
-/// Timed frames per backend and scene (after one untimed warm-up frame on the GPU).
-const FULL_FRAMES: u32 = 3;
-const QUICK_FRAMES: u32 = 1;
 
 /// Arguments of `grin bench speed`.
 #[derive(Debug, clap::Args)]
@@ -68,324 +31,53 @@ pub struct Args {
     pub frames: Option<u32>,
 }
 
-/// One backend on one scene.
-#[derive(Debug, Clone, Serialize)]
-struct Run {
-    scene: String,
-    backend: &'static str,
-    width: u32,
-    height: u32,
-    /// The fastest frame, wall clock (the rates below are of it).
-    ms_per_frame: f64,
-    /// GPU runs on an adapter with timestamps: the device's time in the render passes
-    /// of the fastest-on-the-device frame (no uploads, waits or read-back).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    device_ms_min: Option<f64>,
-    /// Frame times over all timed frames: fastest, median, slowest.
-    ms_min: f64,
-    ms_median: f64,
-    ms_max: f64,
-    rays_per_second: f64,
-    steps_per_ray: f64,
-    evals_per_ray: f64,
-    /// Integration steps (and straight flights) per second over all rays.
-    ray_steps_per_second: f64,
-    /// Field evaluations per second over all rays.
-    field_evals_per_second: f64,
-    /// The same two rates over the device's time (GPU runs with timestamps).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    device_ray_steps_per_second: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    device_field_evals_per_second: Option<f64>,
-}
+/// The progress bar, made when the frames start (after the scenes are loaded and baked).
+struct Bar(OnceCell<ProgressBar>);
 
-impl Run {
-    /// (ray-steps/s, field evaluations/s) over the device's time where measured, else
-    /// over the wall clock: what the raw sample rate (timed the same way) compares with.
-    fn marcher_rates(&self) -> (f64, f64) {
-        match (
-            self.device_ray_steps_per_second,
-            self.device_field_evals_per_second,
-        ) {
-            (Some(steps), Some(evals)) => (steps, evals),
-            _ => (self.ray_steps_per_second, self.field_evals_per_second),
+impl speed::Progress for Bar {
+    fn begin(&self, len: u64) {
+        let bar = ProgressBar::new(len);
+        if let Ok(style) =
+            ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} {elapsed}")
+        {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_prefix("bench speed");
+        let _ = self.0.set(bar);
+    }
+
+    fn phase(&self, what: &str) {
+        if let Some(bar) = self.0.get() {
+            bar.set_message(what.to_owned());
         }
     }
-}
 
-#[derive(Debug, Serialize)]
-struct Report {
-    adapter: String,
-    cpu_threads: usize,
-    bake_resolution: usize,
-    runs: Vec<Run>,
-    /// Frame time of paper (c) over paper (a), both baked (the paper: 2.0).
-    noise_over_analytic_gpu: f64,
-    noise_over_analytic_cpu: Option<f64>,
-    /// Raw trilinear field samples per second on the adapter (microbenchmark).
-    raw_field_samples_per_second: f64,
-    /// The marcher's ray-steps/s (close-up of paper c's medium) over the raw sample rate.
-    ray_steps_fraction_of_raw: f64,
-    /// The marcher's field evaluations/s (same close-up) over the raw sample rate.
-    field_evals_fraction_of_raw: f64,
-    /// Ray-steps/s of the close-up marched with verlet (one evaluation per step) over
-    /// the raw sample rate.
-    verlet_ray_steps_fraction_of_raw: f64,
-    /// Whether the raw rate and the marcher's rates in the fractions are over the
-    /// device's own time (timestamps) rather than the wall clock.
-    timed_on_device: bool,
-}
-
-fn mean(frame: &Frame, f: fn(&grin_render::image::PixelOut) -> f32) -> f64 {
-    frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / frame.pixels.len().max(1) as f64
-}
-
-/// Spread (slowest - fastest) / fastest above which the machine was busy during a run.
-const BUSY_SPREAD: f64 = 0.25;
-
-/// (min, median, max) of frame times in seconds.
-fn min_median_max(times: &[f64]) -> (f64, f64, f64) {
-    let mut t = times.to_vec();
-    t.sort_by(f64::total_cmp);
-    let n = t.len();
-    if n == 0 {
-        return (f64::NAN, f64::NAN, f64::NAN);
+    fn advance(&self) {
+        if let Some(bar) = self.0.get() {
+            bar.inc(1);
+        }
     }
-    let median = if n % 2 == 1 {
-        t[n / 2]
-    } else {
-        0.5 * (t[n / 2 - 1] + t[n / 2])
-    };
-    (t[0], median, t[n - 1])
-}
 
-fn run_of(
-    scene: &str,
-    backend: &'static str,
-    frame: &Frame,
-    spp: u32,
-    times: &[f64],
-    device_times: &[f64],
-) -> Run {
-    let (min, median, max) = min_median_max(times);
-    let seconds = min;
-    let rays = f64::from(frame.width) * f64::from(frame.height) * f64::from(spp);
-    let steps = mean(frame, |p| p.steps);
-    let evals = mean(frame, |p| p.evals);
-    let s = seconds.max(1e-9);
-    let device_s = device_times
-        .iter()
-        .copied()
-        .min_by(f64::total_cmp)
-        .map(|t| t.max(1e-9));
-    if times.len() > 1 && (max - min) / min.max(1e-12) > BUSY_SPREAD {
-        eprintln!(
-            "warning: {scene} ({backend}): frame times {:.1} / {:.1} / {:.1} ms (min / median / max) spread by more than {:.0}%: the machine was busy; rerun for figures to quote",
-            min * 1e3,
-            median * 1e3,
-            max * 1e3,
-            BUSY_SPREAD * 100.0
-        );
+    fn finish(&self) {
+        if let Some(bar) = self.0.get() {
+            bar.finish_and_clear();
+        }
     }
-    Run {
-        scene: scene.to_owned(),
-        backend,
-        width: frame.width,
-        height: frame.height,
-        ms_per_frame: seconds * 1e3,
-        device_ms_min: device_s.map(|t| t * 1e3),
-        ms_min: min * 1e3,
-        ms_median: median * 1e3,
-        ms_max: max * 1e3,
-        rays_per_second: rays / s,
-        steps_per_ray: steps,
-        evals_per_ray: evals,
-        ray_steps_per_second: steps * rays / s,
-        field_evals_per_second: evals * rays / s,
-        device_ray_steps_per_second: device_s.map(|d| steps * rays / d),
-        device_field_evals_per_second: device_s.map(|d| evals * rays / d),
-    }
-}
 
-fn bar(len: u64) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    if let Ok(style) =
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} {elapsed}")
-    {
-        bar.set_style(style.progress_chars("=> "));
+    fn warn(&self, message: &str) {
+        eprintln!("warning: {message}");
     }
-    bar.set_prefix("bench speed");
-    bar
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (size, bake_res, frames) = if args.quick {
-        (QUICK_SIZE, QUICK_BAKE, QUICK_FRAMES)
-    } else {
-        (FULL_SIZE, FULL_BAKE, FULL_FRAMES)
+    let options = Options {
+        quick: args.quick,
+        scenes: args.scenes,
+        gpu_only: args.gpu_only,
+        size: args.size,
+        frames: args.frames,
     };
-    let size = args.size.unwrap_or(size);
-    let frames = args.frames.unwrap_or(frames);
-    // Load and bake every scene first: input errors stop the run before any GPU work.
-    let mut prepared = Vec::new();
-    for (file, label) in SCENES {
-        let path = args.scenes.join(file);
-        if !path.is_file() {
-            bail!(
-                "{}: not found (pass --scenes DIR with paper-a.toml, paper-c.toml, heat-haze.toml)",
-                path.display()
-            );
-        }
-        let mut scene = grin_scene::load_scene(&path)?;
-        scene.render.width = size.0;
-        scene.render.height = size.1;
-        scene.render.spp = 1;
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let medium = scene
-            .medium
-            .as_ref()
-            .with_context(|| format!("{}: no [medium]", path.display()))?;
-        let field = grin_field::build_field(medium, dir)
-            .with_context(|| format!("{}: [medium]", path.display()))?;
-        let baked = Arc::new(
-            bake_for_gpu(field.as_ref(), bake_res)
-                .with_context(|| format!("{}: baking", path.display()))?,
-        );
-        let mut rs = RenderScene::new(&scene, dir, Some(baked.clone() as Arc<dyn IndexField>))
-            .with_context(|| path.display().to_string())?;
-        grin_trace::auto::resolve_scene::<f32>(&mut rs);
-        prepared.push((label, rs, baked));
-    }
-
-    // The marcher alone: paper (c)'s medium filling the whole frame (its silhouette
-    // reaches past the corners), no objects or lights, so every ray marches and its
-    // cost is the march (for the fraction of the raw sample rate).
-    let closeup = {
-        let (_, rs, baked) = &prepared[1];
-        let mut rs = rs.clone();
-        let m = rs.medium.as_ref().context("paper (c) has a medium")?;
-        let (centre, radius) = (m.bounds.center(), m.bounds.radius());
-        let distance = 3.0 * radius;
-        let eye = centre - glam::DVec3::Z * distance;
-        // The frame's half-diagonal at 95% of the silhouette's angular radius.
-        let tan_silhouette = radius / (distance * distance - radius * radius).sqrt();
-        let aspect = f64::from(size.0) / f64::from(size.1);
-        let tan_half_y = CLOSEUP_FILL * tan_silhouette / (1.0 + aspect * aspect).sqrt();
-        let cam = grin_scene::Camera {
-            position: eye.to_array(),
-            look_at: centre.to_array(),
-            up: [0.0, 1.0, 0.0],
-            fov_y_deg: 2.0 * tan_half_y.atan().to_degrees(),
-            focal_length_mm: None,
-            sensor_height_mm: None,
-            pixel_pitch_um: None,
-            f_number: None,
-            focus_distance: None,
-        };
-        rs.camera = grin_render::camera::PinholeCamera::new(&cam, size.0, size.1)
-            .context("close-up camera")?;
-        rs.objects.clear();
-        rs.materials.clear();
-        rs.lights.clear();
-        (MARCH_ONLY, rs, baked.clone())
-    };
-    // The same close-up marched with verlet: one new field evaluation per step (sharma
-    // makes three), so its ray-steps/s is directly comparable with the raw sample rate.
-    let closeup_verlet = {
-        let mut rs = closeup.1.clone();
-        rs.settings.integrator = Some(grin_scene::IntegratorKind::Verlet);
-        if let Some(m) = rs.medium.as_mut() {
-            m.trace.integrator = grin_scene::IntegratorKind::Verlet;
-        }
-        (MARCH_ONLY_VERLET, rs, closeup.2.clone())
-    };
-    prepared.push(closeup);
-    prepared.push(closeup_verlet);
-
-    let ctx = GpuContext::new_headless()?;
-    let adapter = ctx.adapter_name();
-    let cpu_threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let per_scene = u64::from(frames) * if args.gpu_only { 1 } else { 2 } + 1;
-    let progress = bar(per_scene * prepared.len() as u64 + 1);
-    let cancel = AtomicBool::new(false);
-    let mut runs = Vec::new();
-    let mut raw_rate = 0.0;
-    for (label, rs, baked) in &prepared {
-        progress.set_message(format!("{label} (gpu)"));
-        let renderer = GpuRenderer::new(&ctx, rs, Some(baked.as_ref()))?;
-        renderer.render(&|_| {}, &cancel)?; // warm-up: lavapipe compiles lazily
-        progress.inc(1);
-        let mut best: Option<(Frame, f64)> = None;
-        let (mut times, mut device_times) = (Vec::new(), Vec::new());
-        for _ in 0..frames {
-            let start = Instant::now();
-            let frame = renderer.render(&|_| {}, &cancel)?;
-            let t = start.elapsed().as_secs_f64();
-            times.push(t);
-            device_times.extend(renderer.last_device_seconds());
-            if best.as_ref().is_none_or(|(_, b)| t < *b) {
-                best = Some((frame, t));
-            }
-            progress.inc(1);
-        }
-        if let Some((frame, _)) = best {
-            runs.push(run_of(
-                label,
-                "gpu",
-                &frame,
-                rs.settings.spp,
-                &times,
-                &device_times,
-            ));
-        }
-        if *label == MARCH_ONLY {
-            raw_rate = renderer.field_sample_rate(3)?;
-        }
-        if !args.gpu_only {
-            progress.set_message(format!("{label} (cpu)"));
-            let mut best: Option<(Frame, f64)> = None;
-            let mut times = Vec::new();
-            for _ in 0..frames {
-                let start = Instant::now();
-                let frame = render_cpu(rs, &|_| {}, &cancel)?;
-                let t = start.elapsed().as_secs_f64();
-                times.push(t);
-                if best.as_ref().is_none_or(|(_, b)| t < *b) {
-                    best = Some((frame, t));
-                }
-                progress.inc(1);
-            }
-            if let Some((frame, _)) = best {
-                runs.push(run_of(label, "cpu", &frame, rs.settings.spp, &times, &[]));
-            }
-        }
-    }
-    progress.finish_and_clear();
-
-    let find = |scene: &str, backend: &str| {
-        runs.iter()
-            .find(|r| r.scene.contains(scene) && r.backend == backend)
-    };
-    let ratio = |backend: &str| match (find("(c)", backend), find("(a)", backend)) {
-        (Some(c), Some(a)) => Some(c.ms_per_frame / a.ms_per_frame),
-        _ => None,
-    };
-    let noise_gpu = find(MARCH_ONLY, "gpu");
-    let verlet_gpu = find(MARCH_ONLY_VERLET, "gpu");
-    let report = Report {
-        adapter,
-        cpu_threads,
-        bake_resolution: bake_res,
-        noise_over_analytic_gpu: ratio("gpu").unwrap_or(f64::NAN),
-        noise_over_analytic_cpu: ratio("cpu"),
-        raw_field_samples_per_second: raw_rate,
-        ray_steps_fraction_of_raw: noise_gpu.map_or(f64::NAN, |r| r.marcher_rates().0 / raw_rate),
-        field_evals_fraction_of_raw: noise_gpu.map_or(f64::NAN, |r| r.marcher_rates().1 / raw_rate),
-        verlet_ray_steps_fraction_of_raw: verlet_gpu
-            .map_or(f64::NAN, |r| r.marcher_rates().0 / raw_rate),
-        timed_on_device: ctx.has_timestamps(),
-        runs,
-    };
+    let report = speed::run(&options, &Bar(OnceCell::new()))?;
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
@@ -447,17 +139,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.verlet_ray_steps_fraction_of_raw * 100.0
     );
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::min_median_max;
-
-    #[test]
-    fn frame_time_spread_is_min_median_max() {
-        assert_eq!(min_median_max(&[3.0, 1.0, 2.0]), (1.0, 2.0, 3.0));
-        assert_eq!(min_median_max(&[4.0, 1.0, 2.0, 3.0]), (1.0, 2.5, 4.0));
-        assert_eq!(min_median_max(&[5.0]), (5.0, 5.0, 5.0));
-        assert!(min_median_max(&[]).0.is_nan());
-    }
 }
