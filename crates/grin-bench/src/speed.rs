@@ -12,7 +12,8 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use grin_field::IndexField;
-use grin_gpu::{GpuContext, GpuRenderer, field::bake_for_gpu};
+use grin_gpu::field::{bake_for_gpu_with_report, bake_warning};
+use grin_gpu::{GpuContext, GpuRenderer};
 use grin_render::image::Frame;
 use grin_trace::render::render_cpu;
 use serde::Serialize;
@@ -245,9 +246,12 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         let name = path.display().to_string();
         let field = grin_pipeline::build_field(&scene, dir, &name)?
             .with_context(|| format!("{name}: no [medium]"))?;
-        let baked = Arc::new(
-            bake_for_gpu(field.as_ref(), bake_res).with_context(|| format!("{name}: baking"))?,
-        );
+        let (baked, bake) = bake_for_gpu_with_report(field.as_ref(), bake_res)
+            .with_context(|| format!("{name}: baking"))?;
+        for w in field.warnings().into_iter().chain(bake_warning(&bake)) {
+            progress.warn(&w);
+        }
+        let baked = Arc::new(baked);
         let rs = pipeline
             .prepare(
                 &scene,

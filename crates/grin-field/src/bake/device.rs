@@ -22,19 +22,15 @@ pub const GPU_BAKE_MAX_BYTES: u64 = 256 << 20;
 /// Bake `field` on a grid for the GPU (trilinear, f32 voxels, fixed resolution).
 ///
 /// A fixed resolution can under-resolve a thin layer (a 128-node grid along a long, flat
-/// box): when the bake's measured error is over [`DEFAULT_ERROR_BUDGET`] this prints
-/// [`bake_warning`] to stderr, so an under-resolved field never renders silently wrong.
-/// Use [`bake_for_gpu_with_report`] to get the report (and the warning) instead.
+/// box): [`bake_for_gpu_with_report`] returns the bake's report too, and
+/// [`bake_warning`] says so when its measured error is over [`DEFAULT_ERROR_BUDGET`]
+/// (this crate prints nothing: the caller shows the warning).
 pub fn bake_for_gpu(field: &dyn IndexField, resolution: usize) -> Result<BakedField, BakeError> {
-    let (baked, report) = bake_for_gpu_with_report(field, resolution)?;
-    if let Some(w) = bake_warning(&report) {
-        eprintln!("grin: warning: {w}");
-    }
-    Ok(baked)
+    bake_for_gpu_with_report(field, resolution).map(|(baked, _)| baked)
 }
 
-/// [`bake_for_gpu`] without the stderr warning: the baked field and the baker's report
-/// (measured max error relative to the field's delta_n range).
+/// [`bake_for_gpu`] with the baker's report (measured max error relative to the field's
+/// delta_n range).
 pub fn bake_for_gpu_with_report(
     field: &dyn IndexField,
     resolution: usize,

@@ -84,7 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.no_gpu
         && let Some(why) = &run.gpu.skipped
     {
-        eprintln!("warning: no GPU column: {why}");
+        eprintln!("grin: warning: no GPU column: {why}");
     }
     let files = report::write_accuracy(&run, &args.output, &command)?;
     let rows = report::decade_rows(&run);

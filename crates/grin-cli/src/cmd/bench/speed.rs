@@ -65,7 +65,7 @@ impl speed::Progress for Bar {
     }
 
     fn warn(&self, message: &str) {
-        eprintln!("warning: {message}");
+        eprintln!("grin: warning: {message}");
     }
 }
 

@@ -44,7 +44,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (false, false) => "grin bench stability",
     };
     if let Some(note) = m.gpu.as_deref().filter(|n| n.starts_with("no GPU")) {
-        eprintln!("warning: {note}");
+        eprintln!("grin: warning: {note}");
     }
     let files = report::write_stability(&m, &args.output, command)?;
     let count = |o: Outcome| m.cells.iter().filter(|c| c.outcome == o).count();
