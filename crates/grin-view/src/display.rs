@@ -4,8 +4,19 @@
 use grin_render::image::{Frame, PixelOut, linear_to_srgb8};
 
 /// The image the viewer shows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    strum::IntoStaticStr,
+)]
 #[serde(rename_all = "kebab-case")]
+#[strum(serialize_all = "kebab-case")]
 pub enum Aov {
     /// The rendered image (sRGB of the linear radiance, clamped to [0, 1]).
     #[default]
@@ -31,13 +42,7 @@ impl Aov {
     ];
 
     pub fn name(self) -> &'static str {
-        match self {
-            Aov::Beauty => "beauty",
-            Aov::Deflection => "deflection",
-            Aov::Steps => "steps",
-            Aov::Opd => "opd",
-            Aov::Status => "status",
-        }
+        self.into()
     }
 }
 
