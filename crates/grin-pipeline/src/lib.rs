@@ -19,18 +19,9 @@ use grin_render::scene::RenderScene;
 use grin_scene::{OpticsMode, Scene};
 
 /// Which renderer runs the frame.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    clap::ValueEnum,
-    serde::Serialize,
-    strum::IntoStaticStr,
-    strum::VariantNames,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
+#[derive(strum::IntoStaticStr, strum::VariantNames)]
 #[strum(serialize_all = "lowercase")]
 pub enum Backend {
     /// The GPU marcher where wgpu finds a GPU, else the CPU tracer: on a CPU adapter

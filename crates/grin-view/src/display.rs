@@ -4,18 +4,9 @@
 use grin_render::image::{Frame, PixelOut, linear_to_srgb8};
 
 /// The image the viewer shows.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    strum::IntoStaticStr,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[derive(strum::IntoStaticStr)]
 #[strum(serialize_all = "kebab-case")]
 pub enum Aov {
     /// The rendered image (sRGB of the linear radiance, clamped to [0, 1]).
