@@ -355,10 +355,12 @@ pub struct Order {
 }
 
 /// How a measured order compares with the expected one.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, strum::IntoStaticStr)]
 #[serde(rename_all = "kebab-case")]
+#[strum(serialize_all = "lowercase")]
 pub enum OrderVerdict {
     /// Within [`ORDER_TOLERANCE`] of the expected order.
+    #[strum(serialize = "as expected")]
     AsExpected,
     /// Faster: the leading error term cancels (superconvergence) or the fit is still
     /// above the asymptotic range when the error reaches the floor.
@@ -366,17 +368,13 @@ pub enum OrderVerdict {
     /// Slower by more than the tolerance.
     Slower,
     /// Fewer than 3 runs between the floor and `ORDER_MAX_ERR`.
+    #[strum(serialize = "too few points")]
     TooFewPoints,
 }
 
 impl OrderVerdict {
     pub fn name(self) -> &'static str {
-        match self {
-            Self::AsExpected => "as expected",
-            Self::Faster => "faster",
-            Self::Slower => "slower",
-            Self::TooFewPoints => "too few points",
-        }
+        self.into()
     }
 
     fn of(measured: Option<f64>, expected: u32) -> Self {

@@ -423,14 +423,7 @@ pub fn baked(
     };
     let (field, _report) = bake::bake(base.source.as_ref(), &opts, &|_, _, _| {})?;
     let field = Arc::new(field);
-    let interp_name = match interp {
-        Interp::Trilinear => "trilinear",
-        Interp::Tricubic => "tricubic",
-    };
-    let storage_name = match storage {
-        Storage::F32 => "f32",
-        Storage::I16 => "i16",
-    };
+    let (interp_name, storage_name) = (interp.name(), storage.name());
     Ok(Case {
         name: format!(
             "{}-baked{resolution}-{interp_name}-{storage_name}",

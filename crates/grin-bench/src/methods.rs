@@ -5,7 +5,8 @@ use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
 
 /// How step lengths are chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, strum::IntoStaticStr)]
+#[strum(serialize_all = "kebab-case")]
 pub enum Policy {
     /// ds = param * scale.
     Fixed,
@@ -33,18 +34,13 @@ impl Policy {
         Policy::Auto,
     ];
     pub fn name(self) -> &'static str {
-        match self {
-            Policy::Fixed => "fixed",
-            Policy::Heuristic => "heuristic",
-            Policy::Adaptive => "adaptive",
-            Policy::PerLength => "per-length",
-            Policy::Auto => "auto",
-        }
+        self.into()
     }
 }
 
 /// Arithmetic and backend of the integration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, strum::IntoStaticStr)]
+#[strum(serialize_all = "lowercase")]
 pub enum Precision {
     F64,
     /// What the GPU computes (the CPU f32 twin).
@@ -59,11 +55,7 @@ impl Precision {
     pub const ALL: [Precision; 3] = [Precision::F64, Precision::F32, Precision::Gpu];
 
     pub fn name(self) -> &'static str {
-        match self {
-            Precision::F64 => "f64",
-            Precision::F32 => "f32",
-            Precision::Gpu => "gpu",
-        }
+        self.into()
     }
 
     /// f32 arithmetic (the CPU twin or the GPU).
@@ -83,10 +75,7 @@ pub struct Method {
 
 /// Name of an exit method as the scene file writes it.
 pub fn exit_name(exit: ExitMethod) -> &'static str {
-    match exit {
-        ExitMethod::Hermite => "hermite",
-        ExitMethod::Bisection => "bisection",
-    }
+    exit.into()
 }
 
 /// The integrator's name as charts show it (`adaptive` is the Dormand-Prince pair).

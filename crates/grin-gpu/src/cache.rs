@@ -45,8 +45,9 @@ struct EntryMeta {
 }
 
 /// What the cache did for one field.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, strum::IntoStaticStr)]
 #[serde(rename_all = "kebab-case")]
+#[strum(serialize_all = "kebab-case")]
 pub enum CacheUse {
     /// Read from the cache: no bake.
     Hit,

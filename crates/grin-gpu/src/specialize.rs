@@ -17,20 +17,19 @@ use std::sync::OnceLock;
 use naga::{Block, Expression, Literal, Module, Statement, SwitchValue};
 
 /// A kernel source the pipelines are specialised from.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, strum::IntoStaticStr)]
 pub(crate) enum Kernel {
     /// shaders/render.wgsl: `render_main`, `render_deferred`.
+    #[strum(serialize = "render.wgsl")]
     Render,
     /// shaders/stages.wgsl: the marcher's stages, one entry point each.
+    #[strum(serialize = "stages.wgsl")]
     Stages,
 }
 
 impl Kernel {
     fn name(self) -> &'static str {
-        match self {
-            Kernel::Render => "render.wgsl",
-            Kernel::Stages => "stages.wgsl",
-        }
+        self.into()
     }
 }
 

@@ -52,7 +52,10 @@ const BOX_MAX: [f64; 3] = [0.6, 0.9, 0.6];
 const AMBIENT: f64 = 1.000272;
 
 /// What a sample shows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, strum::IntoStaticStr, strum::VariantNames,
+)]
+#[strum(serialize_all = "kebab-case")]
 pub enum Kind {
     /// Background-oriented schlieren: a random-dot plate without and with the medium.
     Bos,
@@ -65,11 +68,7 @@ pub enum Kind {
 
 impl Kind {
     pub fn name(self) -> &'static str {
-        match self {
-            Kind::Bos => "bos",
-            Kind::Schlieren => "schlieren",
-            Kind::Haze => "haze",
-        }
+        self.into()
     }
 }
 

@@ -25,6 +25,8 @@ use grin_scene::{OpticsMode, Scene};
 /// Which renderer runs the frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
+#[derive(strum::IntoStaticStr, strum::VariantNames)]
+#[strum(serialize_all = "lowercase")]
 pub enum Backend {
     /// The GPU marcher where wgpu finds a GPU, else the CPU tracer: on a CPU adapter
     /// (Mesa's lavapipe where a machine has no GPU) the marcher, built for GPUs, renders
@@ -38,23 +40,25 @@ pub enum Backend {
 
 impl Backend {
     pub fn name(self) -> &'static str {
-        match self {
-            Backend::Auto => "auto",
-            Backend::Gpu => "gpu",
-            Backend::Cpu => "cpu",
-        }
+        self.into()
     }
 }
 
 impl std::str::FromStr for Backend {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "auto" => Ok(Backend::Auto),
-            "gpu" => Ok(Backend::Gpu),
-            "cpu" => Ok(Backend::Cpu),
-            _ => Err(format!("unknown backend `{s}` (auto, gpu or cpu)")),
-        }
+        <Self as clap::ValueEnum>::from_str(s, false).map_err(|_| {
+            let names = one_of(<Self as strum::VariantNames>::VARIANTS);
+            format!("unknown backend `{s}` ({names})")
+        })
+    }
+}
+
+/// `a, b or c`: the allowed names, as the error messages list them.
+pub fn one_of(names: &[&str]) -> String {
+    match names.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => names.join(""),
     }
 }
 

@@ -16,13 +16,7 @@ use crate::{Image, Preview};
 
 /// The mode's name as the scene writes it.
 pub fn mode_name(mode: OpticsMode) -> &'static str {
-    match mode {
-        OpticsMode::Displacement => "displacement",
-        OpticsMode::Schlieren => "schlieren",
-        OpticsMode::Shadowgraph => "shadowgraph",
-        OpticsMode::Interferogram => "interferogram",
-        OpticsMode::Bos => "bos",
-    }
+    mode.into()
 }
 
 /// Grey preview bytes of `values` mapped from [lo, hi] to [0, 255] (NaN: black).

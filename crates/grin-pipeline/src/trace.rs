@@ -143,11 +143,8 @@ pub fn rows(rays: impl Iterator<Item = (DVec3, DVec3)>) -> Vec<RayRow> {
 /// An integrator by name (`rk4`, `dopri`, ...), as `--integrator` takes it.
 pub fn parse_integrator(s: &str) -> Result<IntegratorKind, String> {
     IntegratorKind::from_name(s).ok_or_else(|| {
-        let names: Vec<&str> = IntegratorKind::ALL.iter().map(|k| k.name()).collect();
-        format!(
-            "unknown integrator `{s}`; expected one of {}",
-            names.join(", ")
-        )
+        let names = <IntegratorKind as strum::VariantNames>::VARIANTS.join(", ");
+        format!("unknown integrator `{s}`; expected one of {names}")
     })
 }
 

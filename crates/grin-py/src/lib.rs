@@ -13,6 +13,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUnty
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use strum::VariantNames;
 
 pyo3::create_exception!(
     _grin,
@@ -374,9 +375,8 @@ fn bake_options(
     gradient: grin_field::bake::GradientMode,
 ) -> PyResult<grin_field::bake::BakeOptions> {
     let interp = grin_field::baked::Interp::parse(interp).ok_or_else(|| {
-        GrinError::new_err(format!(
-            "unknown interpolation `{interp}` (trilinear or tricubic)"
-        ))
+        let names = grin_pipeline::one_of(<grin_field::baked::Interp as VariantNames>::VARIANTS);
+        GrinError::new_err(format!("unknown interpolation `{interp}` ({names})"))
     })?;
     let defaults = grin_field::bake::BakeOptions::default();
     Ok(grin_field::bake::BakeOptions {
@@ -557,9 +557,8 @@ fn dataset(
 ) -> PyResult<grin_pipeline::dataset::Dataset> {
     use clap::ValueEnum;
     let kind = grin_pipeline::dataset::Kind::from_str(kind, false).map_err(|_| {
-        GrinError::new_err(format!(
-            "unknown dataset kind `{kind}` (bos, schlieren or haze)"
-        ))
+        let names = grin_pipeline::one_of(<grin_pipeline::dataset::Kind as VariantNames>::VARIANTS);
+        GrinError::new_err(format!("unknown dataset kind `{kind}` ({names})"))
     })?;
     let media = grin_pipeline::dataset::Media::parse(media).map_err(GrinError::new_err)?;
     if !(plates.is_empty() && textures.is_empty()) && kind != grin_pipeline::dataset::Kind::Haze {

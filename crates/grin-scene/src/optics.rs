@@ -43,11 +43,14 @@ pub const DEFAULT_OUTPUT_ACCURACY: f64 = 0.01;
 pub const SCHLIEREN_ACCURACY_FRACTION: f64 = 0.01;
 
 /// What unit an output's accuracy is asked in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
+#[strum(serialize_all = "lowercase")]
 pub enum AccuracyUnit {
     /// The exit direction, radians (the knob's own).
+    #[strum(serialize = "rad")]
     Radians,
     /// Where the ray lands, in image pixels.
+    #[strum(serialize = "px")]
     Pixels,
     /// The optical path difference, in waves.
     Waves,
@@ -55,11 +58,7 @@ pub enum AccuracyUnit {
 
 impl AccuracyUnit {
     pub fn name(self) -> &'static str {
-        match self {
-            AccuracyUnit::Radians => "rad",
-            AccuracyUnit::Pixels => "px",
-            AccuracyUnit::Waves => "waves",
-        }
+        self.into()
     }
 }
 
@@ -87,8 +86,9 @@ impl OpticsSpec {
 }
 
 /// Which picture.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, strum::IntoStaticStr)]
 #[serde(rename_all = "kebab-case")]
+#[strum(serialize_all = "kebab-case")]
 pub enum OpticsMode {
     /// Where each pixel's ray lands on the plane with the medium minus without, in pixels
     /// and in plane units, and the ST map a compositor applies to a plate.

@@ -335,8 +335,9 @@ fn default_eaton_core() -> f64 {
 }
 
 /// A coordinate axis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, strum::IntoStaticStr)]
 #[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
 pub enum Axis {
     X,
     Y,
@@ -566,6 +567,8 @@ impl Default for Sky {
 /// The ray integrators (t-parameter form r'' = n grad n).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
+#[derive(strum::IntoStaticStr, strum::EnumString, strum::VariantNames)]
+#[strum(serialize_all = "kebab-case")]
 pub enum IntegratorKind {
     Euler,
     SymplecticEuler,
@@ -588,19 +591,12 @@ impl IntegratorKind {
 
     /// The TOML / command-line name.
     pub fn name(self) -> &'static str {
-        match self {
-            IntegratorKind::Euler => "euler",
-            IntegratorKind::SymplecticEuler => "symplectic-euler",
-            IntegratorKind::Verlet => "verlet",
-            IntegratorKind::Sharma => "sharma",
-            IntegratorKind::Rk4 => "rk4",
-            IntegratorKind::Adaptive => "adaptive",
-        }
+        self.into()
     }
 
     /// Parse a command-line name.
     pub fn from_name(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.name() == s)
+        s.parse().ok()
     }
 }
 
@@ -682,6 +678,8 @@ impl RenderSettings {
 /// How the exit point on the bounds is found on the step that leaves the medium.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
+#[derive(strum::IntoStaticStr)]
+#[strum(serialize_all = "kebab-case")]
 pub enum ExitMethod {
     /// Bisection on the step length (the paper's method).
     Bisection,

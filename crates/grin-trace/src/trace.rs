@@ -46,7 +46,8 @@ fn len_scale_of(bounds: &Bounds) -> f64 {
 }
 
 /// How a ray's trace ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, strum::IntoStaticStr)]
+#[strum(serialize_all = "snake_case")]
 pub enum RayStatus {
     /// Never met the medium.
     Missed,
@@ -84,14 +85,7 @@ impl RayStatus {
 
     /// The name used in ray tables.
     pub fn name(self) -> &'static str {
-        match self {
-            RayStatus::Missed => "missed",
-            RayStatus::Exited => "exited",
-            RayStatus::Absorbed => "absorbed",
-            RayStatus::MaxSteps => "max_steps",
-            RayStatus::Error => "error",
-            RayStatus::Degraded => "degraded",
-        }
+        self.into()
     }
 }
 

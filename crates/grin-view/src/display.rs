@@ -6,6 +6,8 @@ use grin_render::image::{Frame, PixelOut, linear_to_srgb8};
 /// The image the viewer shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[derive(strum::IntoStaticStr)]
+#[strum(serialize_all = "kebab-case")]
 pub enum Aov {
     /// The rendered image (sRGB of the linear radiance, clamped to [0, 1]).
     #[default]
@@ -31,13 +33,7 @@ impl Aov {
     ];
 
     pub fn name(self) -> &'static str {
-        match self {
-            Aov::Beauty => "beauty",
-            Aov::Deflection => "deflection",
-            Aov::Steps => "steps",
-            Aov::Opd => "opd",
-            Aov::Status => "status",
-        }
+        self.into()
     }
 }
 

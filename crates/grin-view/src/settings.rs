@@ -7,11 +7,15 @@ use crate::display::Aov;
 use crate::orbit::OrbitCamera;
 
 /// Step policies as the panel lists them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
 pub enum StepKind {
+    #[strum(serialize = "fixed (step)")]
     Fixed,
+    #[strum(serialize = "heuristic (max step)")]
     Heuristic,
+    #[strum(serialize = "adaptive (tolerance)")]
     Adaptive,
+    #[strum(serialize = "auto (rad)")]
     Auto,
 }
 
@@ -24,12 +28,7 @@ impl StepKind {
     ];
 
     pub fn name(self) -> &'static str {
-        match self {
-            StepKind::Fixed => "fixed (step)",
-            StepKind::Heuristic => "heuristic (max step)",
-            StepKind::Adaptive => "adaptive (tolerance)",
-            StepKind::Auto => "auto (rad)",
-        }
+        self.into()
     }
 
     pub fn of(step: &StepSpec) -> Self {

@@ -172,8 +172,5 @@ pub fn bounds_json(b: &grin_field::Bounds) -> serde_json::Value {
 
 /// The stable name of what a baked grid gives outside its nodes.
 fn outside_name(o: grin_field::baked::Outside) -> &'static str {
-    match o {
-        grin_field::baked::Outside::Ambient => "ambient",
-        grin_field::baked::Outside::Clamp => "clamp",
-    }
+    o.into()
 }

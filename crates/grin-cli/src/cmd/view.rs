@@ -91,11 +91,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "setup {:.2} s (device {:.2} s, bake cache: {}), first frame at {:.2} s; {} spp{}",
         s.setup_seconds,
         s.device_seconds,
-        s.bake_cache.map_or("none", |c| match c {
-            grin_gpu::cache::CacheUse::Hit => "hit",
-            grin_gpu::cache::CacheUse::Stored => "stored",
-            grin_gpu::cache::CacheUse::Off => "off",
-        }),
+        s.bake_cache.map_or("none", <&str>::from),
         s.first_frame_seconds,
         s.samples,
         match s.converged_seconds {

@@ -49,11 +49,7 @@ pub fn axis_vector(axis: Axis) -> DVec3 {
 
 /// Name of an axis as written in scene files.
 pub(crate) fn axis_name(axis: Axis) -> &'static str {
-    match axis {
-        Axis::X => "x",
-        Axis::Y => "y",
-        Axis::Z => "z",
-    }
+    axis.into()
 }
 
 /// n and grad n from n^2 and grad(n^2), clamping n^2 to [`N2_FLOOR`] (zero gradient there).

@@ -169,10 +169,7 @@ pub fn bake_warning(report: &BakeReport) -> Option<String> {
     }
     let [nx, ny, nz] = report.dims;
     let spacing = grid_spacing(report);
-    let interp = match report.interp {
-        Interp::Trilinear => "trilinear",
-        Interp::Tricubic => "tricubic",
-    };
+    let interp = report.interp.name();
     if report.source_limited {
         return Some(format!(
             "the GPU field bake ({nx}x{ny}x{nz} nodes {interp}, spacing {spacing:.3}) is at the source grid's own voxel size; its max |n error| {:.3e} = {:.2}% of the delta_n range is {interp} against grin's Catmull-Rom between the same voxels, not missing data: GPU and CPU images differ by that much at sharp edges of the data",

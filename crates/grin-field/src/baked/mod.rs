@@ -23,7 +23,8 @@ use layout::Bricks;
 pub use macrocell::MacroGrid;
 
 /// How voxels are stored.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
+#[strum(serialize_all = "lowercase")]
 pub enum Storage {
     F32,
     /// Signed 16-bit with a per-channel scale.
@@ -38,15 +39,15 @@ impl Storage {
         }
     }
     pub fn name(self) -> &'static str {
-        match self {
-            Storage::F32 => "f32",
-            Storage::I16 => "i16",
-        }
+        self.into()
     }
 }
 
 /// How the grid is sampled between nodes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr, strum::EnumString, strum::VariantNames,
+)]
+#[strum(serialize_all = "lowercase")]
 pub enum Interp {
     /// Trilinear interpolation of delta_n and of the stored grad n (C0; 2nd order).
     Trilinear,
@@ -56,23 +57,17 @@ pub enum Interp {
 
 impl Interp {
     pub fn name(self) -> &'static str {
-        match self {
-            Interp::Trilinear => "trilinear",
-            Interp::Tricubic => "tricubic",
-        }
+        self.into()
     }
     /// Parse `trilinear` | `tricubic`.
     pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "trilinear" => Some(Interp::Trilinear),
-            "tricubic" => Some(Interp::Tricubic),
-            _ => None,
-        }
+        s.parse().ok()
     }
 }
 
 /// What the field is beyond the grid's nodes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
+#[strum(serialize_all = "lowercase")]
 pub enum Outside {
     /// The value at the nearest node (the grid covers the whole medium plus a margin).
     Clamp,
