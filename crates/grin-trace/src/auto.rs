@@ -321,7 +321,8 @@ fn measure(
 ) -> (f64, f64, f64) {
     let mut worst: f64 = 0.0;
     let mut evals = 0u64;
-    let mut calibration = MAX_CALIBRATION;
+    // The least pessimism seen (infinite: no pilot left with a finite estimate).
+    let mut least = f64::INFINITY;
     for ((r, e), ray) in runs.iter().zip(reference).zip(rays) {
         evals += r.evals;
         // A ray the reference vouches for that this run cannot (a bake's n error
@@ -337,14 +338,15 @@ fn measure(
             worst = worst.max(if err.is_nan() { f64::INFINITY } else { err });
             if r.error_estimate.is_finite() {
                 let real = (err * to_rad).max(floor_rad);
-                calibration = calibration.min(r.error_estimate / real);
+                least = least.min(r.error_estimate / real);
             }
         }
     }
-    let calibration = if calibration.is_nan() {
-        1.0
+    // No pilot to measure it on: no calibration.
+    let calibration = if least.is_finite() {
+        least.clamp(1.0, MAX_CALIBRATION)
     } else {
-        calibration.max(1.0)
+        1.0
     };
     (worst, evals as f64 / runs.len().max(1) as f64, calibration)
 }
@@ -499,7 +501,7 @@ pub fn choose_in<R: Real>(
     // `radius` is its shortest: a rod 2 long and 1 wide was first tried at a quarter of
     // the step that met its request).
     let (lo, hi) = field.bounds().aabb();
-    let reach = (0.5 * (hi - lo)).max_element().max(radius);
+    let reach = (0.5 * (hi - lo)).max_element();
     // Error control per length (what an unresolved `auto` runs), tightened by 10 while
     // the pilots say it misses (rays whose exit is ill-conditioned: grazing ones).
     let mut best: Option<(Candidate, TraceSettings)> = None;
