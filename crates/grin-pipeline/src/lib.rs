@@ -281,15 +281,19 @@ impl Renderer {
                         Backend::Gpu,
                         Some(format!("backend auto: gpu ({})", ctx.adapter_name())),
                     ),
-                    Ok(ctx) => (
-                        Backend::Cpu,
-                        Some(format!(
-                            "backend auto: cpu: wgpu's only adapter is a CPU one ({}), where \
+                    Ok(ctx) => {
+                        // The CPU renders: the device is not kept.
+                        *self.gpu.lock().unwrap_or_else(|e| e.into_inner()) = None;
+                        (
+                            Backend::Cpu,
+                            Some(format!(
+                                "backend auto: cpu: wgpu's only adapter is a CPU one ({}), where \
                              the CPU tracer is faster than the GPU marcher (--backend gpu \
                              runs the marcher there anyway)",
-                            ctx.adapter_name()
-                        )),
-                    ),
+                                ctx.adapter_name()
+                            )),
+                        )
+                    }
                     Err(e) => (
                         Backend::Cpu,
                         Some(format!(
