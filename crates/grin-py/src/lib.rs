@@ -317,6 +317,7 @@ fn trace<'py>(
         "status_names": grin_trace::RayStatus::ALL.map(|s| s.name()),
         "auto": plan.auto,
         "auto_note": plan.auto_note,
+        "warnings": plan.field.warnings(),
     });
     Ok((out, summary.to_string()))
 }

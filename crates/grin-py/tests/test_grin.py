@@ -241,3 +241,20 @@ def test_a_volume_its_bounds_cut_bakes_with_a_warning():
         warnings.simplefilter("error")
         field = grin.bake_volume(values, voxel_size=0.1, quantity="delta", resolution=16)
     assert field.report["warnings"] == [], field.report
+
+
+def test_a_trace_through_a_grid_its_bounds_cut_warns():
+    # The test Gaussian (width 0.25 about (0.1, -0.05, 0.2)) in a sphere of radius 0.3
+    # that cuts it: grin's warning arrives as a RuntimeWarning, and the rays are traced.
+    tables = {
+        "camera": {"position": [0.1, -0.05, -3.0], "look_at": [0.1, -0.05, 0.2]},
+        "medium": {
+            "bounds": {"sphere": {"center": [0.1, -0.05, 0.2], "radius": 0.3}},
+            "field": {"kind": "vdb", "path": str(REPO / "data" / "vdb" / "test" / "gaussian.vdb"),
+                      "grid": "delta_n", "map": {"index": {"delta": True}}},
+        },
+    }
+    rays = np.array([[0.1, -0.05, -1.0, 0.0, 0.0, 1.0]])
+    with pytest.warns(RuntimeWarning, match="bounds cut the grid's data"):
+        out = grin.trace(grin.load_scene(tables, base_dir=REPO), rays)
+    assert out["status"][0] == 1, out

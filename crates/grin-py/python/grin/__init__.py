@@ -181,6 +181,8 @@ def trace(
             f"rays must be an (N, 6) array of ox, oy, oz, dx, dy, dz; got shape {rays.shape}"
         )
     cols, summary_json = _grin.trace(scene, rays, integrator, step, max_steps, f32)
+    for w in json.loads(summary_json).get("warnings", []):
+        warnings.warn(f"grin: {w}", RuntimeWarning, stacklevel=2)
     out = np.empty(rays.shape[0], dtype=RAY_DTYPE)
     out["status"] = cols["status"]
     for i, axis in enumerate("xyz"):
