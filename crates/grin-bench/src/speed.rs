@@ -166,6 +166,28 @@ fn min_median_max(times: &[f64]) -> (f64, f64, f64) {
     (t[0], median, t[n - 1])
 }
 
+/// `frames` frames from `render`, each timed (wall clock) and counted on `progress`: the
+/// fastest frame and every frame's seconds.
+fn timed_frames(
+    frames: u32,
+    progress: &dyn Progress,
+    mut render: impl FnMut() -> anyhow::Result<Frame>,
+) -> anyhow::Result<(Option<Frame>, Vec<f64>)> {
+    let mut best: Option<(Frame, f64)> = None;
+    let mut times = Vec::new();
+    for _ in 0..frames {
+        let start = Instant::now();
+        let frame = render()?;
+        let t = start.elapsed().as_secs_f64();
+        times.push(t);
+        if best.as_ref().is_none_or(|(_, b)| t < *b) {
+            best = Some((frame, t));
+        }
+        progress.advance();
+    }
+    Ok((best.map(|(frame, _)| frame), times))
+}
+
 fn run_of(
     scene: &str,
     backend: &'static str,
@@ -321,20 +343,13 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         let renderer = GpuRenderer::new(&ctx, rs, Some(baked.as_ref()))?;
         renderer.render(&|_| {}, &cancel)?; // warm-up: lavapipe compiles lazily
         progress.advance();
-        let mut best: Option<(Frame, f64)> = None;
-        let (mut times, mut device_times) = (Vec::new(), Vec::new());
-        for _ in 0..frames {
-            let start = Instant::now();
+        let mut device_times = Vec::new();
+        let (best, times) = timed_frames(frames, progress, || {
             let frame = renderer.render(&|_| {}, &cancel)?;
-            let t = start.elapsed().as_secs_f64();
-            times.push(t);
             device_times.extend(renderer.last_device_seconds());
-            if best.as_ref().is_none_or(|(_, b)| t < *b) {
-                best = Some((frame, t));
-            }
-            progress.advance();
-        }
-        if let Some((frame, _)) = best {
+            Ok(frame)
+        })?;
+        if let Some(frame) = best {
             runs.push(run_of(
                 label,
                 "gpu",
@@ -350,19 +365,9 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         }
         if !options.gpu_only {
             progress.phase(&format!("{label} (cpu)"));
-            let mut best: Option<(Frame, f64)> = None;
-            let mut times = Vec::new();
-            for _ in 0..frames {
-                let start = Instant::now();
-                let frame = render_cpu(rs, &|_| {}, &cancel)?;
-                let t = start.elapsed().as_secs_f64();
-                times.push(t);
-                if best.as_ref().is_none_or(|(_, b)| t < *b) {
-                    best = Some((frame, t));
-                }
-                progress.advance();
-            }
-            if let Some((frame, _)) = best {
+            let (best, times) =
+                timed_frames(frames, progress, || Ok(render_cpu(rs, &|_| {}, &cancel)?))?;
+            if let Some(frame) = best {
                 runs.push(run_of(
                     label,
                     "cpu",
