@@ -14,10 +14,13 @@
 //                    bounds_signed_distance, refract    signed_distance}, boundary::refract
 //   stage_scene      intersect_scene, sky_radiance    grin_render::primitives::intersect_scene,
 //                                                     grin_render::sky::SkyModel::sky_radiance
-//   stage_march      march_medium (a whole ray)       grin_trace::trace_ray (no jitter)
+//   stage_march      march_begin, march_run (a whole  grin_trace::trace_ray (no jitter)
+//                    ray, over as many dispatches
+//                    as it needs)
 //
 // stage_march is also the GPU column of `grin bench accuracy` (grin_gpu::march): a ray
-// table traced by the render kernel's own medium loop.
+// table traced by the render kernel's own medium loop. It alone also binds its rays'
+// state between dispatches (binding 2) and the dispatches' control (binding 3).
 
 // Each stage reads and writes structs of its own (stage_take and stage_leave read the
 // same, as do stage_flight and stage_march), mirrored member by member in
@@ -165,6 +168,10 @@ struct MarchOut {
 @group(1) @binding(0) var<storage, read> ray_in: array<RayIn>;
 @group(1) @binding(1) var<storage, read_write> flight_out: array<FlightOut>;
 @group(1) @binding(1) var<storage, read_write> march_out: array<MarchOut>;
+// stage_march's state between its dispatches (MarchCarry with its flags as u32: bool
+// has no layout in a storage buffer), and the dispatches' control.
+@group(1) @binding(2) var<storage, read_write> march_carry: array<MarchCarryStored>;
+@group(1) @binding(3) var<storage, read_write> march_control: MarchControl;
 @group(1) @binding(0) var<storage, read> surface_in: array<SurfaceIn>;
 @group(1) @binding(1) var<storage, read_write> surface_out: array<SurfaceOut>;
 @group(1) @binding(0) var<storage, read> scene_in: array<SceneIn>;
@@ -311,14 +318,100 @@ fn stage_scene(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // A whole ray through the medium from r along t (outside: entered with refraction, as a
-// camera ray is), no jitter.
+// camera ray is), no jitter, over as many dispatches as it needs: each runs every ray
+// still marching on by at most march_control.budget steps, and counts those that are
+// still marching after it in march_control.pending (grin_gpu::march dispatches until
+// none is). lavapipe stops a shader invocation's loops after 65,535 iterations in all,
+// and a desktop driver resets a GPU whose dispatch runs too long: a ray's march is cut
+// into dispatches short enough for both, the same steps in the same arithmetic as one
+// whole march.
 @compute @workgroup_size(64, 1, 1)
 fn stage_march(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= arrayLength(&ray_in) {
         return;
     }
-    let input = ray_in[gid.x];
-    var stats = march_stats_new(input.t);
-    let end = march_medium(input.r, input.t, 1.0, &stats);
-    march_out[gid.x] = MarchOut(end.point, stats.opl, end.dir, stats.length, stats.evals, stats.steps, end.transmittance, end.status, end.kind);
+    var carry: MarchCarry;
+    var stats: MarchStats;
+    if march_control.round == 0u {
+        let input = ray_in[gid.x];
+        stats = march_stats_new(input.t);
+        let begun = march_begin(input.r, input.t, 1.0, &stats);
+        if begun.done {
+            march_finished(gid.x, begun.end, stats);
+            return;
+        }
+        carry = begun.carry;
+    } else {
+        let stored = march_carry[gid.x];
+        if stored.marching == 0u {
+            return;
+        }
+        carry = march_carry_load(stored);
+        stats = stored.stats;
+    }
+    let end = march_run(&carry, &stats, march_control.budget);
+    if end.kind == END_SUSPENDED {
+        march_carry[gid.x] = march_carry_store(carry, stats);
+        atomicAdd(&march_control.pending, 1u);
+        return;
+    }
+    march_finished(gid.x, end, stats);
+}
+
+fn march_finished(i: u32, end: MarchEnd, stats: MarchStats) {
+    march_out[i] = MarchOut(end.point, stats.opl, end.dir, stats.length, stats.evals, stats.steps, end.transmittance, end.status, end.kind);
+    march_carry[i].marching = 0u;
+}
+
+// The dispatches' control (grin_gpu::stages::MarchControl): rays still marching after
+// this dispatch (counted by it), the dispatch's number (0: the rays start from ray_in)
+// and the steps each ray may take in it.
+struct MarchControl {
+    pending: atomic<u32>,
+    round: u32,
+    budget: u32,
+}
+
+// ErrorEstimate with its flags as u32.
+struct ErrorEstimateStored {
+    order: u32,
+    sum: f32,
+    bend: f32,
+    pos: f32,
+    near_miss: u32,
+    has_prev: u32,
+    prev_d: vec3<f32>,
+    prev_h: f32,
+    last_local: vec3<f32>,
+    last_local_r: f32,
+    staggered: u32,
+    staggered_half: vec3<f32>,
+    vsum: vec3<f32>,
+}
+
+// MarchCarry and MarchStats, and whether the ray is still marching (1) or has finished
+// (0: its MarchOut is written).
+struct MarchCarryStored {
+    state: RayState,
+    s0: FieldSample,
+    ctrl: StepController,
+    est: ErrorEstimateStored,
+    comp: RayState,
+    transmittance: f32,
+    surface_err: f32,
+    guard: u32,
+    marching: u32,
+    stats: MarchStats,
+}
+
+fn march_carry_store(c: MarchCarry, stats: MarchStats) -> MarchCarryStored {
+    let e = c.est;
+    let est = ErrorEstimateStored(e.order, e.sum, e.bend, e.pos, u32(e.near_miss), u32(e.has_prev), e.prev_d, e.prev_h, e.last_local, e.last_local_r, u32(e.staggered), e.staggered_half, e.vsum);
+    return MarchCarryStored(c.state, c.s0, c.ctrl, est, c.comp, c.transmittance, c.surface_err, c.guard, 1u, stats);
+}
+
+fn march_carry_load(c: MarchCarryStored) -> MarchCarry {
+    let e = c.est;
+    let est = ErrorEstimate(e.order, e.sum, e.bend, e.pos, e.near_miss != 0u, e.has_prev != 0u, e.prev_d, e.prev_h, e.last_local, e.last_local_r, e.staggered != 0u, e.staggered_half, e.vsum);
+    return MarchCarry(c.state, c.s0, c.ctrl, est, c.comp, c.transmittance, c.surface_err, c.guard);
 }

@@ -24,6 +24,10 @@ const END_EXITED: u32 = 0u;
 const END_OBJECT: u32 = 1u;
 const END_MISSED: u32 = 2u;
 const END_STOPPED: u32 = 3u;
+// march_run's budget of steps ran out: the carry holds the ray, to be run on.
+const END_SUSPENDED: u32 = 4u;
+// march_run with no budget of steps (the march is whole, its one bound max_steps).
+const MARCH_UNBOUNDED: u32 = 0xffffffffu;
 
 // Why march_medium's hot loop stopped: a stop (max_steps, error), a step ending outside
 // the bounds, a flight ending on them, an object met.
@@ -31,6 +35,7 @@ const MARCH_EVENT_STOP: u32 = 0u;
 const MARCH_EVENT_LEAVE: u32 = 1u;
 const MARCH_EVENT_SURFACE: u32 = 2u;
 const MARCH_EVENT_OBJECT: u32 = 3u;
+const MARCH_EVENT_SUSPEND: u32 = 4u;
 
 struct MarchStats {
     steps: u32,
@@ -136,9 +141,52 @@ fn absorbed(stats: ptr<function, MarchStats>, seg: Segment, hit: Hit, transmitta
 // along unit `dir` until the ray leaves the medium, meets an object, or stops.
 // `jitter` in (0, 1] scales the first integration step (1: none).
 fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<function, MarchStats>) -> MarchEnd {
+    let begun = march_begin(origin, dir, jitter, stats);
+    if begun.done {
+        return begun.end;
+    }
+    var carry = begun.carry;
+    return march_run(&carry, stats, MARCH_UNBOUNDED);
+}
+
+// Everything the march keeps from one pass of its loop to the next: all a split march
+// (stages.wgsl's stage_march, a dispatch at a time) stores between its dispatches.
+struct MarchCarry {
+    state: RayState,
+    // The field at state.r.
+    s0: FieldSample,
+    ctrl: StepController,
+    est: ErrorEstimate,
+    // Roundoff of the state updates not yet added in.
+    comp: RayState,
+    transmittance: f32,
+    // Direction error the crossings of the bounds add (trace_ray's surface_error).
+    surface_err: f32,
+    // Passes of march_run's outer loop so far.
+    guard: u32,
+}
+
+// march_begin: the end where the ray missed the medium or stopped at its surface
+// (`done`), else the march's state at its first step.
+struct MarchBegin {
+    done: bool,
+    end: MarchEnd,
+    carry: MarchCarry,
+}
+
+fn march_begun(end: MarchEnd) -> MarchBegin {
+    var b: MarchBegin;
+    b.done = true;
+    b.end = end;
+    return b;
+}
+
+// The ray into the medium: the entry found and refracted (from outside), the first
+// sample, the controller and the estimate.
+fn march_begin(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<function, MarchStats>) -> MarchBegin {
     let len2 = dot(dir, dir);
     if !finite3(origin) || !finite3(dir) || len2 == 0.0 {
-        return march_end(END_STOPPED, STATUS_ERROR, origin, normalize_or_zero(dir), 1.0);
+        return march_begun(march_end(END_STOPPED, STATUS_ERROR, origin, normalize_or_zero(dir), 1.0));
     }
     let d = dir / sqrt(len2);
     let n_amb = ambient_index();
@@ -148,7 +196,7 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     if outside {
         let b = bounds_intersect(origin, d);
         if !b.found || b.s_out < 0.0 || b.s_out <= b.s_in {
-            return march_end(END_MISSED, STATUS_MISSED, origin, d, 1.0);
+            return march_begun(march_end(END_MISSED, STATUS_MISSED, origin, d, 1.0));
         }
         start = origin + d * max(b.s_in, 0.0);
     }
@@ -161,12 +209,12 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     var skip = 0.0;
     if outside {
         if !sample_ok(s0) {
-            return march_end(END_STOPPED, STATUS_ERROR, start, d, transmittance);
+            return march_begun(march_end(END_STOPPED, STATUS_ERROR, start, d, transmittance));
         }
         surface_err += refraction_uncertainty(d, bounds_normal(start), n_amb, s0.n, s0.n, params.n_uncertainty);
         let i = refract(d, bounds_normal(start), n_amb, s0.n);
         if !i.transmitted {
-            return march_end(END_EXITED, select(STATUS_EXITED, STATUS_DEGRADED, surface_err > CROSSING_FACTOR * params.accuracy), start, i.dir, transmittance);
+            return march_begun(march_end(END_EXITED, select(STATUS_EXITED, STATUS_DEGRADED, surface_err > CROSSING_FACTOR * params.accuracy), start, i.dir, transmittance));
         }
         transmittance *= 1.0 - i.reflectance;
         d_in = i.dir;
@@ -174,9 +222,26 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
         start = nudged.point;
         skip = nudged.skip;
     }
-    var state = RayState(start, d_in * s0.n + s0.grad_n * skip);
-    var ctrl = step_controller_new(jitter);
-    var est = estimate_new();
+    var begun: MarchBegin;
+    begun.done = false;
+    begun.carry = MarchCarry(RayState(start, d_in * s0.n + s0.grad_n * skip), s0, step_controller_new(jitter), estimate_new(), zero_state(), transmittance, surface_err, 0u);
+    return begun;
+}
+
+// Run the march on from `carry` until the ray leaves the medium, meets an object or
+// stops, or until `budget` steps and flights are taken (END_SUSPENDED, the carry updated
+// to run on from: the same steps, in the same arithmetic, as one whole run).
+fn march_run(carry: ptr<function, MarchCarry>, stats: ptr<function, MarchStats>, budget: u32) -> MarchEnd {
+    var state = (*carry).state;
+    var s0 = (*carry).s0;
+    var ctrl = (*carry).ctrl;
+    var est = (*carry).est;
+    // Roundoff of the state updates not yet added in (compensated summation, reset at
+    // every jump of the state: flights, the surface, reflections), as trace_ray.
+    var comp = (*carry).comp;
+    var transmittance = (*carry).transmittance;
+    var surface_err = (*carry).surface_err;
+    let n_amb = ambient_index();
     let len_scale = ctrl.len_scale;
     let exit_tol = exit_tolerance();
     let max_steps = params.max_steps;
@@ -188,10 +253,9 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
     // out of the step's critical path. Each outer pass ends with a counted step or
     // flight, or a total reflection after one: 2 * max_steps + 2 passes bound it.
     let min_flight = max(MIN_SPAN_REL * len_scale, MIN_FLIGHT_VOXELS / max_element(params.grid_inv_spacing));
-    // Roundoff of the state updates not yet added in (compensated summation, reset at
-    // every jump of the state: flights, the surface, reflections), as trace_ray.
-    var comp = zero_state();
-    for (var guard = 0u; guard < 2u * max_steps + 2u; guard++) {
+    // Steps and flights this call (against `budget`).
+    var taken_here = 0u;
+    for (var guard = (*carry).guard; guard < 2u * max_steps + 2u; guard++) {
         var event = MARCH_EVENT_STOP;
         var taken: Taken;
         var next: RayState;
@@ -203,6 +267,12 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
                 event = MARCH_EVENT_STOP;
                 break;
             }
+            if taken_here >= budget {
+                (*carry) = MarchCarry(state, s0, ctrl, est, comp, transmittance, surface_err, guard);
+                event = MARCH_EVENT_SUSPEND;
+                break;
+            }
+            taken_here += 1u;
             // A straight flight through homogeneous macro cells, else a step. Both end
             // in the same sample, length sum and object test below.
             let position = state.r;
@@ -287,6 +357,9 @@ fn march_medium(origin: vec3<f32>, dir: vec3<f32>, jitter: f32, stats: ptr<funct
             }
         }
 
+        if event == MARCH_EVENT_SUSPEND {
+            return march_end(END_SUSPENDED, STATUS_ERROR, state.r, normalize_or_zero(state.t), transmittance);
+        }
         if event == MARCH_EVENT_OBJECT {
             return absorbed(stats, seg, hit, transmittance);
         }

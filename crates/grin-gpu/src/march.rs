@@ -14,6 +14,12 @@
 //! One pipeline per set of the kernel's constants (integrator, step policy, exit method,
 //! flags, bounds shape) is compiled on first use and kept across fields; step sizes and
 //! tolerances are parameters.
+//!
+//! A ray's march is split over dispatches of at most
+//! [`MARCH_STEPS_PER_DISPATCH`](crate::stages::MARCH_STEPS_PER_DISPATCH) steps each, its
+//! state kept on the device between them: no invocation runs unbounded (lavapipe stops
+//! one after 65,535 loop iterations; a desktop driver resets a GPU whose dispatch runs
+//! too long), and the results are those of one whole march.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -40,6 +46,8 @@ pub struct GpuRayTracer<'a> {
     /// The parameters as the field's upload left them (grid, macro cells, flags).
     uploaded: FrameParams,
     pipelines: HashMap<Vec<u64>, StagePipeline<stages::March>>,
+    steps_per_dispatch: u32,
+    last_dispatches: u32,
 }
 
 impl std::fmt::Debug for GpuRayTracer<'_> {
@@ -47,6 +55,7 @@ impl std::fmt::Debug for GpuRayTracer<'_> {
         f.debug_struct("GpuRayTracer")
             .field("field", &self.field.geometry().dims)
             .field("pipelines", &self.pipelines.len())
+            .field("steps_per_dispatch", &self.steps_per_dispatch)
             .finish_non_exhaustive()
     }
 }
@@ -112,6 +121,8 @@ impl<'a> GpuRayTracer<'a> {
             field,
             uploaded,
             pipelines: HashMap::new(),
+            steps_per_dispatch: stages::MARCH_STEPS_PER_DISPATCH,
+            last_dispatches: 0,
         })
     }
 
@@ -131,15 +142,27 @@ impl<'a> GpuRayTracer<'a> {
         Ok(())
     }
 
+    /// Steps (or straight flights) a ray takes in one dispatch (at least 1); the results
+    /// do not depend on it.
+    pub fn set_steps_per_dispatch(&mut self, steps: u32) {
+        self.steps_per_dispatch = steps.max(1);
+    }
+
+    /// Dispatches the last [`Self::trace`] took (1 where no ray needed more than
+    /// [`Self::set_steps_per_dispatch`]'s steps).
+    pub fn last_dispatches(&self) -> u32 {
+        self.last_dispatches
+    }
+
     /// Pipelines compiled so far (one per integrator, step policy and exit used).
     pub fn pipelines_compiled(&self) -> usize {
         self.pipelines.len()
     }
 
     /// Trace `rays` (origin, direction; origins outside the bounds enter with
-    /// refraction) with `settings`, each ray `copies` times in one dispatch (to time a
+    /// refraction) with `settings`, each ray `copies` times in one batch (to time a
     /// batch big enough for the adapter; results are the first copy's). Returns the
-    /// results, in the order of `rays`, and the seconds the kernel took.
+    /// results, in the order of `rays`, and the seconds the kernel's dispatches took.
     pub fn trace(
         &mut self,
         settings: &TraceSettings,
@@ -169,7 +192,10 @@ impl<'a> GpuRayTracer<'a> {
             .pipelines
             .get(&key)
             .ok_or_else(|| GpuError::Unsupported("pipeline cache lost an entry".into()))?;
-        let (out, seconds) = self.kit.dispatch(pipeline, &input)?;
+        let (out, seconds, dispatches) =
+            self.kit
+                .dispatch_march(pipeline, &input, self.steps_per_dispatch)?;
+        self.last_dispatches = dispatches;
         Ok((
             out.iter().take(rays.len()).map(GpuRay::from).collect(),
             seconds,

@@ -277,6 +277,28 @@ pub struct SceneOut {
     pub object: u32,
 }
 
+/// The control of [`March`]'s dispatches (WGSL `MarchControl`): the rays still
+/// marching after a dispatch (the kernel counts them), the dispatch's number (0: the
+/// rays start from their [`RayIn`]) and the steps each ray may take in it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+pub struct MarchControl {
+    pub pending: u32,
+    pub round: u32,
+    pub budget: u32,
+}
+
+/// Bytes of one ray's state between [`March`]'s dispatches (WGSL `MarchCarryStored`;
+/// held to the WGSL struct's size by a test).
+pub const MARCH_CARRY_BYTES: u64 = 288;
+
+/// Steps (or straight flights) a ray takes in one dispatch of [`March`] by default:
+/// lavapipe stops a shader invocation's loops after 65,535 iterations in all, ~3 a step
+/// (9 with dopri) and up to ~50 where a step runs the exit and excursion searches
+/// (docs/accuracy.md), so 1,024 steps stay under it; on a GPU a short dispatch keeps
+/// the driver's watchdog away.
+pub const MARCH_STEPS_PER_DISPATCH: u32 = 1024;
+
 /// [`March`]'s result.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
@@ -337,6 +359,9 @@ pub(crate) struct StageKit<'a> {
     io_layout: wgpu::BindGroupLayout,
     params_buffer: wgpu::Buffer,
     frame: Option<FrameBinding>,
+    /// Bound at the io group's bindings 2 and 3 by the stages that do not use them
+    /// (only [`March`] keeps state between dispatches).
+    spare: wgpu::Buffer,
 }
 
 /// One scene's resources of group 0.
@@ -377,7 +402,12 @@ impl<'a> StageKit<'a> {
             };
             let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("stage io"),
-                entries: &[storage(0, true), storage(1, false)],
+                entries: &[
+                    storage(0, true),
+                    storage(1, false),
+                    storage(2, false),
+                    storage(3, false),
+                ],
             });
             let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("stage"),
@@ -390,6 +420,12 @@ impl<'a> StageKit<'a> {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
+            let spare = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("stage spare"),
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
             StageKit {
                 ctx,
                 params: FrameParams::zeroed(),
@@ -398,6 +434,7 @@ impl<'a> StageKit<'a> {
                 io_layout,
                 params_buffer,
                 frame: None,
+                spare,
             }
         })?;
         kit.set_scene(scene, baked)?;
@@ -515,8 +552,31 @@ impl<'a> StageKit<'a> {
         pipeline: &StagePipeline<S>,
         input: &[S::In],
     ) -> Result<(Vec<S::Out>, f64), GpuError> {
+        self.dispatch_rounds(pipeline, input, None)
+            .map(|(out, seconds, _)| (out, seconds))
+    }
+
+    /// Run [`March`] on `input` over as many dispatches as its rays need, each taking at
+    /// most `budget` steps a ray (a ray's state kept on the device between them): the
+    /// results, the seconds the dispatches took (from each submission to its end) and
+    /// the number of dispatches.
+    pub(crate) fn dispatch_march(
+        &self,
+        pipeline: &StagePipeline<March>,
+        input: &[RayIn],
+        budget: u32,
+    ) -> Result<(Vec<MarchOut>, f64, u32), GpuError> {
+        self.dispatch_rounds(pipeline, input, Some(budget.max(1)))
+    }
+
+    fn dispatch_rounds<S: Stage>(
+        &self,
+        pipeline: &StagePipeline<S>,
+        input: &[S::In],
+        march_budget: Option<u32>,
+    ) -> Result<(Vec<S::Out>, f64, u32), GpuError> {
         if input.is_empty() {
-            return Ok((Vec::new(), 0.0));
+            return Ok((Vec::new(), 0.0, 0));
         }
         let ctx = self.ctx;
         let frame = self
@@ -526,54 +586,146 @@ impl<'a> StageKit<'a> {
         let count = u32::try_from(input.len())
             .map_err(|_| GpuError::Unsupported("more than 2^32 stage inputs".into()))?;
         let out_bytes = (input.len() * std::mem::size_of::<S::Out>()) as u64;
-        let (readback, encoder) = ctx.scoped("running a marcher stage", || {
-            use wgpu::util::DeviceExt;
-            let device = &ctx.device;
-            let in_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("stage in"),
-                contents: bytemuck::cast_slice(input),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
-            let (out_buffer, readback) = output_buffers(device, "stage out", out_bytes);
-            let io_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let carry_bytes = match march_budget {
+            Some(_) => input.len() as u64 * MARCH_CARRY_BYTES,
+            None => 0,
+        };
+        let limit = ctx.limits().max_storage_buffer_binding_size;
+        if carry_bytes > limit {
+            return Err(GpuError::Unsupported(format!(
+                "{} rays in one march need {carry_bytes} bytes of state, more than the adapter's max_storage_buffer_binding_size of {limit}",
+                input.len()
+            )));
+        }
+        let (in_buffer, out_buffer, readback, carry, control) =
+            ctx.scoped("preparing a marcher stage", || {
+                use wgpu::util::DeviceExt;
+                let device = &ctx.device;
+                let in_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("stage in"),
+                    contents: bytemuck::cast_slice(input),
+                    usage: wgpu::BufferUsages::STORAGE,
+                });
+                let (out_buffer, readback) = output_buffers(device, "stage out", out_bytes);
+                let (carry, control) = match march_budget {
+                    Some(_) => {
+                        let carry = device.create_buffer(&wgpu::BufferDescriptor {
+                            label: Some("march carry"),
+                            size: carry_bytes,
+                            usage: wgpu::BufferUsages::STORAGE,
+                            mapped_at_creation: false,
+                        });
+                        let bytes = std::mem::size_of::<MarchControl>() as u64;
+                        let (_, back) = output_buffers(device, "march control", bytes);
+                        let control = device.create_buffer(&wgpu::BufferDescriptor {
+                            label: Some("march control"),
+                            size: bytes,
+                            usage: wgpu::BufferUsages::STORAGE
+                                | wgpu::BufferUsages::COPY_SRC
+                                | wgpu::BufferUsages::COPY_DST,
+                            mapped_at_creation: false,
+                        });
+                        (Some(carry), Some((control, back)))
+                    }
+                    None => (None, None),
+                };
+                (in_buffer, out_buffer, readback, carry, control)
+            })?;
+        let io_group = ctx.scoped("binding a marcher stage", || {
+            let spare = self.spare.as_entire_binding();
+            let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("stage io"),
                 layout: &self.io_layout,
                 entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: in_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: out_buffer.as_entire_binding(),
-                    },
+                    entry(0, in_buffer.as_entire_binding()),
+                    entry(1, out_buffer.as_entire_binding()),
+                    entry(
+                        2,
+                        carry
+                            .as_ref()
+                            .map_or(spare.clone(), |b| b.as_entire_binding()),
+                    ),
+                    entry(
+                        3,
+                        control
+                            .as_ref()
+                            .map_or(spare.clone(), |(b, _)| b.as_entire_binding()),
+                    ),
                 ],
-            });
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("stage"),
-            });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("stage"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&pipeline.pipeline);
-                pass.set_bind_group(0, &frame.group, &[]);
-                pass.set_bind_group(1, &io_group, &[]);
-                pass.dispatch_workgroups(count.div_ceil(STAGE_WORKGROUP), 1, 1);
-            }
-            encoder.copy_buffer_to_buffer(&out_buffer, 0, &readback, 0, out_bytes);
-            (readback, encoder)
+            })
         })?;
         // Buffer uploads queued above run before the kernel: finish them first.
         ctx.wait()?;
-        let start = Instant::now();
-        ctx.scoped("running a marcher stage", || {
+        let mut seconds = 0.0;
+        let mut round = 0u32;
+        loop {
+            if let (Some((control, _)), Some(budget)) = (&control, march_budget) {
+                let c = MarchControl {
+                    pending: 0,
+                    round,
+                    budget,
+                };
+                ctx.queue.write_buffer(control, 0, bytemuck::bytes_of(&c));
+                ctx.wait()?;
+            }
+            let start = Instant::now();
+            ctx.scoped("running a marcher stage", || {
+                let mut encoder =
+                    ctx.device
+                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                            label: Some("stage"),
+                        });
+                {
+                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some("stage"),
+                        timestamp_writes: None,
+                    });
+                    pass.set_pipeline(&pipeline.pipeline);
+                    pass.set_bind_group(0, &frame.group, &[]);
+                    pass.set_bind_group(1, &io_group, &[]);
+                    pass.dispatch_workgroups(count.div_ceil(STAGE_WORKGROUP), 1, 1);
+                }
+                if let Some((control, back)) = &control {
+                    let bytes = std::mem::size_of::<MarchControl>() as u64;
+                    encoder.copy_buffer_to_buffer(control, 0, back, 0, bytes);
+                }
+                ctx.queue.submit([encoder.finish()]);
+            })?;
+            ctx.wait()?;
+            seconds += start.elapsed().as_secs_f64();
+            round += 1;
+            let Some((_, back)) = &control else { break };
+            let c: Vec<MarchControl> =
+                read_buffer(ctx, back, std::mem::size_of::<MarchControl>() as u64)?;
+            if c[0].pending == 0 {
+                break;
+            }
+            // Every ray still marching took its whole budget in that dispatch, and the
+            // march ends at max_steps: more dispatches than that is a kernel fault.
+            let most = self.params.max_steps / march_budget.unwrap_or(1) + 2;
+            if round > most {
+                return Err(GpuError::Wgpu {
+                    during: "running the march".into(),
+                    message: format!(
+                        "{} rays still marching after {round} dispatches of {} steps (max_steps {})",
+                        c[0].pending,
+                        march_budget.unwrap_or(0),
+                        self.params.max_steps
+                    ),
+                });
+            }
+        }
+        ctx.scoped("reading a marcher stage back", || {
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("stage readback"),
+                });
+            encoder.copy_buffer_to_buffer(&out_buffer, 0, &readback, 0, out_bytes);
             ctx.queue.submit([encoder.finish()]);
         })?;
-        ctx.wait()?;
-        let seconds = start.elapsed().as_secs_f64();
-        Ok((read_buffer(ctx, &readback, out_bytes)?, seconds))
+        Ok((read_buffer(ctx, &readback, out_bytes)?, seconds, round))
     }
 }
 
@@ -622,6 +774,9 @@ mod tests {
         );
         same_layout!(w, SceneIn, r, t_min, t);
         same_layout!(w, SceneOut, normal, distance, sky, object);
+        same_layout!(w, MarchControl, pending, round, budget);
+        let (carry, _) = crate::gpu_data::tests::wgsl_offsets(w, "MarchCarryStored");
+        assert_eq!(carry as u64, MARCH_CARRY_BYTES, "MarchCarryStored's size");
         same_layout!(
             w,
             MarchOut,
@@ -664,6 +819,8 @@ mod tests {
         assert_eq!(io_of::<Flight>(), pair("ray_in", "flight_out"));
         assert_eq!(io_of::<Surface>(), pair("surface_in", "surface_out"));
         assert_eq!(io_of::<Scene>(), pair("scene_in", "scene_out"));
-        assert_eq!(io_of::<March>(), pair("ray_in", "march_out"));
+        let mut march = pair("ray_in", "march_out");
+        march.extend([(2, "march_carry".into()), (3, "march_control".into())]);
+        assert_eq!(io_of::<March>(), march);
     }
 }

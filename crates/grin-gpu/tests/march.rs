@@ -235,3 +235,97 @@ fn entry_nudges_keep_rays_on_their_own_line() {
         "GPU {worst_gpu:.2e} rad (twin {worst_twin:.2e})"
     );
 }
+
+/// A march split over dispatches (its state kept on the device between them) is the
+/// whole march: the same steps in the same arithmetic, bit for bit, whatever the budget
+/// of steps a dispatch allows.
+#[test]
+fn a_march_split_over_dispatches_is_the_whole_march() {
+    let Some(ctx) = harness::context("a_march_split_over_dispatches_is_the_whole_march") else {
+        return;
+    };
+    let lens = baked("luneburg", 48, Interp::Tricubic);
+    let mut gpu = GpuRayTracer::new(&ctx, Arc::clone(&lens)).unwrap();
+    let mut rays = rays(&lens, 24);
+    // Rays entering at grazing incidence (reflections at the surface, exit searches).
+    rays.extend((0..8).map(|i| {
+        let h = 0.9 + 0.0124 * f64::from(i);
+        (DVec3::new(h, 0.0, -3.0), DVec3::Z)
+    }));
+    for s in [
+        settings(
+            IntegratorKind::Rk4,
+            StepSpec::Fixed(1.0 / 512.0),
+            ExitMethod::Hermite,
+        ),
+        settings(
+            IntegratorKind::Adaptive,
+            StepSpec::Fixed(1.0 / 256.0),
+            ExitMethod::Bisection,
+        ),
+    ] {
+        gpu.set_steps_per_dispatch(u32::MAX);
+        let (whole, _) = gpu.trace(&s, &rays, 1).unwrap();
+        assert_eq!(gpu.last_dispatches(), 1);
+        let most = whole.iter().map(|r| r.steps).max().unwrap();
+        assert!(most > 40, "{most} steps at most: too few to split");
+        for budget in [1, 7, 40] {
+            gpu.set_steps_per_dispatch(budget);
+            let (split, _) = gpu.trace(&s, &rays, 1).unwrap();
+            assert!(
+                gpu.last_dispatches() >= most / budget,
+                "{} dispatches of {budget} steps for {most} steps",
+                gpu.last_dispatches()
+            );
+            assert_eq!(split, whole, "{s:?} split every {budget} steps");
+        }
+    }
+}
+
+/// Rays of 40,000+ steps (rk4 at 2.5e-5 R) through the GPU's bake of the Luneburg lens:
+/// through the centre, and tangent to the surface from inside at 0.9999 R (trapped
+/// there past max_steps).
+/// Marched whole in one invocation, lavapipe's loop limit (65,535 loop iterations in
+/// all, ~3 a step) ended them `error` after ~21,800 steps; split over dispatches they
+/// leave as their CPU twins do.
+#[test]
+fn rays_past_lavapipes_loop_limit_leave_as_their_cpu_twin() {
+    let Some(ctx) = harness::context("rays_past_lavapipes_loop_limit_leave_as_their_cpu_twin")
+    else {
+        return;
+    };
+    let lens = baked("luneburg", 100, Interp::Trilinear);
+    let mut gpu = GpuRayTracer::new(&ctx, Arc::clone(&lens)).unwrap();
+    let rays = [
+        (DVec3::new(0.0, 0.0, -3.0), DVec3::Z),
+        (DVec3::new(0.9999, 0.0, 0.0), DVec3::Y),
+    ];
+    let mut s = settings(
+        IntegratorKind::Rk4,
+        StepSpec::Fixed(2.5e-5),
+        ExitMethod::Hermite,
+    );
+    s.max_steps = 400_000;
+    let (out, _) = gpu.trace(&s, &rays, 1).unwrap();
+    for ((o, d), g) in rays.iter().zip(&out) {
+        let c = trace_ray::<f32>(lens.as_ref(), &s, *o, *d);
+        eprintln!(
+            "CPU twin: {:?} after {} steps; GPU: {} after {} steps, {} dispatches, {:.2e} rad apart",
+            c.status,
+            c.steps,
+            g.status,
+            g.steps,
+            gpu.last_dispatches(),
+            g.direction.angle_between(c.direction)
+        );
+        assert!(c.steps > 40_000, "{} steps: not a long ray", c.steps);
+        assert_eq!(RayStatus::ALL[g.status as usize], c.status);
+        assert_eq!(g.steps, c.steps);
+        assert!(g.direction.angle_between(c.direction) < 1e-5);
+    }
+    // Through the centre the ray leaves (79,997 steps); the tangent one is trapped
+    // beyond max_steps on both backends (its orbit hugs the bake's surface).
+    let c = trace_ray::<f32>(lens.as_ref(), &s, rays[0].0, rays[0].1);
+    assert!(c.status.left(), "{:?}", c.status);
+    assert!(gpu.last_dispatches() > 40);
+}
