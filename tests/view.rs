@@ -170,6 +170,15 @@ fn view_orbits_and_reports_frame_rates() {
         fps["max"].as_f64().expect("max"),
     );
     assert!(0.0 < min && min <= med && med <= max, "{fps}");
+    // Per frame: wall and (where the adapter writes timestamps) device milliseconds, and
+    // the bytes read back: the last, still frame's 64 bytes a pixel at least.
+    let wall = s["wall_ms"]["median"].as_f64().expect("wall_ms");
+    assert!(wall > 0.0, "{s}");
+    if let Some(d) = s["device_ms"]["median"].as_f64() {
+        assert!(d > 0.0 && d <= 1.5 * s["wall_ms"]["max"].as_f64().expect("max"), "{s}");
+    }
+    let bytes = s["read_back_bytes"]["max"].as_f64().expect("read_back_bytes");
+    assert!(bytes >= 64.0 * 128.0 * 72.0, "{s}");
     let internal = s["last_internal"].as_array().expect("internal size");
     assert!(internal[0].as_u64().expect("w") <= 128 && internal[1].as_u64().expect("h") <= 72);
     let png = image::open(&shot).expect("the screenshot is a PNG");

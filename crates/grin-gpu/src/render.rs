@@ -135,9 +135,14 @@ impl PassTimer {
         encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, u64::from(passes) * 16);
     }
 
+    /// Bytes [`Self::band_seconds`] reads back for `passes` passes.
+    pub(crate) fn read_back_bytes(passes: u32) -> u64 {
+        u64::from(passes) * 16
+    }
+
     /// Device seconds of the band just read back (its `passes` passes).
     pub(crate) fn band_seconds(&self, ctx: &GpuContext, passes: u32) -> Result<f64, GpuError> {
-        let ticks: Vec<u64> = read_buffer(ctx, &self.readback, u64::from(passes) * 16)?;
+        let ticks: Vec<u64> = read_buffer(ctx, &self.readback, Self::read_back_bytes(passes))?;
         let total: u64 = ticks
             .chunks_exact(2)
             .map(|t| t[1].saturating_sub(t[0]))
@@ -174,6 +179,9 @@ pub struct GpuRenderer<'a> {
     pub(crate) warnings: Vec<String>,
     /// The device's time in the render passes, where it writes timestamps.
     pub(crate) timer: Option<PassTimer>,
+    /// Bytes mapped and read back from the device by [`Self::render`] so far: the
+    /// bands' pixels and the passes' timestamps.
+    pub(crate) read_back: std::sync::atomic::AtomicU64,
 }
 
 impl<'a> GpuRenderer<'a> {
@@ -420,6 +428,7 @@ impl<'a> GpuRenderer<'a> {
                 field,
                 warnings,
                 timer: PassTimer::new(ctx),
+                read_back: std::sync::atomic::AtomicU64::new(0),
             }
         })
     }
@@ -541,6 +550,12 @@ impl<'a> GpuRenderer<'a> {
         })
     }
 
+    /// Bytes read back from the device by this renderer's frames so far (pixels and
+    /// timestamps): what a frame costs in transfers is the difference across it.
+    pub fn bytes_read_back(&self) -> u64 {
+        self.read_back.load(Ordering::Relaxed)
+    }
+
     /// Seconds the device spent in the render passes of the last [`Self::render`]
     /// (timestamps written around each pass; `None` where the adapter has none).
     pub fn last_device_seconds(&self) -> Option<f64> {
@@ -626,8 +641,14 @@ impl<'a> GpuRenderer<'a> {
             ctx.queue.submit([encoder.finish()]);
         })?;
         read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
+        self.read_back.fetch_add(bytes, Ordering::Relaxed);
         match &self.timer {
-            Some(timer) => Ok(Some(timer.band_seconds(ctx, passes)?)),
+            Some(timer) => {
+                let seconds = timer.band_seconds(ctx, passes)?;
+                self.read_back
+                    .fetch_add(PassTimer::read_back_bytes(passes), Ordering::Relaxed);
+                Ok(Some(seconds))
+            }
             None => Ok(None),
         }
     }

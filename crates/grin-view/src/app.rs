@@ -47,7 +47,9 @@ struct Gfx {
 struct Stats {
     /// Wall-clock instants at which new rendered frames were shown.
     shown: Vec<Instant>,
-    gpu_ms: Vec<f64>,
+    wall_ms: Vec<f64>,
+    device_ms: Vec<f64>,
+    read_back_bytes: Vec<f64>,
     ui_frames: u64,
     ui_start: Option<Instant>,
     rays_per_second: Vec<f64>,
@@ -275,7 +277,13 @@ impl App {
                         self.first_frame_seconds = Some(t);
                         eprintln!("grin view: first frame after {t:.2} s");
                     }
-                    self.stats.gpu_ms.push(f.rendered.gpu_seconds * 1e3);
+                    self.stats.wall_ms.push(f.rendered.gpu_seconds * 1e3);
+                    if let Some(d) = f.rendered.device_seconds {
+                        self.stats.device_ms.push(d * 1e3);
+                    }
+                    self.stats
+                        .read_back_bytes
+                        .push(f.rendered.read_back_bytes as f64);
                     self.stats.rays_per_second.push(f.rendered.rays_per_second);
                     if f.rendered.converged && self.converged_after.is_none() {
                         self.converged_after = Some(self.still_since.elapsed().as_secs_f64());
@@ -349,7 +357,10 @@ impl App {
             last_internal: [f.rendered.frame.width, f.rendered.frame.height],
             orbit_deg_per_frame: self.opts.orbit_deg,
             fps: crate::MinMedMax::of(&fps),
-            gpu_ms: crate::MinMedMax::of(&self.stats.gpu_ms),
+            wall_ms: crate::MinMedMax::of(&self.stats.wall_ms),
+            device_ms: (!self.stats.device_ms.is_empty())
+                .then(|| crate::MinMedMax::of(&self.stats.device_ms)),
+            read_back_bytes: crate::MinMedMax::of(&self.stats.read_back_bytes),
             rays_per_second: crate::MinMedMax::of(&self.stats.rays_per_second).median,
             ui_fps: self.stats.ui_frames as f64 / ui_secs.max(1e-9),
             setup_seconds: self.setup_seconds.unwrap_or(0.0),

@@ -85,8 +85,14 @@ pub struct ViewSummary {
     pub orbit_deg_per_frame: f64,
     /// New rendered frames shown per second (between consecutive frames).
     pub fps: MinMedMax,
-    /// GPU milliseconds per frame.
-    pub gpu_ms: MinMedMax,
+    /// Wall-clock milliseconds per frame on the render thread (the dispatches to the
+    /// last byte read back).
+    pub wall_ms: MinMedMax,
+    /// The device's milliseconds per frame in the render passes (its timestamps; absent
+    /// where the adapter writes none).
+    pub device_ms: Option<MinMedMax>,
+    /// Bytes read back from the device per frame (pixels and timestamps).
+    pub read_back_bytes: MinMedMax,
     pub rays_per_second: f64,
     /// Window redraws per second (the UI's own rate).
     pub ui_fps: f64,

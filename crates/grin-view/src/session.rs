@@ -72,8 +72,13 @@ pub struct Rendered {
     pub frame: Frame,
     /// Samples per pixel accumulated.
     pub samples: u32,
-    /// Seconds the GPU frame took (dispatch to readback).
+    /// Seconds the GPU frame took on the wall clock (dispatch to readback).
     pub gpu_seconds: f64,
+    /// Seconds the device spent in the frame's render passes (its timestamps; `None`
+    /// where the adapter writes none).
+    pub device_seconds: Option<f64>,
+    /// Bytes the frame read back from the device (pixels and timestamps).
+    pub read_back_bytes: u64,
     /// Seconds spent on baking, building fields and pipelines before it (0 when the
     /// renderer was only re-aimed).
     pub setup_seconds: f64,
@@ -366,6 +371,7 @@ impl<'a> Session<'a> {
             return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
         };
         let method = method_name(&g.scene.settings);
+        let read_before = g.renderer.bytes_read_back();
         let start = Instant::now();
         let frame = match g.renderer.render(&|_| {}, cancel) {
             Ok(f) => f,
@@ -373,6 +379,8 @@ impl<'a> Session<'a> {
             Err(e) => return Err(e.into()),
         };
         let gpu_seconds = start.elapsed().as_secs_f64();
+        let device_seconds = g.renderer.last_device_seconds();
+        let read_back_bytes = g.renderer.bytes_read_back() - read_before;
         self.frame_warning = g.renderer.loop_limit_warning(&frame);
         let spp = applied.render.spp;
         let n = frame.pixels.len();
@@ -414,6 +422,8 @@ impl<'a> Session<'a> {
             frame: out,
             samples: accum.samples,
             gpu_seconds,
+            device_seconds,
+            read_back_bytes,
             setup_seconds,
             rays_per_second: rays / gpu_seconds.max(1e-9),
             steps_per_ray,

@@ -87,6 +87,15 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     base.max_spp = 1;
     let r0 = render(&mut s, &base);
     assert!(max_deflection(&r0) > 0.05, "{}", max_deflection(&r0));
+    // The renderer's own count of what a frame reads back from the device: every
+    // pixel's 64 bytes (the frame crosses the CPU to reach the window), and the passes'
+    // timestamps (16 bytes a pass, where the adapter writes them).
+    let pixels = u64::from(W * H) * 64;
+    assert!(
+        (pixels..=pixels + 32).contains(&r0.read_back_bytes),
+        "{} bytes read back for {W}x{H} pixels",
+        r0.read_back_bytes
+    );
 
     // Integrator: rk4 spends 4 field evaluations a step, euler 1.
     let mut v = base.clone();

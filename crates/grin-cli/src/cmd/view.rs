@@ -74,7 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("grin: warning: {w}");
     }
     outln!(
-        "viewed {} frames of {}x{} (last at {}x{}) on {}: {:.1} fps min / {:.1} median / {:.1} max, GPU {:.1} ms median, {:.2} Mrays/s",
+        "viewed {} frames of {}x{} (last at {}x{}) on {}: {:.1} fps min / {:.1} median / {:.1} max, frame {:.1} ms median on the wall{}, {:.2} Mrays/s, {:.0} kB read back a frame",
         s.frames,
         s.width,
         s.height,
@@ -84,8 +84,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.fps.min,
         s.fps.median,
         s.fps.max,
-        s.gpu_ms.median,
-        s.rays_per_second * 1e-6
+        s.wall_ms.median,
+        s.device_ms
+            .map_or(String::new(), |d| format!(" ({:.1} ms on the device)", d.median)),
+        s.rays_per_second * 1e-6,
+        s.read_back_bytes.median * 1e-3
     );
     outln!(
         "setup {:.2} s (device {:.2} s, bake cache: {}), first frame at {:.2} s; {} spp{}",
