@@ -66,6 +66,7 @@ pub(crate) struct App {
     setup_seconds: Option<f64>,
     device_seconds: Option<f64>,
     first_frame_seconds: Option<f64>,
+    first_full_frame_seconds: Option<f64>,
     settings: ViewSettings,
     /// The scene file's own settings (to rebase the user's edits on reload).
     file_settings: ViewSettings,
@@ -126,6 +127,7 @@ impl App {
             setup_seconds: None,
             device_seconds: None,
             first_frame_seconds: None,
+            first_full_frame_seconds: None,
             file_settings: ViewSettings::from_scene(scene),
             animated: ViewSettings::animated(scene),
             animation: scene.animation.filter(|_| scene.is_sequence()),
@@ -277,6 +279,17 @@ impl App {
                         self.first_frame_seconds = Some(t);
                         eprintln!("grin view: first frame after {t:.2} s");
                     }
+                    if f.preview {
+                        // A still view's preview: shown until its full frame comes, not
+                        // one of the frames counted.
+                        self.frame_error = None;
+                        self.frame = Some(f);
+                        self.shown_aov = None;
+                        continue;
+                    }
+                    if self.first_full_frame_seconds.is_none() {
+                        self.first_full_frame_seconds = Some(self.start.elapsed().as_secs_f64());
+                    }
                     self.stats.wall_ms.push(f.rendered.gpu_seconds * 1e3);
                     if let Some(d) = f.rendered.device_seconds {
                         self.stats.device_ms.push(d * 1e3);
@@ -366,6 +379,7 @@ impl App {
             setup_seconds: self.setup_seconds.unwrap_or(0.0),
             device_seconds: self.device_seconds.unwrap_or(0.0),
             first_frame_seconds: self.first_frame_seconds.unwrap_or(0.0),
+            first_full_frame_seconds: self.first_full_frame_seconds.unwrap_or(0.0),
             samples: f.rendered.samples,
             converged: f.rendered.converged,
             converged_seconds: self.converged_after,
@@ -863,6 +877,12 @@ impl ApplicationHandler for App {
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
         let Some(g) = &mut self.gfx else { return };
         let resp = g.egui.on_window_event(&g.window, &event);
+        // egui-winit asks for a repaint after every redraw; taken, that kept the window
+        // redrawing ~30 times a second with nothing new to show, which on a CPU adapter
+        // (lavapipe) took a core from the render thread (a heat-haze frame 10.3 -> 12.3 s
+        // with an image on screen). The redraw's own output says whether egui wants
+        // another.
+        let repaint = resp.repaint && !matches!(event, WindowEvent::RedrawRequested);
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::Resized(s) => {
@@ -873,7 +893,7 @@ impl ApplicationHandler for App {
             WindowEvent::RedrawRequested => self.redraw(el),
             _ => {}
         }
-        if resp.repaint {
+        if repaint {
             self.dirty = true;
         }
     }

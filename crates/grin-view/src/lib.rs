@@ -101,8 +101,11 @@ pub struct ViewSummary {
     /// The part of `setup_seconds` spent creating the GPU device (adapter, device, the
     /// pipeline cache read).
     pub device_seconds: f64,
-    /// From the start to the first frame shown.
+    /// From the start to the first frame shown (a still view's low-resolution preview
+    /// where its full frame takes longer than the frame budget).
     pub first_frame_seconds: f64,
+    /// From the start to the first full frame (the first counted in `frames`).
+    pub first_full_frame_seconds: f64,
     pub samples: u32,
     pub converged: bool,
     /// From the last change of the view to the converged image.

@@ -265,6 +265,15 @@ impl<'a> Session<'a> {
         }
     }
 
+    /// An image of this view (`settings` at `width` x `height`) is accumulated, at any
+    /// number of samples.
+    pub fn has_image_of(&self, settings: &ViewSettings, width: u32, height: u32) -> bool {
+        let applied = settings.apply(&self.scene, width, height);
+        self.accum
+            .as_ref()
+            .is_some_and(|a| a.view_key == view_key(&applied, settings))
+    }
+
     /// Render one frame of `settings` at `width` x `height` (the internal resolution)
     /// and accumulate it; `cancel` stops between bands of rows. A `preview` frame (the
     /// camera is moving) has 1 sample a pixel and marches a tricubic grid's nodes

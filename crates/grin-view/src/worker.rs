@@ -18,6 +18,10 @@ use crate::settings::ViewSettings;
 /// Smallest internal resolution while moving, as a fraction of each side.
 pub const MIN_MOVING_SCALE: f64 = 0.125;
 
+/// The resolution of a still view's preview when the cost of a frame is not measured
+/// yet (the first frame), as a fraction of each side.
+pub const FIRST_PREVIEW_SCALE: f64 = 0.25;
+
 /// What the window asks for.
 #[derive(Debug, Clone)]
 pub struct Request {
@@ -57,6 +61,9 @@ pub struct FrameReply {
     /// The settings it was rendered with (for AOV display and screenshots).
     pub settings: ViewSettings,
     pub scale: f64,
+    /// A still view's preview, shown while its full frame renders (not one of the
+    /// frames a headless run counts).
+    pub preview: bool,
     pub warnings: Vec<String>,
     pub cache: Option<grin_gpu::cache::CacheUse>,
     pub field_grid: Option<([u32; 3], u64)>,
@@ -150,6 +157,8 @@ fn run(
     // (its internal size follows the cost measured meanwhile, which would otherwise ask
     // for another frame of the same view).
     let mut previewed = false;
+    // The current still request had its preview.
+    let mut still_previewed = false;
     loop {
         // The newest request; block when there is nothing left to refine.
         let idle = failed
@@ -166,6 +175,7 @@ fn run(
                 Ok(r) => {
                     current = Some(r);
                     previewed = false;
+                    still_previewed = false;
                 }
                 Err(_) => return,
             }
@@ -176,6 +186,7 @@ fn run(
                     let reload = r.reload || current.as_ref().is_some_and(|c| c.reload);
                     current = Some(Request { reload, ..r });
                     previewed = false;
+                    still_previewed = false;
                 }
                 Err(TryRecvError::Empty) => break,
                 Err(TryRecvError::Disconnected) => return,
@@ -192,10 +203,30 @@ fn run(
             // The window answers with the rebased settings.
             continue;
         }
-        let (w, h, scale) = internal_size(req, cost);
+        let (mut w, mut h, mut scale) = internal_size(req, cost);
+        // A new still view whose frame would take longer than the frame budget (or whose
+        // cost is not known yet): a preview first, as a moving view gets, refined after.
+        let preview = !req.moving
+            && !still_previewed
+            && !session.has_image_of(&req.settings, w, h)
+            && cost.is_none_or(|c| {
+                let samples = f64::from(w) * f64::from(h) * f64::from(req.settings.spp.max(1));
+                c * samples > 1.0 / req.settings.target_fps.max(1.0)
+            });
+        if preview {
+            still_previewed = true;
+            let moving = Request {
+                moving: true,
+                ..req.clone()
+            };
+            (w, h, scale) = internal_size(&moving, cost);
+            if cost.is_none() {
+                (w, h, scale) = scaled(req, scale.min(FIRST_PREVIEW_SCALE));
+            }
+        }
         cancel.store(false, Ordering::Relaxed);
         let settings = req.settings.clone();
-        match session.render(&settings, w, h, req.moving, &cancel) {
+        match session.render(&settings, w, h, req.moving || preview, &cancel) {
             Ok(rendered) => {
                 let samples = f64::from(w) * f64::from(h) * f64::from(settings.spp.max(1));
                 let c = rendered.gpu_seconds / samples.max(1.0);
@@ -204,6 +235,7 @@ fn run(
                     rendered,
                     settings,
                     scale,
+                    preview,
                     warnings: session
                         .warnings
                         .iter()
@@ -242,6 +274,11 @@ pub fn internal_size(req: &Request, cost: Option<f64>) -> (u32, u32, f64) {
         let fit = (budget / (c * full).max(1e-12)).sqrt();
         scale = scale.min(fit).max(MIN_MOVING_SCALE);
     }
+    scaled(req, scale)
+}
+
+/// `req`'s image size at `scale` of each side.
+fn scaled(req: &Request, scale: f64) -> (u32, u32, f64) {
     let w = ((f64::from(req.width) * scale).round() as u32).max(1);
     let h = ((f64::from(req.height) * scale).round() as u32).max(1);
     (w, h, scale)

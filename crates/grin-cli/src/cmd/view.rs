@@ -85,8 +85,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.fps.median,
         s.fps.max,
         s.wall_ms.median,
-        s.device_ms
-            .map_or(String::new(), |d| format!(" ({:.1} ms on the device)", d.median)),
+        s.device_ms.map_or(String::new(), |d| format!(
+            " ({:.1} ms on the device)",
+            d.median
+        )),
         s.rays_per_second * 1e-6,
         s.read_back_bytes.median * 1e-3
     );
