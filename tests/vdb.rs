@@ -5,8 +5,8 @@
 mod common;
 use common::rng::Rng;
 use common::{
-    Row, assert_failed, assert_ok, bake_with, grin, grin_args as run, json, num, read_table,
-    run_ok, stderr, stdout,
+    Row, assert_failed, assert_ok, bake_with, exr_channels, gpu_or_skip, grin, grin_args as run,
+    json, num, read_table, run_ok, stderr, stdout,
 };
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -788,6 +788,44 @@ jitter = false
         .expect("grin");
     let s: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert!(s["comparison"]["max"].as_f64().expect("max") > 1e-3, "{s}");
+
+    // On the GPU every frame is baked once: a second render of the sequence bakes
+    // nothing, each frame's grid read from the bake cache (`bake_cache` per frame), and
+    // the images are the first render's.
+    if gpu_or_skip() {
+        let cache = dir.path().join("bakes");
+        let render_gpu = |pattern: &str| {
+            let o = run_ok(
+                grin()
+                    .env("GRIN_CACHE_DIR", &cache)
+                    .args([
+                        "render",
+                        "--backend",
+                        "gpu",
+                        "--frames",
+                        "1..4",
+                        "--json",
+                        "-o",
+                    ])
+                    .arg(dir.path().join(pattern))
+                    .arg(&seq),
+            );
+            let frames = json(&o);
+            let used: Vec<String> = frames
+                .as_array()
+                .expect("one summary a frame")
+                .iter()
+                .map(|f| f["bake_cache"].as_str().unwrap_or("none").to_owned())
+                .collect();
+            used
+        };
+        assert_eq!(render_gpu("gpu1.####.exr"), ["stored"; 4]);
+        assert_eq!(render_gpu("gpu2.####.exr"), ["hit"; 4]);
+        for f in 1..=4 {
+            let read = |name: &str| exr_channels(&dir.path().join(format!("{name}.{f:04}.exr")));
+            assert!(read("gpu1") == read("gpu2"), "frame {f} differs");
+        }
+    }
 
     // `grin bake` of the sequence: one file a frame, each the frame's field.
     let o = run_ok(
