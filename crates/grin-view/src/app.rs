@@ -714,10 +714,14 @@ impl App {
         ui.label(format!("frames shown: {n}, {fps:.1} fps"));
         if let Some(f) = &self.frame {
             let r = &f.rendered;
+            let device = r.device_seconds.map_or(String::new(), |d| {
+                format!(" ({:.1} on the device)", d * 1e3)
+            });
             ui.label(format!(
-                "GPU {:.1} ms/frame, {:.2} Mrays/s",
+                "frame {:.1} ms{device}, {:.2} Mrays/s, {:.0} kB read back",
                 r.gpu_seconds * 1e3,
-                r.rays_per_second * 1e-6
+                r.rays_per_second * 1e-6,
+                r.read_back_bytes as f64 * 1e-3
             ));
             ui.label(format!(
                 "{:.1} steps, {:.1} field evals per ray",
