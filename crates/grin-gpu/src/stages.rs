@@ -666,8 +666,8 @@ impl<'a> StageKit<'a> {
                     round,
                     budget,
                 };
+                // Queued writes land before the next submission.
                 ctx.queue.write_buffer(control, 0, bytemuck::bytes_of(&c));
-                ctx.wait()?;
             }
             let start = Instant::now();
             ctx.scoped("running a marcher stage", || {

@@ -258,20 +258,21 @@ impl<'a> Session<'a> {
     /// Whether a frame of `settings` at `width` x `height` would add anything: the view
     /// changed, or its accumulation is short of `max_spp`.
     pub fn needs_frame(&self, settings: &ViewSettings, width: u32, height: u32) -> bool {
-        let applied = settings.apply(&self.scene, width, height);
-        match &self.accum {
-            Some(a) => a.view_key != view_key(&applied, settings) || a.samples < settings.max_spp,
-            None => true,
-        }
+        self.accum_of(settings, width, height)
+            .is_none_or(|a| a.samples < settings.max_spp)
     }
 
     /// An image of this view (`settings` at `width` x `height`) is accumulated, at any
     /// number of samples.
     pub fn has_image_of(&self, settings: &ViewSettings, width: u32, height: u32) -> bool {
+        self.accum_of(settings, width, height).is_some()
+    }
+
+    /// The accumulation, where it is of this view.
+    fn accum_of(&self, settings: &ViewSettings, width: u32, height: u32) -> Option<&Accum> {
         let applied = settings.apply(&self.scene, width, height);
-        self.accum
-            .as_ref()
-            .is_some_and(|a| a.view_key == view_key(&applied, settings))
+        let key = view_key(&applied, settings);
+        self.accum.as_ref().filter(|a| a.view_key == key)
     }
 
     /// Render one frame of `settings` at `width` x `height` (the internal resolution)

@@ -219,10 +219,10 @@ fn run(
                 moving: true,
                 ..req.clone()
             };
-            (w, h, scale) = internal_size(&moving, cost);
-            if cost.is_none() {
-                (w, h, scale) = scaled(req, scale.min(FIRST_PREVIEW_SCALE));
-            }
+            (w, h, scale) = match cost {
+                Some(_) => internal_size(&moving, cost),
+                None => scaled(req, scale.min(FIRST_PREVIEW_SCALE)),
+            };
         }
         cancel.store(false, Ordering::Relaxed);
         let settings = req.settings.clone();
