@@ -36,8 +36,10 @@ pub mod render;
 pub mod shaders;
 mod specialize;
 pub mod stages;
+pub mod view;
 
 pub use device::{GpuContext, describe_adapter};
 pub use error::GpuError;
 pub use march::GpuRayTracer;
 pub use render::GpuRenderer;
+pub use view::ViewImage;

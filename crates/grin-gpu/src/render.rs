@@ -16,6 +16,7 @@ use crate::field::{
 use crate::gpu_data::*;
 use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
+use crate::view::ViewImage;
 use crate::{GpuContext, GpuError, specialize};
 
 /// Pixels per dispatch on a CPU adapter (lavapipe): big enough to keep every core busy,
@@ -474,6 +475,12 @@ impl<'a> GpuRenderer<'a> {
         Ok(true)
     }
 
+    /// Render in bands of at most `rows` rows (the seams between bands, tested; the next
+    /// [`Self::retarget`] sets the adapter's band again).
+    pub fn limit_band_rows(&mut self, rows: u32) {
+        self.rows_per_band = self.rows_per_band.min(rows.max(1));
+    }
+
     /// `name (backend, device type)` of the adapter.
     pub fn adapter_info(&self) -> String {
         self.ctx.adapter_name()
@@ -482,13 +489,19 @@ impl<'a> GpuRenderer<'a> {
     /// Where `frame`'s pixels ended `error` after many steps on an adapter with a loop
     /// limit (lavapipe): how many, what they likely are, and what traces them whole.
     pub fn loop_limit_warning(&self, frame: &Frame) -> Option<String> {
-        let limit = self.ctx.loop_limit()?;
         let error = crate::gpu_data::STATUS_ERROR as f32;
         let suspect = frame
             .pixels
             .iter()
             .filter(|p| p.status == error && p.steps >= crate::device::LOOP_LIMIT_SUSPECT_STEPS)
             .count();
+        self.loop_limit_warning_of(suspect as u64)
+    }
+
+    /// [`Self::loop_limit_warning`] for `suspect` such pixels, counted elsewhere (the
+    /// viewer's image on the device counts them: [`crate::view::ViewStats`]).
+    pub fn loop_limit_warning_of(&self, suspect: u64) -> Option<String> {
+        let limit = self.ctx.loop_limit()?;
         (suspect > 0).then(|| {
             format!(
                 "{suspect} pixels ended `error` after {:.0}+ steps on a CPU adapter (lavapipe), which stops all loops of a shader invocation after {limit} iterations in all (~3 a step, more with dopri, with objects in the scene or an exit search every step: 10,900 steps a ray in the Luneburg scene): they were likely cut short there, not failed; a GPU has no such limit, and the CPU backend (grin render --backend cpu) traces them whole",
@@ -531,9 +544,10 @@ impl<'a> GpuRenderer<'a> {
             }
             let rows = self.rows_per_band.min(height - row);
             // Converted straight from the mapped read-back buffer: no copy of the band.
-            let seconds = self.render_band(row, rows, &mut |band: &[PixelOut]| {
+            let mut take = |band: &[PixelOut]| {
                 pixels.extend(band.iter().map(|p| p.to_cpu()));
-            })?;
+            };
+            let seconds = self.render_band(row, rows, BandSink::ReadBack(&mut take))?;
             device_seconds += seconds.unwrap_or(0.0);
             row += rows;
             progress(rows);
@@ -548,6 +562,50 @@ impl<'a> GpuRenderer<'a> {
             height,
             pixels,
         })
+    }
+
+    /// Render every pixel into `image` (the viewer's image on the device): the frame's
+    /// samples start the image (`overwrite`) or are added to it, and nothing is read back
+    /// but the passes' timestamps. Show it with [`ViewImage::show`]. Setting `cancel`
+    /// stops between bands with [`GpuError::Cancelled`], the image then part this frame
+    /// and part the last: start it again.
+    pub fn render_to_view(
+        &self,
+        image: &mut ViewImage,
+        overwrite: bool,
+        cancel: &AtomicBool,
+    ) -> Result<(), GpuError> {
+        let ctx = self.ctx;
+        let (width, height) = (self.params.width, self.params.height);
+        ctx.scoped("starting the viewer's frame", || {
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("view frame"),
+                });
+            image.begin_frame(&mut encoder, width, height, overwrite, self.params.spp);
+            ctx.queue.submit([encoder.finish()]);
+        })?;
+        let mut row = 0;
+        let mut device_seconds = 0.0;
+        while row < height {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(GpuError::Cancelled);
+            }
+            let rows = self.rows_per_band.min(height - row);
+            let sink = BandSink::View {
+                image: &*image,
+                overwrite,
+            };
+            device_seconds += self.render_band(row, rows, sink)?.unwrap_or(0.0);
+            row += rows;
+        }
+        if let Some(timer) = &self.timer {
+            timer
+                .last
+                .store(device_seconds.to_bits(), Ordering::Relaxed);
+        }
+        Ok(())
     }
 
     /// Bytes read back from the device by this renderer's frames so far (pixels and
@@ -577,14 +635,13 @@ impl<'a> GpuRenderer<'a> {
         ))
     }
 
-    /// Render rows `first_row .. first_row + rows`, hand their pixels to `take` (while
-    /// the read-back buffer is mapped), and return, where the device writes timestamps,
-    /// the seconds it spent in the band's passes.
+    /// Render rows `first_row .. first_row + rows` into `sink`, and return, where the
+    /// device writes timestamps, the seconds it spent in the band's passes.
     fn render_band(
         &self,
         first_row: u32,
         rows: u32,
-        take: &mut dyn FnMut(&[PixelOut]),
+        sink: BandSink<'_>,
     ) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
         let width = self.params.width;
@@ -634,14 +691,37 @@ impl<'a> GpuRenderer<'a> {
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.dispatch_workgroups_indirect(&self.deferred_dispatch, 0);
             }
-            encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
+            match &sink {
+                BandSink::ReadBack(_) => {
+                    encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
+                }
+                BandSink::View { image, overwrite } => image.accumulate_band(
+                    ctx,
+                    &mut encoder,
+                    &self.out_buffer,
+                    first_row,
+                    rows,
+                    self.params.spp,
+                    *overwrite,
+                ),
+            }
             if let Some(timer) = &self.timer {
                 timer.resolve(&mut encoder, passes);
             }
             ctx.queue.submit([encoder.finish()]);
         })?;
-        read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
-        self.read_back.fetch_add(bytes, Ordering::Relaxed);
+        match sink {
+            BandSink::ReadBack(take) => {
+                read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
+                self.read_back.fetch_add(bytes, Ordering::Relaxed);
+            }
+            // A CPU adapter runs a band for a good part of a second: wait for each, so a
+            // cancel stops the frame between them (timestamps below wait too).
+            BandSink::View { .. } if self.timer.is_none() && ctx.is_cpu_adapter() => {
+                ctx.wait()?;
+            }
+            BandSink::View { .. } => {}
+        }
         match &self.timer {
             Some(timer) => {
                 let seconds = timer.band_seconds(ctx, passes)?;
@@ -652,6 +732,16 @@ impl<'a> GpuRenderer<'a> {
             None => Ok(None),
         }
     }
+}
+
+/// Where a band's pixels go: read back and handed to a closure (while the read-back
+/// buffer is mapped), or added to the viewer's image on the device.
+enum BandSink<'s> {
+    ReadBack(&'s mut dyn FnMut(&[PixelOut])),
+    View {
+        image: &'s ViewImage,
+        overwrite: bool,
+    },
 }
 
 /// A storage buffer of `bytes` a kernel writes (`label`) and the mappable buffer it is

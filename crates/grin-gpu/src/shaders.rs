@@ -9,3 +9,7 @@ pub const TEXTURE_BENCH_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/tex
 /// The test-only stage kernels (`stage_sample`, `stage_integrate`, `stage_take`,
 /// `stage_leave`): shaders/stages.wgsl, run by [`crate::stages`].
 pub const STAGES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/stages.wgsl"));
+
+/// The viewer's image on the device (`view_accumulate`, `view_scale`, `view_colour`):
+/// shaders/view.wgsl, run by [`crate::view`].
+pub const VIEW_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/view.wgsl"));

@@ -1,0 +1,568 @@
+//! The viewer's image on the device: the accumulation of a view's frames and the texture
+//! a window draws, so a frame reaches the screen without crossing to the CPU.
+//!
+//! [`GpuRenderer::render_to_view`](crate::GpuRenderer::render_to_view) adds each band of
+//! the render kernel's pixels to [`ViewImage`]'s accumulation (`view_accumulate`,
+//! shaders/view.wgsl) instead of reading them back; [`ViewImage::show`] colours the AOV
+//! asked for into the texture (`view_scale`, `view_colour`, as `grin_view::display`
+//! colours a [`Frame`]) and reads back the frame's 32 bytes of statistics. Pixels are read
+//! back only when asked ([`ViewImage::read_frame`], [`ViewImage::read_display`]: a
+//! screenshot, an export, a test), and counted apart ([`ViewImage::pixel_bytes_read_back`]).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use grin_render::image::Frame;
+
+use crate::gpu_data::PixelOut;
+use crate::render::read_buffer;
+use crate::{GpuContext, GpuError, shaders};
+
+/// `stats` indices (shaders/view.wgsl's STAT_*).
+const STAT_STEPS: usize = 0;
+const STAT_EVALS: usize = 2;
+const STAT_SUSPECTS: usize = 4;
+const STAT_SCALE: usize = 5;
+/// Bytes of `stats` (8 u32 words).
+pub const STATS_BYTES: u64 = 32;
+/// Bytes of the statistics cleared at the start of a frame (steps, evaluations, suspects).
+const FRAME_STATS_BYTES: u64 = 20;
+
+/// The texture's format: linear, filterable, writable from a compute shader everywhere.
+pub const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// shaders/view.wgsl's `ViewParams`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct ViewParams {
+    pub width: u32,
+    pub height: u32,
+    pub first_row: u32,
+    pub rows: u32,
+    pub weight: f32,
+    pub inv_samples: f32,
+    pub overwrite: u32,
+    pub aov: u32,
+    pub out_width: u32,
+    pub out_height: u32,
+    pub pad: [u32; 2],
+}
+
+/// What the device counted of the last frame added and the image shown.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ViewStats {
+    /// Integration steps of all the frame's rays.
+    pub steps: u64,
+    /// Field evaluations of all the frame's rays.
+    pub evals: u64,
+    /// The frame's pixels that ended `error` after at least
+    /// [`crate::device::LOOP_LIMIT_SUSPECT_STEPS`] steps (lavapipe's loop limit).
+    pub loop_limit_suspects: u32,
+    /// The value the full colour scale of the AOV shown stands for (its largest finite
+    /// magnitude; 1 for beauty and status).
+    pub scale: f32,
+}
+
+/// The texture the window draws: the image scaled to fill it.
+#[derive(Debug, Clone)]
+pub struct DisplayTexture {
+    pub view: wgpu::TextureView,
+    /// Changes whenever the texture is replaced (another display size).
+    pub generation: u64,
+    /// The texture's size in pixels.
+    pub size: [u32; 2],
+}
+
+/// The accumulation buffer and display texture of one view, on the device.
+#[derive(Debug)]
+pub struct ViewImage {
+    accum: wgpu::Buffer,
+    texture: wgpu::Texture,
+    storage_view: wgpu::TextureView,
+    /// Pixels the accumulation holds.
+    capacity: u64,
+    /// The texture's size.
+    display: [u32; 2],
+    generation: u64,
+    params: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    stats_readback: wgpu::Buffer,
+    /// Bound as the band in passes that read none.
+    no_band: wgpu::Buffer,
+    layout: wgpu::BindGroupLayout,
+    accumulate: wgpu::ComputePipeline,
+    scale: wgpu::ComputePipeline,
+    colour: wgpu::ComputePipeline,
+    /// The image's size and samples accumulated.
+    size: [u32; 2],
+    samples: u32,
+    /// Bytes of statistics read back so far.
+    stats_read: AtomicU64,
+    /// Bytes of pixels read back so far (exports and tests only).
+    pixels_read: AtomicU64,
+}
+
+impl ViewImage {
+    /// Pipelines and buffers for an image of `width` x `height` shown at that size (see
+    /// [`Self::reserve`]).
+    pub fn new(ctx: &GpuContext, width: u32, height: u32) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        ctx.scoped("creating the viewer's image", || {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("view.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(shaders::VIEW_WGSL.into()),
+            });
+            let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("view bindings"),
+                entries: &[
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 0,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    },
+                    storage(1, true),
+                    storage(2, false),
+                    storage(3, false),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 4,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::StorageTexture {
+                            access: wgpu::StorageTextureAccess::WriteOnly,
+                            format: DISPLAY_FORMAT,
+                            view_dimension: wgpu::TextureViewDimension::D2,
+                        },
+                        count: None,
+                    },
+                ],
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("view"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let pipeline = |entry: &str| {
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&pipeline_layout),
+                    module: &module,
+                    entry_point: Some(entry),
+                    // Workgroup memory zeroed: view_accumulate's sums start at 0.
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    cache: ctx.pipeline_cache(),
+                })
+            };
+            let buffer = |label, size, usage| {
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage,
+                    mapped_at_creation: false,
+                })
+            };
+            use wgpu::BufferUsages as U;
+            let display = [width.max(1), height.max(1)];
+            let capacity = u64::from(display[0]) * u64::from(display[1]);
+            let (texture, storage_view) = display_texture(ctx, display);
+            ViewImage {
+                accum: accumulation(ctx, capacity),
+                texture,
+                storage_view,
+                capacity,
+                display,
+                generation: 0,
+                params: buffer(
+                    "view params",
+                    std::mem::size_of::<ViewParams>() as u64,
+                    U::UNIFORM | U::COPY_DST,
+                ),
+                stats: buffer("view stats", STATS_BYTES, U::STORAGE | U::COPY_SRC | U::COPY_DST),
+                stats_readback: buffer("view stats readback", STATS_BYTES, U::MAP_READ | U::COPY_DST),
+                no_band: buffer("view no band", 64, U::STORAGE),
+                accumulate: pipeline("view_accumulate"),
+                scale: pipeline("view_scale"),
+                colour: pipeline("view_colour"),
+                layout,
+                size: [0, 0],
+                samples: 0,
+                stats_read: AtomicU64::new(0),
+                pixels_read: AtomicU64::new(0),
+            }
+        })
+    }
+
+    /// Make room for an image of `width` x `height` shown at `display` pixels: a bigger
+    /// accumulation when it holds fewer pixels (the image starts again), a new texture
+    /// (another [`DisplayTexture::generation`]) when the display size changes.
+    pub fn reserve(
+        &mut self,
+        ctx: &GpuContext,
+        width: u32,
+        height: u32,
+        display: [u32; 2],
+    ) -> Result<(), GpuError> {
+        let pixels = u64::from(width) * u64::from(height);
+        let display = [display[0].max(1), display[1].max(1)];
+        if pixels > self.capacity {
+            self.accum = ctx.scoped("allocating the viewer's image", || accumulation(ctx, pixels))?;
+            self.capacity = pixels;
+            self.samples = 0;
+        }
+        if display != self.display {
+            let (texture, view) =
+                ctx.scoped("allocating the viewer's texture", || display_texture(ctx, display))?;
+            self.texture = texture;
+            self.storage_view = view;
+            self.display = display;
+            self.generation += 1;
+        }
+        Ok(())
+    }
+
+    /// The texture the window draws, for the image last shown.
+    pub fn display_texture(&self) -> DisplayTexture {
+        DisplayTexture {
+            view: self.texture.create_view(&wgpu::TextureViewDescriptor::default()),
+            generation: self.generation,
+            size: self.display,
+        }
+    }
+
+    /// Samples per pixel accumulated.
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
+    /// Bytes of statistics read back so far (32 a frame shown).
+    pub fn stats_bytes_read_back(&self) -> u64 {
+        self.stats_read.load(Ordering::Relaxed)
+    }
+
+    /// Bytes of pixels read back so far: only by [`Self::read_frame`] and
+    /// [`Self::read_display`], never by a frame.
+    pub fn pixel_bytes_read_back(&self) -> u64 {
+        self.pixels_read.load(Ordering::Relaxed)
+    }
+
+    /// Start an image of `width` x `height` (`overwrite`) or add to the one accumulated:
+    /// the statistics of the frame are cleared in `encoder`.
+    pub(crate) fn begin_frame(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        width: u32,
+        height: u32,
+        overwrite: bool,
+        samples: u32,
+    ) {
+        encoder.clear_buffer(&self.stats, 0, Some(FRAME_STATS_BYTES));
+        if overwrite {
+            self.samples = 0;
+        }
+        self.size = [width, height];
+        self.samples += samples;
+    }
+
+    /// Add `band` (render_main's pixels of rows `first_row .. first_row + rows`),
+    /// weighted by `weight` samples, in `encoder`. `params` is written now: submit the
+    /// encoder before the next band's.
+    pub(crate) fn accumulate_band(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        band: &wgpu::Buffer,
+        first_row: u32,
+        rows: u32,
+        weight: u32,
+        overwrite: bool,
+    ) {
+        let params = ViewParams {
+            width: self.size[0],
+            height: self.size[1],
+            first_row,
+            rows,
+            weight: weight as f32,
+            inv_samples: 0.0,
+            overwrite: u32::from(overwrite),
+            aov: 0,
+            out_width: self.display[0],
+            out_height: self.display[1],
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let bind = self.bind_group(ctx, band);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("view_accumulate"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.accumulate);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups((self.size[0] * rows).div_ceil(64), 1, 1);
+    }
+
+    fn bind_group(&self, ctx: &GpuContext, band: &wgpu::Buffer) -> wgpu::BindGroup {
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("view bindings"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: band.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.accum.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.stats.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&self.storage_view),
+                },
+            ],
+        })
+    }
+
+    /// Colour AOV `aov` (grin_view::display::Aov's index: beauty, deflection, steps, opd,
+    /// status) of the accumulated image into the texture, and read back the statistics
+    /// of the last frame added (32 bytes; waits for the device).
+    pub fn show(&self, ctx: &GpuContext, aov: u32) -> Result<ViewStats, GpuError> {
+        let [width, height] = self.size;
+        if width == 0 || height == 0 {
+            return Err(GpuError::DeviceLost("no image to show".into()));
+        }
+        ctx.scoped("colouring the viewer's image", || {
+            let params = ViewParams {
+                width,
+                height,
+                first_row: 0,
+                rows: height,
+                weight: 0.0,
+                inv_samples: 1.0 / self.samples.max(1) as f32,
+                overwrite: 0,
+                aov,
+                out_width: self.display[0],
+                out_height: self.display[1],
+                pad: [0; 2],
+            };
+            ctx.queue
+                .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+            let bind = self.bind_group(ctx, &self.no_band);
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("view colour"),
+                });
+            encoder.clear_buffer(&self.stats, STAT_SCALE as u64 * 4, Some(4));
+            let [out_w, out_h] = self.display;
+            for (label, pipeline, [w, h]) in [
+                ("view_scale", &self.scale, [width, height]),
+                ("view_colour", &self.colour, [out_w, out_h]),
+            ] {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(label),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            }
+            encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, STATS_BYTES);
+            ctx.queue.submit([encoder.finish()]);
+        })?;
+        let words: Vec<u32> = read_buffer(ctx, &self.stats_readback, STATS_BYTES)?;
+        self.stats_read.fetch_add(STATS_BYTES, Ordering::Relaxed);
+        let wide = |at: usize| u64::from(words[at]) | (u64::from(words[at + 1]) << 32);
+        let scale = match aov {
+            1..=3 => f32::from_bits(words[STAT_SCALE]),
+            _ => 1.0,
+        };
+        Ok(ViewStats {
+            steps: wide(STAT_STEPS),
+            evals: wide(STAT_EVALS),
+            loop_limit_suspects: words[STAT_SUSPECTS],
+            scale,
+        })
+    }
+
+    /// The accumulated image as a frame (mean radiance, steps and evaluations; the other
+    /// AOVs of its first frame), read back from the device: for screenshots and exports.
+    pub fn read_frame(&self, ctx: &GpuContext) -> Result<Frame, GpuError> {
+        let [width, height] = self.size;
+        let n = u64::from(width) * u64::from(height);
+        let bytes = n * std::mem::size_of::<PixelOut>() as u64;
+        let readback = ctx.scoped("reading the viewer's image back", || {
+            let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("view image readback"),
+                size: bytes.max(4),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("view image readback"),
+                });
+            encoder.copy_buffer_to_buffer(&self.accum, 0, &readback, 0, bytes);
+            ctx.queue.submit([encoder.finish()]);
+            readback
+        })?;
+        let sums: Vec<PixelOut> = read_buffer(ctx, &readback, bytes)?;
+        self.pixels_read.fetch_add(bytes, Ordering::Relaxed);
+        let inv = 1.0 / self.samples.max(1) as f32;
+        let pixels = sums
+            .into_iter()
+            .map(|p| {
+                let mut out = p.to_cpu();
+                out.rgb = p.rgb.map(|c| c * inv);
+                out.steps = p.steps * inv;
+                out.evals = p.evals * inv;
+                out
+            })
+            .collect();
+        Ok(Frame {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// The texture as last shown: linear RGBA per texel, row by row (read back; for
+    /// tests).
+    pub fn read_display(&self, ctx: &GpuContext) -> Result<Vec<[f32; 4]>, GpuError> {
+        let [width, height] = self.display;
+        let row_bytes = u64::from(width) * 8;
+        let padded = row_bytes.div_ceil(256) * 256;
+        let bytes = padded * u64::from(height);
+        let readback = ctx.scoped("reading the viewer's texture back", || {
+            let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("view texture readback"),
+                size: bytes.max(4),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("view texture readback"),
+                });
+            encoder.copy_texture_to_buffer(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &readback,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(padded as u32),
+                        rows_per_image: Some(height),
+                    },
+                },
+                wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+            );
+            ctx.queue.submit([encoder.finish()]);
+            readback
+        })?;
+        let halves: Vec<u16> = read_buffer(ctx, &readback, bytes)?;
+        self.pixels_read.fetch_add(bytes, Ordering::Relaxed);
+        let per_row = (padded / 2) as usize;
+        let mut out = Vec::with_capacity(width as usize * height as usize);
+        for row in halves.chunks(per_row) {
+            for px in row[..width as usize * 4].chunks(4) {
+                out.push([
+                    f16_to_f32(px[0]),
+                    f16_to_f32(px[1]),
+                    f16_to_f32(px[2]),
+                    f16_to_f32(px[3]),
+                ]);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// An accumulation of `pixels` pixels.
+fn accumulation(ctx: &GpuContext, pixels: u64) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("view accumulation"),
+        size: pixels.max(1) * std::mem::size_of::<PixelOut>() as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+/// The display texture of `size` texels, and its view for the colour pass.
+fn display_texture(ctx: &GpuContext, size: [u32; 2]) -> (wgpu::Texture, wgpu::TextureView) {
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("view display"),
+        size: wgpu::Extent3d {
+            width: size[0],
+            height: size[1],
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: DISPLAY_FORMAT,
+        usage: wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    (texture, view)
+}
+
+/// An IEEE half as f32.
+fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = i32::from((h >> 10) & 0x1f);
+    let frac = f32::from(h & 0x3ff);
+    sign * match exp {
+        0 => frac * 2f32.powi(-24),
+        31 if frac == 0.0 => f32::INFINITY,
+        31 => f32::NAN,
+        e => (1.0 + frac / 1024.0) * 2f32.powi(e - 15),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::f16_to_f32;
+
+    #[test]
+    fn halves_decode() {
+        assert_eq!(f16_to_f32(0x3c00), 1.0);
+        assert_eq!(f16_to_f32(0xc000), -2.0);
+        assert_eq!(f16_to_f32(0x3555), 0.333_251_95);
+        assert_eq!(f16_to_f32(0x0001), 2f32.powi(-24));
+        assert!(f16_to_f32(0x7c00).is_infinite());
+        assert!(f16_to_f32(0x7e00).is_nan());
+    }
+}
