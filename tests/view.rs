@@ -178,7 +178,8 @@ fn view_orbits_and_reports_frame_rates() {
     );
     assert!(0.0 < min && min <= med && med <= max, "{fps}");
     // Per frame: wall and (where the adapter writes timestamps) device milliseconds, and
-    // the bytes read back: the last, still frame's 64 bytes a pixel at least.
+    // the bytes read back: no pixel (the image stays on the window's device), only the
+    // frame's 32 bytes of statistics and the passes' timestamps (16 bytes a pass).
     let wall = s["wall_ms"]["median"].as_f64().expect("wall_ms");
     assert!(wall > 0.0, "{s}");
     if let Some(d) = s["device_ms"]["median"].as_f64() {
@@ -190,7 +191,11 @@ fn view_orbits_and_reports_frame_rates() {
     let bytes = s["read_back_bytes"]["max"]
         .as_f64()
         .expect("read_back_bytes");
-    assert!(bytes >= 64.0 * 128.0 * 72.0, "{s}");
+    assert!((32.0..=64.0).contains(&bytes), "{s}");
+    assert!(
+        s["adapter"] == s["display_adapter"],
+        "the window draws on the renderer's device: {s}"
+    );
     let internal = s["last_internal"].as_array().expect("internal size");
     assert!(internal[0].as_u64().expect("w") <= 128 && internal[1].as_u64().expect("h") <= 72);
     let png = image::open(&shot).expect("the screenshot is a PNG");

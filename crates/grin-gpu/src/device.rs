@@ -60,6 +60,12 @@ fn process_instance(backends: wgpu::Backends) -> &'static wgpu::Instance {
     })
 }
 
+/// The process's wgpu instance, of the backends `WGPU_BACKEND` names (all by default): a
+/// window's surface must come from it to share its device with the renderer.
+pub fn instance() -> &'static wgpu::Instance {
+    process_instance(wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all()))
+}
+
 impl GpuContext {
     /// A headless device. `WGPU_BACKEND` (e.g. `vulkan`) restricts the backends,
     /// `WGPU_ADAPTER_NAME` picks the first adapter whose name contains it
@@ -73,9 +79,30 @@ impl GpuContext {
     /// [`Self::new_headless`] with the pipeline cache kept in `pipeline_dir` (`None`: no
     /// pipeline cache, every pipeline compiled from scratch).
     pub fn new_headless_in(pipeline_dir: Option<&std::path::Path>) -> Result<Self, GpuError> {
+        Self::new_in(None, pipeline_dir)
+    }
+
+    /// A device that can also draw into `surface` (made by [`instance`]): the viewer's
+    /// renderer and window share it, so frames reach the window without leaving the
+    /// device. Adapters are chosen as by [`Self::new_headless`], among those that can
+    /// present to the surface.
+    pub fn new_for_surface(
+        surface: &wgpu::Surface<'_>,
+        pipeline_dir: Option<&std::path::Path>,
+    ) -> Result<Self, GpuError> {
+        Self::new_in(Some(surface), pipeline_dir)
+    }
+
+    fn new_in(
+        surface: Option<&wgpu::Surface<'_>>,
+        pipeline_dir: Option<&std::path::Path>,
+    ) -> Result<Self, GpuError> {
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let instance = process_instance(backends);
-        let adapters = pollster::block_on(instance.enumerate_adapters(backends));
+        let adapters: Vec<wgpu::Adapter> = pollster::block_on(instance.enumerate_adapters(backends))
+            .into_iter()
+            .filter(|a| surface.is_none_or(|s| a.is_surface_supported(s)))
+            .collect();
         let seen = if adapters.is_empty() {
             "none".to_owned()
         } else {
@@ -97,6 +124,7 @@ impl GpuContext {
             }
             None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
                 power_preference: wgpu::PowerPreference::HighPerformance,
+                compatible_surface: surface,
                 ..Default::default()
             }))
             .ok(),
@@ -108,6 +136,9 @@ impl GpuContext {
             }
             if let Some(n) = &wanted {
                 filter.push_str(&format!(" matching WGPU_ADAPTER_NAME={n}"));
+            }
+            if surface.is_some() {
+                filter.push_str(" that can draw into the window");
             }
             return Err(GpuError::NoAdapter { filter, seen });
         };

@@ -241,6 +241,11 @@ impl ViewImage {
         }
     }
 
+    /// The image's size (the last frame's).
+    pub fn size(&self) -> [u32; 2] {
+        self.size
+    }
+
     /// Samples per pixel accumulated.
     pub fn samples(&self) -> u32 {
         self.samples

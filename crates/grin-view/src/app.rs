@@ -1,6 +1,7 @@
-//! The window: winit + a wgpu surface + egui. The render thread's image is shown as an
-//! egui texture beside the panel; mouse and keys move the orbit camera; the scene file is
-//! watched and reloaded. With `--frames N` the same window runs N rendered frames, writes
+//! The window: winit + a wgpu surface + egui, on the device the render thread renders
+//! with. The render thread's image is a texture on that device, drawn by egui beside the
+//! panel (no pixel crosses to the CPU); mouse and keys move the orbit camera; the scene
+//! file is watched and reloaded. With `--frames N` the same window runs N rendered frames, writes
 //! the last one and reports frame rates (Xvfb in CI).
 //!
 //! Over 500 lines: the event loop, the panel and the headless run share the app's state
@@ -9,6 +10,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
+use grin_gpu::GpuContext;
+use grin_gpu::cache::BakeCache;
+use grin_gpu::view::DisplayTexture;
 use grin_scene::{IntegratorKind, Interpolation};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
@@ -16,7 +20,7 @@ use winit::event::WindowEvent;
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::window::{Window, WindowId};
 
-use crate::display::{self, Aov};
+use crate::display::Aov;
 use crate::settings::{StepKind, ViewSettings};
 use crate::worker::{FrameReply, Reply, Request, Worker};
 use crate::{ViewOptions, ViewSummary};
@@ -31,6 +35,9 @@ const MOVING_FOR: Duration = Duration::from_millis(150);
 /// on the cores that render, so it redraws only for a new frame, input or playing time,
 /// at most this often.
 const MIN_REDRAW: Duration = Duration::from_millis(33);
+
+/// How long a headless run waits for its screenshot's pixels.
+const CAPTURE_TIMEOUT: Duration = Duration::from_secs(120);
 
 struct Gfx {
     window: Arc<Window>,
@@ -57,7 +64,9 @@ struct Stats {
 
 pub(crate) struct App {
     opts: ViewOptions,
-    worker: Worker,
+    /// The render thread, started with the window (it renders on the window's device).
+    worker: Option<Worker>,
+    cache: Option<BakeCache>,
     gfx: Option<Gfx>,
     start: Instant,
     pub(crate) fatal: Option<String>,
@@ -76,8 +85,12 @@ pub(crate) struct App {
     last_sent: Option<(ViewSettings, u32, u32, bool)>,
     last_move: Option<Instant>,
     frame: Option<Box<FrameReply>>,
-    texture: Option<egui::TextureHandle>,
-    shown_aov: Option<(Aov, usize)>,
+    /// The texture on screen, as egui knows it, and its generation.
+    texture: Option<(egui::TextureId, u64)>,
+    /// The render thread's texture to show (replaced by each frame and AOV switch).
+    display: Option<DisplayTexture>,
+    /// The frame last counted as shown.
+    shown_frame: u32,
     aov_scale: f32,
     frame_error: Option<String>,
     reload_error: Option<String>,
@@ -103,7 +116,11 @@ fn mtime(p: &std::path::Path) -> Option<SystemTime> {
 }
 
 impl App {
-    pub(crate) fn new(opts: ViewOptions, scene: &grin_scene::Scene, worker: Worker) -> Self {
+    pub(crate) fn new(
+        opts: ViewOptions,
+        scene: &grin_scene::Scene,
+        cache: Option<BakeCache>,
+    ) -> Self {
         let mut settings = ViewSettings::from_scene(scene);
         if let Some(spp) = opts.spp {
             settings.spp = spp.max(1);
@@ -118,7 +135,8 @@ impl App {
             .size
             .unwrap_or((scene.render.width, scene.render.height));
         App {
-            worker,
+            worker: None,
+            cache,
             gfx: None,
             start: Instant::now(),
             fatal: None,
@@ -136,7 +154,8 @@ impl App {
             last_move: None,
             frame: None,
             texture: None,
-            shown_aov: None,
+            display: None,
+            shown_frame: 0,
             aov_scale: 1.0,
             frame_error: None,
             reload_error: None,
@@ -176,20 +195,20 @@ impl App {
             )
             .map_err(|e| format!("cannot open a window: {e}"))?,
         );
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
-        let surface = instance
+        let surface = grin_gpu::device::instance()
             .create_surface(window.clone())
             .map_err(|e| format!("cannot draw into the window: {e}"))?;
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            compatible_surface: Some(&surface),
-            ..Default::default()
-        }))
-        .map_err(|e| format!("no GPU adapter can draw into the window: {e}"))?;
-        self.display_adapter = grin_gpu::describe_adapter(&adapter.get_info());
-        let (device, queue) =
-            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
-                .map_err(|e| format!("{}: {e}", self.display_adapter))?;
-        let caps = surface.get_capabilities(&adapter);
+        // One device for the window and the renderer: frames stay in GPU memory. The
+        // driver's pipeline cache sits beside the bake cache (and is off with it).
+        let started = Instant::now();
+        let pipeline_dir = self.cache.as_ref().map(BakeCache::pipeline_dir);
+        let ctx = GpuContext::new_for_surface(&surface, pipeline_dir.as_deref())
+            .map_err(|e| format!("no GPU device for the viewer: {e}"))?;
+        self.device_seconds = Some(started.elapsed().as_secs_f64());
+        let gpu = Arc::new(ctx);
+        self.display_adapter = gpu.adapter_name();
+        let (device, queue) = (gpu.device.clone(), gpu.queue.clone());
+        let caps = surface.get_capabilities(&gpu.adapter);
         let format = egui_wgpu::preferred_framebuffer_format(&caps.formats)
             .map_err(|e| format!("the window's surface: {e}"))?;
         let inner = window.inner_size();
@@ -216,6 +235,11 @@ impl App {
         );
         let renderer =
             egui_wgpu::Renderer::new(&device, format, egui_wgpu::RendererOptions::default());
+        self.worker = Some(Worker::start(
+            gpu,
+            self.opts.scene.clone(),
+            self.cache.take(),
+        ));
         Ok(Gfx {
             window,
             surface,
@@ -229,17 +253,25 @@ impl App {
 
     /// Take the render thread's replies.
     fn poll_worker(&mut self, el: &ActiveEventLoop) {
-        while let Ok(reply) = self.worker.replies.try_recv() {
+        while let Some(reply) = self.worker.as_ref().and_then(|w| w.replies.try_recv().ok()) {
             self.dirty = true;
             match reply {
                 Reply::Started {
                     adapter,
                     setup_seconds,
-                    device_seconds,
                 } => {
                     self.adapter = Some(adapter);
                     self.setup_seconds = Some(setup_seconds);
-                    self.device_seconds = Some(device_seconds);
+                }
+                Reply::Shown {
+                    aov,
+                    display,
+                    scale,
+                } => {
+                    if aov == self.settings.aov {
+                        self.display = Some(display);
+                        self.aov_scale = scale;
+                    }
                 }
                 Reply::Fatal(e) => {
                     self.fatal = Some(e);
@@ -279,12 +311,13 @@ impl App {
                         self.first_frame_seconds = Some(t);
                         eprintln!("grin view: first frame after {t:.2} s");
                     }
+                    self.display = Some(f.rendered.display.clone());
+                    self.aov_scale = f.rendered.aov_scale;
                     if f.preview {
                         // A still view's preview: shown until its full frame comes, not
                         // one of the frames counted.
                         self.frame_error = None;
                         self.frame = Some(f);
-                        self.shown_aov = None;
                         continue;
                     }
                     if self.first_full_frame_seconds.is_none() {
@@ -304,15 +337,15 @@ impl App {
                     self.frame_error = None;
                     self.frames_seen += 1;
                     self.frame = Some(f);
-                    self.shown_aov = None;
                     if let Some(n) = self.opts.frames {
                         let done = self.frames_seen >= n
                             || self.frame.as_ref().is_some_and(|f| f.rendered.converged);
                         // A screenshot is of the size asked for: after an orbit's preview
                         // frames, one more still frame at that size.
-                        let preview = self.frame.as_ref().is_some_and(|f| {
-                            (f.rendered.frame.width, f.rendered.frame.height) != self.image_px
-                        });
+                        let preview = self
+                            .frame
+                            .as_ref()
+                            .is_some_and(|f| (f.rendered.width, f.rendered.height) != self.image_px);
                         if done && preview && self.opts.screenshot.is_some() && !self.final_still {
                             self.final_still = true;
                             self.last_move = None;
@@ -343,11 +376,18 @@ impl App {
             self.fatal = Some("no frame was rendered".into());
             return;
         };
-        if let Some(path) = &self.opts.screenshot
-            && let Err(e) = crate::write_screenshot(path, &f.rendered.frame, f.settings.aov)
-        {
-            self.fatal = Some(format!("{e:#}"));
-            return;
+        if let Some(path) = &self.opts.screenshot {
+            // The only pixels read back: the image shown, once, for the file.
+            let written = self
+                .capture()
+                .and_then(|frame| {
+                    crate::write_screenshot(path, &frame, f.settings.aov)
+                        .map_err(|e| format!("{e:#}"))
+                });
+            if let Err(e) = written {
+                self.fatal = Some(e);
+                return;
+            }
         }
         let intervals: Vec<f64> = self
             .stats
@@ -367,7 +407,7 @@ impl App {
             frames: self.frames_seen,
             width: self.image_px.0,
             height: self.image_px.1,
-            last_internal: [f.rendered.frame.width, f.rendered.frame.height],
+            last_internal: [f.rendered.width, f.rendered.height],
             orbit_deg_per_frame: self.opts.orbit_deg,
             fps: crate::MinMedMax::of(&fps),
             wall_ms: crate::MinMedMax::of(&self.stats.wall_ms),
@@ -391,6 +431,26 @@ impl App {
             warnings: f.warnings.clone(),
             screenshot: self.opts.screenshot.clone(),
         });
+    }
+
+    /// The image shown, read back by the render thread (a screenshot).
+    fn capture(&self) -> Result<grin_render::image::Frame, String> {
+        let worker = self.worker.as_ref().ok_or("no render thread")?;
+        let (tx, rx) = std::sync::mpsc::channel();
+        let (w, h) = self.image_px;
+        worker.send(
+            Request {
+                settings: self.settings.clone(),
+                width: w,
+                height: h,
+                moving: false,
+                reload: false,
+                capture: Some(tx),
+            },
+            false,
+        );
+        rx.recv_timeout(CAPTURE_TIMEOUT)
+            .map_err(|e| format!("the screenshot's pixels did not come back: {e}"))?
     }
 
     /// The camera moved within MOVING_FOR (a headless orbit moves it every frame).
@@ -424,13 +484,15 @@ impl App {
             self.still_since = Instant::now();
             self.converged_after = None;
         }
-        self.worker.send(
+        let Some(worker) = &self.worker else { return };
+        worker.send(
             Request {
                 settings: self.settings.clone(),
                 width: w,
                 height: h,
                 moving,
                 reload: false,
+                capture: None,
             },
             view_changed,
         );
@@ -446,13 +508,15 @@ impl App {
         if now != self.watched {
             self.watched = now;
             let (w, h) = self.image_px;
-            self.worker.send(
+            let Some(worker) = &self.worker else { return };
+            worker.send(
                 Request {
                     settings: self.settings.clone(),
                     width: w,
                     height: h,
                     moving: false,
                     reload: true,
+                    capture: None,
                 },
                 true,
             );
@@ -483,7 +547,7 @@ impl App {
         self.stats.ui_frames += 1;
         let raw = g.egui.take_egui_input(&g.window);
         let ctx = g.egui.egui_ctx().clone();
-        self.update_texture(&ctx);
+        self.update_texture(&mut g);
         let mut avail = (0u32, 0u32);
         let mut out = ctx.run_ui(raw, |ui| {
             avail = self.ui(ui);
@@ -558,32 +622,33 @@ impl App {
         self.gfx = Some(g);
     }
 
-    /// The shown frame as an egui texture, in the AOV the panel picks.
-    fn update_texture(&mut self, ctx: &egui::Context) {
-        let Some(f) = &self.frame else { return };
-        let id = (self.settings.aov, self.frames_seen as usize);
-        if self.shown_aov == Some(id) {
-            return;
-        }
-        if self.shown_aov.is_none_or(|(_, n)| n != id.1) {
+    /// The render thread's texture, registered with egui when it is a new one (the
+    /// texture is drawn where it is, on the device).
+    fn update_texture(&mut self, g: &mut Gfx) {
+        let Some(d) = &self.display else { return };
+        if self.shown_frame != self.frames_seen {
             // A new rendered frame reaches the screen (not an AOV switch).
+            self.shown_frame = self.frames_seen;
             self.stats.shown.push(Instant::now());
         }
-        let frame = &f.rendered.frame;
-        let (rgba, scale) = display::rgba(frame, self.settings.aov);
-        self.aov_scale = scale;
-        let image = egui::ColorImage::from_rgba_unmultiplied(
-            [frame.width as usize, frame.height as usize],
-            &rgba,
-        );
-        match &mut self.texture {
-            Some(t) => t.set(image, egui::TextureOptions::LINEAR),
+        match self.texture {
+            Some((_, generation)) if generation == d.generation => {}
+            Some((id, _)) => {
+                g.renderer.update_egui_texture_from_wgpu_texture(
+                    &g.device,
+                    &d.view,
+                    wgpu::FilterMode::Linear,
+                    id,
+                );
+                self.texture = Some((id, d.generation));
+            }
             None => {
-                self.texture =
-                    Some(ctx.load_texture("grin view", image, egui::TextureOptions::LINEAR));
+                let id =
+                    g.renderer
+                        .register_native_texture(&g.device, &d.view, wgpu::FilterMode::Linear);
+                self.texture = Some((id, d.generation));
             }
         }
-        self.shown_aov = Some(id);
     }
 
     /// The panel and the image; returns the image area in pixels.
@@ -608,8 +673,8 @@ impl App {
                 size
             };
             let (rect, resp) = ui.allocate_exact_size(shown, egui::Sense::click_and_drag());
-            if let Some(t) = &self.texture {
-                egui::Image::new((t.id(), shown)).paint_at(ui, rect);
+            if let Some((id, _)) = self.texture {
+                egui::Image::new((id, shown)).paint_at(ui, rect);
             } else {
                 ui.put(
                     rect,
@@ -735,8 +800,8 @@ impl App {
             ui.label(format!("method: {}{chosen}", r.method));
             ui.label(format!(
                 "{}x{} ({:.0}%), {} / {} spp{}",
-                r.frame.width,
-                r.frame.height,
+                r.width,
+                r.height,
                 f.scale * 100.0,
                 r.samples,
                 f.settings.max_spp,

@@ -190,8 +190,7 @@ pub fn run(opts: ViewOptions) -> anyhow::Result<Option<ViewSummary>> {
     let cache = (!opts.no_cache)
         .then(grin_gpu::cache::BakeCache::user_default)
         .flatten();
-    let worker = worker::Worker::start(opts.scene.clone(), cache);
-    let app = app::App::new(opts, &scene, worker);
+    let app = app::App::new(opts, &scene, cache);
     let app = app::run_window(app)?;
     if let Some(e) = app.fatal {
         bail!("{e}");

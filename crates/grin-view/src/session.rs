@@ -5,7 +5,10 @@
 //! Each [`Session::render`] renders the scene file with the settings applied and, when
 //! the view is the one of the last frame, adds the frame's samples to the image so far:
 //! frame k renders samples k spp .. (k+1) spp of `max_spp`, so the accumulated image is
-//! one render of that many samples (`grin render --spp max_spp`, to rounding). What a
+//! one render of that many samples (`grin render --spp max_spp`, to rounding). The image
+//! stays on the device ([`ViewImage`]): each frame is added there and coloured into the
+//! texture the window draws, and only 32 bytes of statistics (and the passes' timestamps)
+//! are read back; [`Session::frame`] reads the pixels for a screenshot. What a
 //! change costs is decided by comparing scenes: the camera, the image size, spp and the
 //! step's value only re-aim the renderer ([`GpuRenderer::retarget`]); the integrator,
 //! the step policy or the medium switched on or off build new pipelines; another field
@@ -21,13 +24,15 @@ use anyhow::Context;
 use grin_field::IndexField;
 use grin_field::baked::{BakedField, Interp};
 use grin_gpu::cache::{BakeCache, CacheUse};
-use grin_gpu::{GpuContext, GpuRenderer};
+use grin_gpu::view::DisplayTexture;
+use grin_gpu::{GpuContext, GpuRenderer, ViewImage};
 use grin_render::camera::PinholeCamera;
 use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
 use grin_render::settings::TraceSettings;
 use grin_scene::{FieldSpec, Interpolation, Scene};
 
+use crate::display::Aov;
 use crate::settings::ViewSettings;
 
 /// Fields kept in memory (time steps of an animation, interpolations).
@@ -67,17 +72,23 @@ impl FieldEntry {
 /// What one [`Session::render`] produced.
 #[derive(Debug, Clone)]
 pub struct Rendered {
-    /// The accumulated image: mean radiance of all samples so far, steps and evaluations
-    /// averaged, the other AOVs of the accumulation's first frame.
-    pub frame: Frame,
+    /// The image's size (the internal resolution).
+    pub width: u32,
+    pub height: u32,
+    /// The texture showing the accumulated image in the AOV asked for (on the device).
+    pub display: DisplayTexture,
+    /// The value the full colour scale of that AOV stands for.
+    pub aov_scale: f32,
     /// Samples per pixel accumulated.
     pub samples: u32,
-    /// Seconds the GPU frame took on the wall clock (dispatch to readback).
+    /// Seconds the GPU frame took on the wall clock (its dispatches to the statistics
+    /// read back after the colour pass).
     pub gpu_seconds: f64,
     /// Seconds the device spent in the frame's render passes (its timestamps; `None`
     /// where the adapter writes none).
     pub device_seconds: Option<f64>,
-    /// Bytes the frame read back from the device (pixels and timestamps).
+    /// Bytes the frame read back from the device: its statistics and the passes'
+    /// timestamps (no pixels).
     pub read_back_bytes: u64,
     /// Seconds spent on baking, building fields and pipelines before it (0 when the
     /// renderer was only re-aimed).
@@ -153,13 +164,10 @@ fn resolve_auto(scene: &mut RenderScene, cached: &mut Option<(String, TraceSetti
     }
 }
 
+/// The view accumulated in the image on the device.
 struct Accum {
     view_key: String,
     samples: u32,
-    sum: Vec<[f32; 3]>,
-    steps: Vec<f32>,
-    evals: Vec<f32>,
-    first: Frame,
 }
 
 /// The viewer's scene on the GPU.
@@ -173,6 +181,12 @@ pub struct Session<'a> {
     /// The renderers of still frames and of preview frames (while the camera moves).
     gpus: [Option<Gpu<'a>>; 2],
     accum: Option<Accum>,
+    /// The accumulated image and the texture the window draws.
+    image: Option<ViewImage>,
+    /// The texture's size (the window's image area); `None`: the image's own size.
+    display_size: Option<[u32; 2]>,
+    /// The AOV the texture shows.
+    shown_aov: Option<Aov>,
     /// Warnings about the current field (an under-resolved bake), for the panel.
     pub warnings: Vec<String>,
     /// What the last frame itself warns of (pixels cut short by lavapipe's loop limit):
@@ -216,6 +230,9 @@ impl<'a> Session<'a> {
             fields: VecDeque::new(),
             gpus: [None, None],
             accum: None,
+            image: None,
+            display_size: None,
+            shown_aov: None,
             warnings: Vec::new(),
             frame_warning: None,
             cache_use: None,
@@ -268,6 +285,59 @@ impl<'a> Session<'a> {
         self.accum_of(settings, width, height).is_some()
     }
 
+    /// Show the image in the window's image area of `width` x `height` pixels (the
+    /// texture's size; frames rendered smaller are scaled to fill it).
+    pub fn set_display_size(&mut self, width: u32, height: u32) {
+        self.display_size = Some([width.max(1), height.max(1)]);
+    }
+
+    /// The AOV the texture shows (`None` before the first frame).
+    pub fn shown_aov(&self) -> Option<Aov> {
+        self.shown_aov
+    }
+
+    /// Colour the accumulated image's `aov` into the texture (no new frame): the texture
+    /// and the value its full colour scale stands for.
+    pub fn show(&mut self, aov: Aov) -> anyhow::Result<(DisplayTexture, f32)> {
+        let image = self
+            .image
+            .as_mut()
+            .filter(|i| i.samples() > 0)
+            .context("no image to show yet")?;
+        if let Some(d) = self.display_size {
+            let [w, h] = image.size();
+            image.reserve(self.ctx, w, h, d)?;
+        }
+        let stats = image.show(self.ctx, aov_index(aov))?;
+        self.shown_aov = Some(aov);
+        Ok((image.display_texture(), stats.scale))
+    }
+
+    /// The accumulated image read back from the device (mean radiance of all samples so
+    /// far, steps and evaluations averaged, the other AOVs of its first frame): for a
+    /// screenshot or an export, never per frame.
+    pub fn frame(&self) -> anyhow::Result<Frame> {
+        let image = self
+            .image
+            .as_ref()
+            .filter(|i| i.samples() > 0)
+            .context("no image to read yet")?;
+        Ok(image.read_frame(self.ctx)?)
+    }
+
+    /// The texture as shown, read back (linear RGBA a texel; for tests).
+    pub fn displayed(&self) -> anyhow::Result<Vec<[f32; 4]>> {
+        let image = self.image.as_ref().context("no image shown yet")?;
+        Ok(image.read_display(self.ctx)?)
+    }
+
+    /// Bytes of pixels read back so far (only by [`Self::frame`] and [`Self::displayed`]).
+    pub fn pixel_bytes_read_back(&self) -> u64 {
+        self.image
+            .as_ref()
+            .map_or(0, ViewImage::pixel_bytes_read_back)
+    }
+
     /// The accumulation, where it is of this view.
     fn accum_of(&self, settings: &ViewSettings, width: u32, height: u32) -> Option<&Accum> {
         let applied = settings.apply(&self.scene, width, height);
@@ -295,10 +365,21 @@ impl<'a> Session<'a> {
         let settings = &settings;
         let applied = settings.apply(&self.scene, width, height);
         let view = view_key(&applied, settings);
-        let continuing = self
-            .accum
-            .as_ref()
-            .is_some_and(|a| a.view_key == view && a.samples < settings.max_spp);
+        let display = self.display_size.unwrap_or([width, height]);
+        match &mut self.image {
+            Some(image) => image.reserve(self.ctx, width, height, display)?,
+            None => {
+                let mut image = ViewImage::new(self.ctx, width, height)?;
+                image.reserve(self.ctx, width, height, display)?;
+                self.image = Some(image);
+            }
+        }
+        let kept = self.image.as_ref().is_some_and(|i| i.samples() > 0);
+        let continuing = kept
+            && self
+                .accum
+                .as_ref()
+                .is_some_and(|a| a.view_key == view && a.samples < settings.max_spp);
         let first_sample = if continuing {
             self.accum.as_ref().map_or(0, |a| a.samples)
         } else {
@@ -381,64 +462,58 @@ impl<'a> Session<'a> {
             return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
         };
         let method = method_name(&g.scene.settings);
-        let read_before = g.renderer.bytes_read_back();
-        let start = Instant::now();
-        let frame = match g.renderer.render(&|_| {}, cancel) {
-            Ok(f) => f,
-            Err(grin_gpu::GpuError::Cancelled) => return Err(RenderFailure::Cancelled),
-            Err(e) => return Err(e.into()),
+        let Some(image) = self.image.as_mut() else {
+            return Err(RenderFailure::Error(anyhow::anyhow!("no image")));
         };
+        let read_before = g.renderer.bytes_read_back() + image.stats_bytes_read_back();
+        let start = Instant::now();
+        match g.renderer.render_to_view(image, !continuing, cancel) {
+            Ok(()) => {}
+            Err(e) => {
+                // Part of the image is this frame's: the next starts it again.
+                self.accum = None;
+                return Err(match e {
+                    grin_gpu::GpuError::Cancelled => RenderFailure::Cancelled,
+                    e => e.into(),
+                });
+            }
+        }
+        let stats = match image.show(self.ctx, aov_index(settings.aov)) {
+            Ok(s) => s,
+            Err(e) => {
+                self.accum = None;
+                return Err(e.into());
+            }
+        };
+        self.shown_aov = Some(settings.aov);
         let gpu_seconds = start.elapsed().as_secs_f64();
         let device_seconds = g.renderer.last_device_seconds();
-        let read_back_bytes = g.renderer.bytes_read_back() - read_before;
-        self.frame_warning = g.renderer.loop_limit_warning(&frame);
+        let read_back_bytes =
+            g.renderer.bytes_read_back() + image.stats_bytes_read_back() - read_before;
+        self.frame_warning = g
+            .renderer
+            .loop_limit_warning_of(u64::from(stats.loop_limit_suspects));
         let spp = applied.render.spp;
-        let n = frame.pixels.len();
-        let rays = n as f64 * f64::from(spp);
-        let mean = |f: fn(&grin_render::image::PixelOut) -> f32| {
-            frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / (n.max(1) as f64)
-        };
-        let (steps_per_ray, evals_per_ray) = (mean(|p| p.steps), mean(|p| p.evals));
-        let w = spp as f32;
-        let accum = match (&mut self.accum, first_sample > 0) {
-            (Some(a), true) => {
-                for (i, p) in frame.pixels.iter().enumerate() {
-                    for c in 0..3 {
-                        a.sum[i][c] += p.rgb[c] * w;
-                    }
-                    a.steps[i] += p.steps * w;
-                    a.evals[i] += p.evals * w;
-                }
-                a.samples += spp;
-                a
-            }
-            (slot, _) => slot.insert(Accum {
-                view_key: view,
-                samples: spp,
-                sum: frame.pixels.iter().map(|p| p.rgb.map(|c| c * w)).collect(),
-                steps: frame.pixels.iter().map(|p| p.steps * w).collect(),
-                evals: frame.pixels.iter().map(|p| p.evals * w).collect(),
-                first: frame,
-            }),
-        };
-        let inv = 1.0 / accum.samples as f32;
-        let mut out = accum.first.clone();
-        for (i, p) in out.pixels.iter_mut().enumerate() {
-            p.rgb = accum.sum[i].map(|c| c * inv);
-            p.steps = accum.steps[i] * inv;
-            p.evals = accum.evals[i] * inv;
-        }
+        let rays = f64::from(width) * f64::from(height) * f64::from(spp);
+        let samples = image.samples();
+        self.accum = Some(Accum {
+            view_key: view,
+            samples,
+        });
         Ok(Rendered {
-            frame: out,
-            samples: accum.samples,
+            width,
+            height,
+            display: image.display_texture(),
+            aov_scale: stats.scale,
+            samples,
             gpu_seconds,
             device_seconds,
             read_back_bytes,
             setup_seconds,
             rays_per_second: rays / gpu_seconds.max(1e-9),
-            steps_per_ray,
-            evals_per_ray,
-            converged: accum.samples >= settings.max_spp,
+            steps_per_ray: stats.steps as f64 / rays.max(1.0),
+            evals_per_ray: stats.evals as f64 / rays.max(1.0),
+            converged: samples >= settings.max_spp,
             method,
         })
     }
@@ -554,6 +629,11 @@ impl<'a> Session<'a> {
             cache,
         }))
     }
+}
+
+/// `aov`'s index in the colour pass (shaders/view.wgsl's AOV_*: [`Aov::ALL`]'s order).
+fn aov_index(aov: Aov) -> u32 {
+    Aov::ALL.iter().position(|a| *a == aov).unwrap_or(0) as u32
 }
 
 /// Everything that makes two frames' samples belong to one image.

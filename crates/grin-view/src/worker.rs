@@ -1,7 +1,9 @@
-//! The render thread: a [`Session`] on its own wgpu device, fed the newest view the
-//! window asks for, so the window never waits on a GPU frame. While the camera moves it
-//! renders at the internal resolution that keeps the frame budget; when it stops it
-//! refines the full-resolution image progressively until `max_spp`.
+//! The render thread: a [`Session`] on the window's wgpu device, fed the newest view the
+//! window asks for, so the window never waits on a GPU frame. Its frames stay on the
+//! device: each reply names the texture the window draws (no pixel crosses to the CPU).
+//! While the camera moves it renders at the internal resolution that keeps the frame
+//! budget; when it stops it refines the full-resolution image progressively until
+//! `max_spp`.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -11,7 +13,10 @@ use std::thread::JoinHandle;
 
 use grin_gpu::GpuContext;
 use grin_gpu::cache::BakeCache;
+use grin_gpu::view::DisplayTexture;
+use grin_render::image::Frame;
 
+use crate::display::Aov;
 use crate::session::{RenderFailure, Rendered, Session};
 use crate::settings::ViewSettings;
 
@@ -33,23 +38,28 @@ pub struct Request {
     pub moving: bool,
     /// Read the scene file again first.
     pub reload: bool,
+    /// Read the image shown back to the CPU and send it here (a screenshot) before
+    /// anything else; the request's view is not taken.
+    pub capture: Option<Sender<Result<Frame, String>>>,
 }
 
 /// What the render thread reports.
 #[derive(Debug)]
 pub enum Reply {
-    /// The device and the scene's field are ready.
-    Started {
-        adapter: String,
-        setup_seconds: f64,
-        /// The part of `setup_seconds` spent creating the GPU device.
-        device_seconds: f64,
-    },
+    /// The scene's field is ready on the device.
+    Started { adapter: String, setup_seconds: f64 },
     /// The device or the scene could not be set up: the viewer ends with this error.
     Fatal(String),
     Frame(Box<FrameReply>),
     /// The scene file was read again: the new file's settings, or why it was not taken.
     Reloaded(Result<ViewSettings, String>),
+    /// The image was coloured in another AOV (no new frame): the texture and the value
+    /// its full colour scale stands for.
+    Shown {
+        aov: Aov,
+        display: DisplayTexture,
+        scale: f32,
+    },
     /// A frame failed (shown in the panel; the last good frame stays).
     Error(String),
 }
@@ -79,16 +89,16 @@ pub struct Worker {
 }
 
 impl Worker {
-    /// Start the thread: it creates its device and loads `scene` (the bake through
-    /// `cache`), then answers [`Request`]s.
-    pub fn start(scene: PathBuf, cache: Option<BakeCache>) -> Self {
+    /// Start the thread on `ctx` (the window's device): it loads `scene` (the bake
+    /// through `cache`), then answers [`Request`]s.
+    pub fn start(ctx: Arc<GpuContext>, scene: PathBuf, cache: Option<BakeCache>) -> Self {
         let (requests, rx) = std::sync::mpsc::channel::<Request>();
         let (tx, replies) = std::sync::mpsc::channel::<Reply>();
         let cancel = Arc::new(AtomicBool::new(false));
         let c = cancel.clone();
         let handle = std::thread::Builder::new()
             .name("grin-view render".into())
-            .spawn(move || run(scene, cache, rx, tx, c))
+            .spawn(move || run(&ctx, scene, cache, rx, tx, c))
             .ok();
         Worker {
             requests,
@@ -120,6 +130,7 @@ impl Drop for Worker {
 }
 
 fn run(
+    ctx: &GpuContext,
     scene: PathBuf,
     cache: Option<BakeCache>,
     rx: Receiver<Request>,
@@ -127,17 +138,7 @@ fn run(
     cancel: Arc<AtomicBool>,
 ) {
     let start = std::time::Instant::now();
-    // The driver's pipeline cache sits beside the bake cache (and is off with it).
-    let ctx = GpuContext::new_headless_in(cache.as_ref().map(BakeCache::pipeline_dir).as_deref());
-    let device_seconds = start.elapsed().as_secs_f64();
-    let ctx = match ctx {
-        Ok(c) => c,
-        Err(e) => {
-            let _ = tx.send(Reply::Fatal(format!("no GPU device for the viewer: {e}")));
-            return;
-        }
-    };
-    let mut session = match Session::new(&ctx, &scene, cache) {
+    let mut session = match Session::new(ctx, &scene, cache) {
         Ok(s) => s,
         Err(e) => {
             let _ = tx.send(Reply::Fatal(format!("{e:#}")));
@@ -147,7 +148,6 @@ fn run(
     let _ = tx.send(Reply::Started {
         adapter: ctx.adapter_name(),
         setup_seconds: start.elapsed().as_secs_f64(),
-        device_seconds,
     });
     let mut current: Option<Request> = None;
     // Seconds per pixel-sample of the last frames (for the moving resolution).
@@ -161,17 +161,39 @@ fn run(
     let mut still_previewed = false;
     loop {
         // The newest request; block when there is nothing left to refine.
-        let idle = failed
-            || match &current {
-                Some(r) if r.moving => previewed,
-                Some(r) => {
-                    let (w, h, _) = internal_size(r, cost);
-                    !session.needs_frame(&r.settings, w, h)
-                }
-                None => true,
+        let rendered = match &current {
+            Some(r) if r.moving => previewed,
+            Some(r) => {
+                let (w, h, _) = internal_size(r, cost);
+                !session.needs_frame(&r.settings, w, h)
+            }
+            None => true,
+        };
+        // Nothing to render, but the image is wanted in another AOV: colour it again.
+        if rendered
+            && let Some(r) = &current
+            && session.shown_aov().is_some_and(|a| a != r.settings.aov)
+        {
+            let aov = r.settings.aov;
+            let reply = match session.show(aov) {
+                Ok((display, scale)) => Reply::Shown {
+                    aov,
+                    display,
+                    scale,
+                },
+                Err(e) => Reply::Error(format!("{e:#}")),
             };
-        if idle {
+            if tx.send(reply).is_err() {
+                return;
+            }
+            continue;
+        }
+        if failed || rendered {
             match rx.recv() {
+                Ok(r) if r.capture.is_some() => {
+                    capture(&session, r);
+                    continue;
+                }
                 Ok(r) => {
                     current = Some(r);
                     previewed = false;
@@ -182,6 +204,7 @@ fn run(
         }
         loop {
             match rx.try_recv() {
+                Ok(r) if r.capture.is_some() => capture(&session, r),
                 Ok(r) => {
                     let reload = r.reload || current.as_ref().is_some_and(|c| c.reload);
                     current = Some(Request { reload, ..r });
@@ -225,6 +248,7 @@ fn run(
             };
         }
         cancel.store(false, Ordering::Relaxed);
+        session.set_display_size(req.width, req.height);
         let settings = req.settings.clone();
         match session.render(&settings, w, h, req.moving || preview, &cancel) {
             Ok(rendered) => {
@@ -258,6 +282,13 @@ fn run(
                 }
             }
         }
+    }
+}
+
+/// Answer a capture request: the image shown, read back from the device.
+fn capture(session: &Session, r: Request) {
+    if let Some(to) = r.capture {
+        let _ = to.send(session.frame().map_err(|e| format!("{e:#}")));
     }
 }
 

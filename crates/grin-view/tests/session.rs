@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use grin_gpu::GpuContext;
+use grin_render::image::Frame;
 use grin_scene::{IntegratorKind, Interpolation, StepSpec};
 use grin_view::session::{Rendered, Session};
 use grin_view::settings::StepKind;
@@ -45,16 +46,35 @@ fn scene_file(dir: &Path, text: &str) -> PathBuf {
     p
 }
 
-fn render(s: &mut Session, v: &ViewSettings) -> Rendered {
-    match s.render(v, W, H, false, &AtomicBool::new(false)) {
+/// A frame rendered and the accumulated image read back (as a screenshot reads it).
+struct Shot {
+    rendered: Rendered,
+    frame: Frame,
+}
+
+impl std::ops::Deref for Shot {
+    type Target = Rendered;
+    fn deref(&self) -> &Rendered {
+        &self.rendered
+    }
+}
+
+fn render_only(s: &mut Session, v: &ViewSettings, w: u32, h: u32) -> Rendered {
+    match s.render(v, w, h, false, &AtomicBool::new(false)) {
         Ok(r) => r,
         Err(grin_view::session::RenderFailure::Error(e)) => panic!("{e:#}"),
         Err(grin_view::session::RenderFailure::Cancelled) => panic!("cancelled"),
     }
 }
 
+fn render(s: &mut Session, v: &ViewSettings) -> Shot {
+    let rendered = render_only(s, v, W, H);
+    let frame = s.frame().expect("the image read back");
+    Shot { rendered, frame }
+}
+
 /// Mean absolute beauty difference.
-fn beauty_diff(a: &Rendered, b: &Rendered) -> f64 {
+fn beauty_diff(a: &Shot, b: &Shot) -> f64 {
     assert_eq!(a.frame.pixels.len(), b.frame.pixels.len());
     a.frame
         .pixels
@@ -69,7 +89,7 @@ fn beauty_diff(a: &Rendered, b: &Rendered) -> f64 {
         / a.frame.pixels.len() as f64
 }
 
-fn max_deflection(r: &Rendered) -> f32 {
+fn max_deflection(r: &Shot) -> f32 {
     r.frame
         .pixels
         .iter()
@@ -85,17 +105,22 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     let mut s = Session::new(&ctx, &path, None).expect("session");
     let mut base = ViewSettings::from_scene(s.scene());
     base.max_spp = 1;
+    // The renderer's own counts of what a frame reads back from the device: no pixel
+    // (the image stays on the device, coloured into the window's texture), only the
+    // frame's 32 bytes of statistics and the passes' timestamps (16 bytes a pass, where
+    // the adapter writes them).
+    for _ in 0..2 {
+        let r = render_only(&mut s, &base, W, H);
+        assert!(
+            (32..=32 + 32).contains(&r.read_back_bytes),
+            "{} bytes read back for {W}x{H} pixels",
+            r.read_back_bytes
+        );
+    }
+    assert_eq!(s.pixel_bytes_read_back(), 0, "no pixel crossed to the CPU");
     let r0 = render(&mut s, &base);
+    assert_eq!(s.pixel_bytes_read_back(), u64::from(W * H) * 64, "read on request");
     assert!(max_deflection(&r0) > 0.05, "{}", max_deflection(&r0));
-    // The renderer's own count of what a frame reads back from the device: every
-    // pixel's 64 bytes (the frame crosses the CPU to reach the window), and the passes'
-    // timestamps (16 bytes a pass, where the adapter writes them).
-    let pixels = u64::from(W * H) * 64;
-    assert!(
-        (pixels..=pixels + 32).contains(&r0.read_back_bytes),
-        "{} bytes read back for {W}x{H} pixels",
-        r0.read_back_bytes
-    );
 
     // Integrator: rk4 spends 4 field evaluations a step, euler 1.
     let mut v = base.clone();
@@ -181,11 +206,30 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     assert_eq!(samples, [3, 6, 9]);
     assert!(!s.needs_frame(&v, W, H), "converged: nothing to add");
 
-    // The AOV shown is display only: no new frame, another picture.
+    // The AOV shown is display only: no new frame, another picture, coloured on the
+    // device as the screenshot's PNG colours it (display::rgba), to within a level.
     let mut shown = v.clone();
     shown.aov = Aov::Deflection;
     assert!(!s.needs_frame(&shown, W, H));
     let last = render(&mut s, &base);
+    for aov in Aov::ALL {
+        let (want, scale) = grin_view::display::rgba(&last.frame, aov);
+        let (_, device_scale) = s.show(aov).expect("show");
+        assert_eq!(s.shown_aov(), Some(aov));
+        assert_eq!(device_scale, scale, "{aov:?}'s colour scale");
+        let texels = s.displayed().expect("texture read back");
+        assert_eq!(texels.len(), (W * H) as usize);
+        let worst = texels
+            .iter()
+            .zip(want.chunks(4))
+            .flat_map(|(t, w)| {
+                (0..3).map(move |c| {
+                    (i32::from(grin_render::image::linear_to_srgb8(t[c])) - i32::from(w[c])).abs()
+                })
+            })
+            .max();
+        assert!(worst <= Some(1), "{aov:?}: off by {worst:?} of 255");
+    }
     let (beauty, _) = grin_view::display::rgba(&last.frame, Aov::Beauty);
     let (defl, scale) = grin_view::display::rgba(&last.frame, Aov::Deflection);
     assert_ne!(beauty, defl);
@@ -200,13 +244,16 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
         height: H,
         moving: false,
         reload: false,
+        capture: None,
     };
     let (w, h, _) = internal_size(&req, None);
     assert_eq!((w, h), (W / 2, H / 2));
-    let r = s
-        .render(&v, w, h, false, &AtomicBool::new(false))
-        .unwrap_or_else(|_| panic!("half-size frame"));
-    assert_eq!((r.frame.width, r.frame.height), (W / 2, H / 2));
+    s.set_display_size(W, H);
+    let r = render_only(&mut s, &v, w, h);
+    assert_eq!((r.width, r.height), (W / 2, H / 2));
+    // Shown scaled to the window's image area.
+    assert_eq!(r.display.size, [W, H]);
+    assert_eq!(s.frame().expect("frame").width, W / 2);
 }
 
 #[test]
@@ -221,6 +268,7 @@ fn while_moving_the_resolution_drops_to_the_frame_budget() {
         height: 400,
         moving,
         reload: false,
+        capture: None,
     };
     // 1 us per pixel-sample: the full frame takes 0.32 s, the budget is 0.05 s.
     let (w, h, scale) = internal_size(&req(true), Some(1e-6));
