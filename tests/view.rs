@@ -298,6 +298,52 @@ fn view_without_a_display_is_one_clear_error() {
     );
 }
 
+/// Without a display, `--offscreen` runs the same headless frames: the render thread's
+/// texture copied where a window would draw it, no pixel read back but the screenshot's.
+#[test]
+fn view_offscreen_needs_no_display() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shot = dir.path().join("shot.png");
+    let o = run_ok(
+        grin()
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .env("GRIN_CACHE_DIR", dir.path().join("cache"))
+            .arg("view")
+            .arg(scenes().join("paper-a.toml"))
+            .args(["--size", "48x27", "--frames", "3", "--orbit", "2", "--offscreen"])
+            .arg("--screenshot")
+            .arg(&shot)
+            .arg("--json"),
+    );
+    let s = json(&o);
+    // Three orbit frames, and a still one for the screenshot where the orbit's were
+    // smaller than asked.
+    let frames = s["frames"].as_u64().expect("frames");
+    assert!((3..=4).contains(&frames), "{s}");
+    assert!(
+        s["display_adapter"]
+            .as_str()
+            .is_some_and(|a| a.ends_with("(offscreen)")),
+        "{s}"
+    );
+    assert!(s["fps"]["median"].as_f64().expect("fps") > 0.0, "{s}");
+    let bytes = s["read_back_bytes"]["max"].as_f64().expect("bytes");
+    assert!((32.0..=64.0).contains(&bytes), "{s}");
+    let png = image::open(&shot).expect("the screenshot is a PNG");
+    assert_eq!((png.width(), png.height()), (48, 27));
+    // --offscreen is for headless runs only.
+    let o = grin()
+        .env_remove("DISPLAY")
+        .arg("view")
+        .arg(scenes().join("paper-a.toml"))
+        .arg("--offscreen")
+        .output()
+        .expect("run grin view");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--frames"), "{}", stderr(&o));
+}
+
 #[test]
 fn view_of_a_broken_scene_is_one_clear_error() {
     let dir = tempfile::tempdir().expect("tempdir");

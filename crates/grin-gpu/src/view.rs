@@ -65,6 +65,7 @@ pub struct ViewStats {
 /// The texture the window draws: the image scaled to fill it.
 #[derive(Debug, Clone)]
 pub struct DisplayTexture {
+    pub texture: wgpu::Texture,
     pub view: wgpu::TextureView,
     /// Changes whenever the texture is replaced (another display size).
     pub generation: u64,
@@ -235,6 +236,7 @@ impl ViewImage {
     /// The texture the window draws, for the image last shown.
     pub fn display_texture(&self) -> DisplayTexture {
         DisplayTexture {
+            texture: self.texture.clone(),
             view: self.texture.create_view(&wgpu::TextureViewDescriptor::default()),
             generation: self.generation,
             size: self.display,

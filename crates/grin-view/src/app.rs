@@ -31,9 +31,9 @@ const PANEL_WIDTH: f32 = 300.0;
 const WATCH_PERIOD: Duration = Duration::from_millis(250);
 /// The camera counts as moving this long after its last change.
 const MOVING_FOR: Duration = Duration::from_millis(150);
-/// Shortest time between two window redraws: on lavapipe the window's own drawing runs
-/// on the cores that render, so it redraws only for a new frame, input or playing time,
-/// at most this often.
+/// Shortest time between two window redraws on a CPU adapter: on lavapipe the window's
+/// own drawing runs on the cores that render, so it redraws only for a new frame, input or
+/// playing time, at most this often. A GPU redraws for each new frame.
 const MIN_REDRAW: Duration = Duration::from_millis(33);
 
 /// How long a headless run waits for its screenshot's pixels.
@@ -108,6 +108,12 @@ pub(crate) struct App {
     final_still: bool,
     /// Something to show: a reply from the render thread, input, an egui animation.
     dirty: bool,
+    /// The run is over (closed, done, or a fatal error).
+    exit: bool,
+    /// The device is a CPU adapter (lavapipe).
+    cpu_adapter: bool,
+    /// Wakes the event loop when the render thread replies.
+    proxy: Option<winit::event_loop::EventLoopProxy<()>>,
     last_redraw: Instant,
 }
 
@@ -170,6 +176,9 @@ impl App {
             image_px,
             final_still: false,
             dirty: true,
+            exit: false,
+            cpu_adapter: false,
+            proxy: None,
             last_redraw: Instant::now(),
             opts,
         }
@@ -235,10 +244,17 @@ impl App {
         );
         let renderer =
             egui_wgpu::Renderer::new(&device, format, egui_wgpu::RendererOptions::default());
+        self.cpu_adapter = gpu.is_cpu_adapter();
+        let wake = self.proxy.take().map(|p| {
+            Box::new(move || {
+                let _ = p.send_event(());
+            }) as Box<dyn Fn() + Send>
+        });
         self.worker = Some(Worker::start(
             gpu,
             self.opts.scene.clone(),
             self.cache.take(),
+            wake,
         ));
         Ok(Gfx {
             window,
@@ -251,9 +267,17 @@ impl App {
         })
     }
 
-    /// Take the render thread's replies.
-    fn poll_worker(&mut self, el: &ActiveEventLoop) {
-        while let Some(reply) = self.worker.as_ref().and_then(|w| w.replies.try_recv().ok()) {
+    /// Take the render thread's replies, waiting up to `wait` for the first.
+    fn poll_worker(&mut self, wait: Duration) {
+        let first = self
+            .worker
+            .as_ref()
+            .and_then(|w| w.replies.recv_timeout(wait).ok());
+        let mut first = first;
+        while let Some(reply) = first
+            .take()
+            .or_else(|| self.worker.as_ref().and_then(|w| w.replies.try_recv().ok()))
+        {
             self.dirty = true;
             match reply {
                 Reply::Started {
@@ -275,13 +299,13 @@ impl App {
                 }
                 Reply::Fatal(e) => {
                     self.fatal = Some(e);
-                    el.exit();
+                    self.exit = true;
                 }
                 Reply::Error(e) => {
                     self.frame_error = Some(e.clone());
                     if self.headless() {
                         self.fatal = Some(e);
-                        el.exit();
+                        self.exit = true;
                     }
                 }
                 Reply::Reloaded(Ok(new_file)) => {
@@ -353,7 +377,7 @@ impl App {
                             return;
                         }
                         if done {
-                            self.finish(el);
+                            self.finish();
                             return;
                         }
                         if self.opts.orbit_deg != 0.0 {
@@ -370,8 +394,8 @@ impl App {
     }
 
     /// Headless end: the screenshot and the summary.
-    fn finish(&mut self, el: &ActiveEventLoop) {
-        el.exit();
+    fn finish(&mut self) {
+        self.exit = true;
         let Some(f) = &self.frame else {
             self.fatal = Some("no frame was rendered".into());
             return;
@@ -524,8 +548,9 @@ impl App {
     }
 
     fn redraw(&mut self, el: &ActiveEventLoop) {
-        self.poll_worker(el);
-        if self.fatal.is_some() || self.summary.is_some() {
+        self.poll_worker(Duration::ZERO);
+        if self.exit {
+            el.exit();
             return;
         }
         self.dirty = false;
@@ -649,6 +674,43 @@ impl App {
                 self.texture = Some((id, d.generation));
             }
         }
+    }
+
+    /// Offscreen: copy a new frame's texture into `target`, as a window would draw it.
+    fn draw_offscreen(&mut self, gpu: &GpuContext, target: &mut Option<wgpu::Texture>) {
+        let Some(d) = &self.display else { return };
+        if self.shown_frame == self.frames_seen && self.stats.ui_start.is_some() {
+            return;
+        }
+        self.shown_frame = self.frames_seen;
+        self.stats.shown.push(Instant::now());
+        self.stats.ui_start.get_or_insert_with(Instant::now);
+        self.stats.ui_frames += 1;
+        let size = d.texture.size();
+        if target.as_ref().is_none_or(|t| t.size() != size) {
+            *target = Some(gpu.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("offscreen window"),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: d.texture.format(),
+                usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            }));
+        }
+        let Some(t) = target else { return };
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("offscreen draw"),
+            });
+        enc.copy_texture_to_texture(
+            d.texture.as_image_copy(),
+            t.as_image_copy(),
+            size,
+        );
+        gpu.queue.submit([enc.finish()]);
     }
 
     /// The panel and the image; returns the image area in pixels.
@@ -929,7 +991,66 @@ impl App {
     }
 }
 
+/// Run headless without a window (`--offscreen`): the render thread on a device of its
+/// own, each new frame's texture copied into an offscreen target where a window would
+/// draw it, until the frames are done.
+pub(crate) fn run_offscreen(mut app: App) -> anyhow::Result<App> {
+    let started = Instant::now();
+    let pipeline_dir = app.cache.as_ref().map(BakeCache::pipeline_dir);
+    let gpu = GpuContext::new_headless_in(pipeline_dir.as_deref())
+        .map_err(|e| anyhow::anyhow!("no GPU device for the viewer: {e}"))?;
+    app.device_seconds = Some(started.elapsed().as_secs_f64());
+    let gpu = Arc::new(gpu);
+    app.display_adapter = format!("{} (offscreen)", gpu.adapter_name());
+    app.cpu_adapter = gpu.is_cpu_adapter();
+    app.worker = Some(Worker::start(
+        gpu.clone(),
+        app.opts.scene.clone(),
+        app.cache.take(),
+        None,
+    ));
+    let mut target: Option<wgpu::Texture> = None;
+    while !app.exit {
+        app.poll_worker(Duration::from_millis(5));
+        if app.exit {
+            break;
+        }
+        app.watch_scene();
+        app.request_view(app.image_px);
+        app.draw_offscreen(&gpu, &mut target);
+    }
+    Ok(app)
+}
+
+/// winit's event loop, or why there is none: its X11 backend panics where the display
+/// lacks an extension it needs (XKB), and that is an error to report, not a crash.
+fn open_event_loop() -> anyhow::Result<EventLoop<()>> {
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let opened = std::panic::catch_unwind(EventLoop::new);
+    std::panic::set_hook(hook);
+    match opened {
+        Ok(Ok(el)) => Ok(el),
+        Ok(Err(e)) => Err(anyhow::anyhow!("grin view cannot open a window: {e}")),
+        Err(panic) => {
+            let why = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("no reason given");
+            Err(anyhow::anyhow!(
+                "grin view cannot open a window on this display ({why}); without a usable display, run it with --offscreen"
+            ))
+        }
+    }
+}
+
 impl ApplicationHandler for App {
+    fn user_event(&mut self, _el: &ActiveEventLoop, _wake: ()) {
+        // A reply from the render thread: about_to_wait, next, takes it.
+        self.dirty = true;
+    }
+
     fn resumed(&mut self, el: &ActiveEventLoop) {
         if self.gfx.is_some() {
             return;
@@ -953,7 +1074,10 @@ impl ApplicationHandler for App {
         // another.
         let repaint = resp.repaint && !matches!(event, WindowEvent::RedrawRequested);
         match event {
-            WindowEvent::CloseRequested => el.exit(),
+            WindowEvent::CloseRequested => {
+                self.exit = true;
+                el.exit();
+            }
             WindowEvent::Resized(s) => {
                 g.config.width = s.width.max(1);
                 g.config.height = s.height.max(1);
@@ -968,18 +1092,25 @@ impl ApplicationHandler for App {
     }
 
     fn about_to_wait(&mut self, el: &ActiveEventLoop) {
-        // Frames from the render thread arrive on their own: poll for them, the scene
-        // file and the clock, and redraw when there is something to show.
-        self.poll_worker(el);
-        if self.fatal.is_some() || self.summary.is_some() {
+        // Frames from the render thread arrive on their own (and wake the loop): poll for
+        // them, the scene file and the clock, and redraw when there is something to show.
+        self.poll_worker(Duration::ZERO);
+        if self.exit {
+            el.exit();
             return;
         }
         self.watch_scene();
         // The camera stopped since the last (moving) request: one redraw sends the still
         // one.
         let stopped = self.last_sent.as_ref().is_some_and(|l| l.3) && !self.moving();
+        // Only a CPU adapter spaces redraws out (its drawing takes the render's cores).
+        let min_redraw = if self.cpu_adapter {
+            MIN_REDRAW
+        } else {
+            Duration::ZERO
+        };
         if (self.dirty || self.settings.playing || stopped)
-            && self.last_redraw.elapsed() >= MIN_REDRAW
+            && self.last_redraw.elapsed() >= min_redraw
             && let Some(g) = &self.gfx
         {
             g.window.request_redraw();
@@ -992,8 +1123,8 @@ impl ApplicationHandler for App {
 
 /// Open the window and run until it is closed (or, headless, until the frames are done).
 pub(crate) fn run_window(mut app: App) -> anyhow::Result<App> {
-    let el =
-        EventLoop::new().map_err(|e| anyhow::anyhow!("grin view cannot open a window: {e}"))?;
+    let el = open_event_loop()?;
+    app.proxy = Some(el.create_proxy());
     el.set_control_flow(ControlFlow::Poll);
     el.run_app(&mut app)
         .map_err(|e| anyhow::anyhow!("the window's event loop failed: {e}"))?;

@@ -44,6 +44,9 @@ pub struct ViewOptions {
     pub orbit_deg: f64,
     /// Bake without the disk cache.
     pub no_cache: bool,
+    /// Headless without a window or display: each frame is drawn into an offscreen
+    /// texture (needs `frames`).
+    pub offscreen: bool,
 }
 
 /// Min, median and max of some per-frame figure.
@@ -179,17 +182,27 @@ pub fn run(opts: ViewOptions) -> anyhow::Result<Option<ViewSummary>> {
     if opts.screenshot.is_some() && opts.frames.is_none() {
         bail!("--screenshot needs --frames N (the frame to write is the N-th)");
     }
+    if opts.offscreen && opts.frames.is_none() {
+        bail!("--offscreen needs --frames N (there is no window to close)");
+    }
     // The user's input first, then the machine.
     let scene = session::load(&opts.scene)?;
-    let display = std::env::var_os("DISPLAY").filter(|d| !d.is_empty());
-    if display.is_none() {
-        bail!(
-            "grin view needs an X11 display and DISPLAY is not set (on a machine without one, run it under Xvfb: xvfb-run -a grin view ...)"
-        );
-    }
     let cache = (!opts.no_cache)
         .then(grin_gpu::cache::BakeCache::user_default)
         .flatten();
+    if opts.offscreen {
+        let app = app::run_offscreen(app::App::new(opts, &scene, cache))?;
+        if let Some(e) = app.fatal {
+            bail!("{e}");
+        }
+        return Ok(app.summary);
+    }
+    let display = std::env::var_os("DISPLAY").filter(|d| !d.is_empty());
+    if display.is_none() {
+        bail!(
+            "grin view needs an X11 display and DISPLAY is not set (on a machine without one, run it under Xvfb: xvfb-run -a grin view ..., or headless with --frames N --offscreen)"
+        );
+    }
     let app = app::App::new(opts, &scene, cache);
     let app = app::run_window(app)?;
     if let Some(e) = app.fatal {

@@ -91,14 +91,20 @@ pub struct Worker {
 impl Worker {
     /// Start the thread on `ctx` (the window's device): it loads `scene` (the bake
     /// through `cache`), then answers [`Request`]s.
-    pub fn start(ctx: Arc<GpuContext>, scene: PathBuf, cache: Option<BakeCache>) -> Self {
+    /// `wake` is called after each reply (to wake the window's event loop).
+    pub fn start(
+        ctx: Arc<GpuContext>,
+        scene: PathBuf,
+        cache: Option<BakeCache>,
+        wake: Option<Box<dyn Fn() + Send>>,
+    ) -> Self {
         let (requests, rx) = std::sync::mpsc::channel::<Request>();
         let (tx, replies) = std::sync::mpsc::channel::<Reply>();
         let cancel = Arc::new(AtomicBool::new(false));
         let c = cancel.clone();
         let handle = std::thread::Builder::new()
             .name("grin-view render".into())
-            .spawn(move || run(&ctx, scene, cache, rx, tx, c))
+            .spawn(move || run(&ctx, scene, cache, rx, Replies { tx, wake }, c))
             .ok();
         Worker {
             requests,
@@ -134,7 +140,7 @@ fn run(
     scene: PathBuf,
     cache: Option<BakeCache>,
     rx: Receiver<Request>,
-    tx: Sender<Reply>,
+    tx: Replies,
     cancel: Arc<AtomicBool>,
 ) {
     let start = std::time::Instant::now();
@@ -282,6 +288,23 @@ fn run(
                 }
             }
         }
+    }
+}
+
+/// The reply channel, and what wakes the window when a reply is sent.
+struct Replies {
+    tx: Sender<Reply>,
+    wake: Option<Box<dyn Fn() + Send>>,
+}
+
+impl Replies {
+    /// Send `reply`; `Err` when the window is gone.
+    fn send(&self, reply: Reply) -> Result<(), ()> {
+        self.tx.send(reply).map_err(|_| ())?;
+        if let Some(wake) = &self.wake {
+            wake();
+        }
+        Ok(())
     }
 }
 

@@ -38,6 +38,10 @@ pub struct Args {
     /// pipeline cache is not used either).
     #[arg(long)]
     pub no_cache: bool,
+    /// With --frames: no window and no display needed; each frame is drawn into an
+    /// offscreen texture on the render device (servers, benchmarks).
+    #[arg(long, requires = "frames")]
+    pub offscreen: bool,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -62,6 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         screenshot: args.screenshot,
         orbit_deg: args.orbit,
         no_cache: args.no_cache,
+        offscreen: args.offscreen,
     };
     let Some(s) = grin_view::run(opts)? else {
         return Ok(());
