@@ -16,7 +16,7 @@ use crate::field::{
 use crate::gpu_data::*;
 use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
-use crate::view::ViewImage;
+use crate::view::{ViewImage, ViewStats};
 use crate::{GpuContext, GpuError, specialize};
 
 /// Pixels per dispatch on a CPU adapter (lavapipe): big enough to keep every core busy,
@@ -565,27 +565,20 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// Render every pixel into `image` (the viewer's image on the device): the frame's
-    /// samples start the image (`overwrite`) or are added to it, and nothing is read back
-    /// but the passes' timestamps. Show it with [`ViewImage::show`]. Setting `cancel`
-    /// stops between bands with [`GpuError::Cancelled`], the image then part this frame
-    /// and part the last: start it again.
+    /// samples start the image (`overwrite`) or are added to it, AOV `aov` is coloured
+    /// into its texture ([`ViewImage::show`]) and the frame's statistics come back;
+    /// nothing else is read back but the passes' timestamps. A frame of one band is one
+    /// submission. Setting `cancel` stops between bands with [`GpuError::Cancelled`], the
+    /// image then part this frame and part the last: start it again.
     pub fn render_to_view(
         &self,
         image: &mut ViewImage,
         overwrite: bool,
+        aov: u32,
         cancel: &AtomicBool,
-    ) -> Result<(), GpuError> {
-        let ctx = self.ctx;
+    ) -> Result<ViewStats, GpuError> {
         let (width, height) = (self.params.width, self.params.height);
-        ctx.scoped("starting the viewer's frame", || {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("view frame"),
-                });
-            image.begin_frame(&mut encoder, width, height, overwrite, self.params.spp);
-            ctx.queue.submit([encoder.finish()]);
-        })?;
+        image.begin_frame(width, height, overwrite, self.params.spp);
         let mut row = 0;
         let mut device_seconds = 0.0;
         while row < height {
@@ -596,6 +589,8 @@ impl<'a> GpuRenderer<'a> {
             let sink = BandSink::View {
                 image: &*image,
                 overwrite,
+                first: row == 0,
+                show: (row + rows >= height).then_some(aov),
             };
             device_seconds += self.render_band(row, rows, sink)?.unwrap_or(0.0);
             row += rows;
@@ -605,7 +600,7 @@ impl<'a> GpuRenderer<'a> {
                 .last
                 .store(device_seconds.to_bits(), Ordering::Relaxed);
         }
-        Ok(())
+        image.read_stats(self.ctx, aov)
     }
 
     /// Bytes read back from the device by this renderer's frames so far (pixels and
@@ -658,6 +653,12 @@ impl<'a> GpuRenderer<'a> {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("render band"),
                 });
+            if let BandSink::View {
+                image, first: true, ..
+            } = &sink
+            {
+                image.encode_clear(&mut encoder);
+            }
             if self.medium_pipeline.is_some() {
                 ctx.queue.write_buffer(
                     &self.deferred_count,
@@ -695,15 +696,25 @@ impl<'a> GpuRenderer<'a> {
                 BandSink::ReadBack(_) => {
                     encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
                 }
-                BandSink::View { image, overwrite } => image.accumulate_band(
-                    ctx,
-                    &mut encoder,
-                    &self.out_buffer,
-                    first_row,
-                    rows,
-                    self.params.spp,
-                    *overwrite,
-                ),
+                BandSink::View {
+                    image,
+                    overwrite,
+                    show,
+                    ..
+                } => {
+                    image.accumulate_band(
+                        ctx,
+                        &mut encoder,
+                        &self.out_buffer,
+                        first_row,
+                        rows,
+                        self.params.spp,
+                        *overwrite,
+                    );
+                    if let Some(aov) = show {
+                        image.encode_show(ctx, &mut encoder, *aov);
+                    }
+                }
             }
             if let Some(timer) = &self.timer {
                 timer.resolve(&mut encoder, passes);
@@ -741,6 +752,10 @@ enum BandSink<'s> {
     View {
         image: &'s ViewImage,
         overwrite: bool,
+        /// The frame's first band: clear its statistics first.
+        first: bool,
+        /// The frame's last band: colour this AOV after it.
+        show: Option<u32>,
     },
 }
 

@@ -3,9 +3,10 @@
 //!
 //! [`GpuRenderer::render_to_view`](crate::GpuRenderer::render_to_view) adds each band of
 //! the render kernel's pixels to [`ViewImage`]'s accumulation (`view_accumulate`,
-//! shaders/view.wgsl) instead of reading them back; [`ViewImage::show`] colours the AOV
-//! asked for into the texture (`view_scale`, `view_colour`, as `grin_view::display`
-//! colours a [`Frame`]) and reads back the frame's 32 bytes of statistics. Pixels are read
+//! shaders/view.wgsl) instead of reading them back, then colours the AOV asked for into
+//! the texture (`view_scale`, `view_colour`, as `grin_view::display` colours a [`Frame`])
+//! and reads back the frame's 32 bytes of statistics, all in the frame's one submission
+//! where it is one band; [`ViewImage::show`] colours it again in another AOV. Pixels are read
 //! back only when asked ([`ViewImage::read_frame`], [`ViewImage::read_display`]: a
 //! screenshot, an export, a test), and counted apart ([`ViewImage::pixel_bytes_read_back`]).
 
@@ -84,7 +85,10 @@ pub struct ViewImage {
     /// The texture's size.
     display: [u32; 2],
     generation: u64,
+    /// The accumulate pass's parameters, and the colour passes' (one submission may
+    /// hold both).
     params: wgpu::Buffer,
+    colour_params: wgpu::Buffer,
     stats: wgpu::Buffer,
     stats_readback: wgpu::Buffer,
     /// Bound as the band in passes that read none.
@@ -190,6 +194,11 @@ impl ViewImage {
                     std::mem::size_of::<ViewParams>() as u64,
                     U::UNIFORM | U::COPY_DST,
                 ),
+                colour_params: buffer(
+                    "view colour params",
+                    std::mem::size_of::<ViewParams>() as u64,
+                    U::UNIFORM | U::COPY_DST,
+                ),
                 stats: buffer("view stats", STATS_BYTES, U::STORAGE | U::COPY_SRC | U::COPY_DST),
                 stats_readback: buffer("view stats readback", STATS_BYTES, U::MAP_READ | U::COPY_DST),
                 no_band: buffer("view no band", 64, U::STORAGE),
@@ -264,22 +273,19 @@ impl ViewImage {
         self.pixels_read.load(Ordering::Relaxed)
     }
 
-    /// Start an image of `width` x `height` (`overwrite`) or add to the one accumulated:
-    /// the statistics of the frame are cleared in `encoder`.
-    pub(crate) fn begin_frame(
-        &mut self,
-        encoder: &mut wgpu::CommandEncoder,
-        width: u32,
-        height: u32,
-        overwrite: bool,
-        samples: u32,
-    ) {
-        encoder.clear_buffer(&self.stats, 0, Some(FRAME_STATS_BYTES));
+    /// Start an image of `width` x `height` (`overwrite`) or add a frame of `samples` to
+    /// the one accumulated.
+    pub(crate) fn begin_frame(&mut self, width: u32, height: u32, overwrite: bool, samples: u32) {
         if overwrite {
             self.samples = 0;
         }
         self.size = [width, height];
         self.samples += samples;
+    }
+
+    /// Clear the frame's statistics, in `encoder` (before its first band).
+    pub(crate) fn encode_clear(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.stats, 0, Some(FRAME_STATS_BYTES));
     }
 
     /// Add `band` (render_main's pixels of rows `first_row .. first_row + rows`),
@@ -310,7 +316,7 @@ impl ViewImage {
         };
         ctx.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let bind = self.bind_group(ctx, band);
+        let bind = self.bind_group(ctx, &self.params, band);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("view_accumulate"),
             timestamp_writes: None,
@@ -320,14 +326,19 @@ impl ViewImage {
         pass.dispatch_workgroups((self.size[0] * rows).div_ceil(64), 1, 1);
     }
 
-    fn bind_group(&self, ctx: &GpuContext, band: &wgpu::Buffer) -> wgpu::BindGroup {
+    fn bind_group(
+        &self,
+        ctx: &GpuContext,
+        params: &wgpu::Buffer,
+        band: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
         ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("view bindings"),
             layout: &self.layout,
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
-                    resource: self.params.as_entire_binding(),
+                    resource: params.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
@@ -353,49 +364,65 @@ impl ViewImage {
     /// status) of the accumulated image into the texture, and read back the statistics
     /// of the last frame added (32 bytes; waits for the device).
     pub fn show(&self, ctx: &GpuContext, aov: u32) -> Result<ViewStats, GpuError> {
-        let [width, height] = self.size;
-        if width == 0 || height == 0 {
+        if self.size[0] == 0 || self.size[1] == 0 {
             return Err(GpuError::DeviceLost("no image to show".into()));
         }
         ctx.scoped("colouring the viewer's image", || {
-            let params = ViewParams {
-                width,
-                height,
-                first_row: 0,
-                rows: height,
-                weight: 0.0,
-                inv_samples: 1.0 / self.samples.max(1) as f32,
-                overwrite: 0,
-                aov,
-                out_width: self.display[0],
-                out_height: self.display[1],
-                pad: [0; 2],
-            };
-            ctx.queue
-                .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-            let bind = self.bind_group(ctx, &self.no_band);
             let mut encoder = ctx
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("view colour"),
                 });
-            encoder.clear_buffer(&self.stats, STAT_SCALE as u64 * 4, Some(4));
-            let [out_w, out_h] = self.display;
-            for (label, pipeline, [w, h]) in [
-                ("view_scale", &self.scale, [width, height]),
-                ("view_colour", &self.colour, [out_w, out_h]),
-            ] {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some(label),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-            }
-            encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, STATS_BYTES);
+            self.encode_show(ctx, &mut encoder, aov);
             ctx.queue.submit([encoder.finish()]);
         })?;
+        self.read_stats(ctx, aov)
+    }
+
+    /// The colour passes of [`Self::show`] and the copy of the statistics, in `encoder`
+    /// (after the frame's last band: one submission a frame).
+    pub(crate) fn encode_show(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        aov: u32,
+    ) {
+        let [width, height] = self.size;
+        let params = ViewParams {
+            width,
+            height,
+            first_row: 0,
+            rows: height,
+            weight: 0.0,
+            inv_samples: 1.0 / self.samples.max(1) as f32,
+            overwrite: 0,
+            aov,
+            out_width: self.display[0],
+            out_height: self.display[1],
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&self.colour_params, 0, bytemuck::bytes_of(&params));
+        let bind = self.bind_group(ctx, &self.colour_params, &self.no_band);
+        encoder.clear_buffer(&self.stats, STAT_SCALE as u64 * 4, Some(4));
+        let [out_w, out_h] = self.display;
+        for (label, pipeline, [w, h]) in [
+            ("view_scale", &self.scale, [width, height]),
+            ("view_colour", &self.colour, [out_w, out_h]),
+        ] {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(label),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        }
+        encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, STATS_BYTES);
+    }
+
+    /// The statistics copied by [`Self::encode_show`] (waits for its submission).
+    pub(crate) fn read_stats(&self, ctx: &GpuContext, aov: u32) -> Result<ViewStats, GpuError> {
         let words: Vec<u32> = read_buffer(ctx, &self.stats_readback, STATS_BYTES)?;
         self.stats_read.fetch_add(STATS_BYTES, Ordering::Relaxed);
         let wide = |at: usize| u64::from(words[at]) | (u64::from(words[at + 1]) << 32);

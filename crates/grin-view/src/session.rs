@@ -467,22 +467,20 @@ impl<'a> Session<'a> {
         };
         let read_before = g.renderer.bytes_read_back() + image.stats_bytes_read_back();
         let start = Instant::now();
-        match g.renderer.render_to_view(image, !continuing, cancel) {
-            Ok(()) => {}
+        let stats = match g.renderer.render_to_view(
+            image,
+            !continuing,
+            aov_index(settings.aov),
+            cancel,
+        ) {
+            Ok(stats) => stats,
             Err(e) => {
-                // Part of the image is this frame's: the next starts it again.
+                // Part of the image may be this frame's: the next starts it again.
                 self.accum = None;
                 return Err(match e {
                     grin_gpu::GpuError::Cancelled => RenderFailure::Cancelled,
                     e => e.into(),
                 });
-            }
-        }
-        let stats = match image.show(self.ctx, aov_index(settings.aov)) {
-            Ok(s) => s,
-            Err(e) => {
-                self.accum = None;
-                return Err(e.into());
             }
         };
         self.shown_aov = Some(settings.aov);
