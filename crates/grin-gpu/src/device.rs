@@ -305,6 +305,45 @@ impl GpuContext {
         Ok(out)
     }
 
+    /// Wait for the work submitted so far on this thread's queue, without holding the
+    /// device while waiting: wgpu's blocking poll keeps a device lock for the whole wait,
+    /// so a window sharing the device (the viewer) could not submit or present meanwhile.
+    /// Polls without blocking, sleeping 20 us doubling to 1 ms in between.
+    pub fn wait_submitted(&self) -> Result<(), GpuError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.queue.on_submitted_work_done(move || {
+            let _ = tx.send(());
+        });
+        self.wait_until(&rx)
+    }
+
+    /// Poll the device without blocking until `rx` holds a value (a callback of the
+    /// device's fired), then return it; a lost device or a captured error ends the wait.
+    pub fn wait_until<T>(&self, rx: &std::sync::mpsc::Receiver<T>) -> Result<T, GpuError> {
+        let mut pause = std::time::Duration::from_micros(20);
+        loop {
+            self.device
+                .poll(wgpu::PollType::Poll)
+                .map_err(|e| GpuError::DeviceLost(e.to_string()))?;
+            match rx.try_recv() {
+                Ok(v) => {
+                    self.check_fault()?;
+                    return Ok(v);
+                }
+                Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                    self.check_fault()?;
+                    return Err(GpuError::DeviceLost(
+                        "a device callback was dropped".into(),
+                    ));
+                }
+                Err(std::sync::mpsc::TryRecvError::Empty) => {}
+            }
+            self.check_fault()?;
+            std::thread::sleep(pause);
+            pause = (pause * 2).min(std::time::Duration::from_millis(1));
+        }
+    }
+
     /// Wait for all submitted work.
     pub fn wait(&self) -> Result<(), GpuError> {
         self.device

@@ -729,7 +729,7 @@ impl<'a> GpuRenderer<'a> {
             // A CPU adapter runs a band for a good part of a second: wait for each, so a
             // cancel stops the frame between them (timestamps below wait too).
             BandSink::View { .. } if self.timer.is_none() && ctx.is_cpu_adapter() => {
-                ctx.wait()?;
+                ctx.wait_submitted()?;
             }
             BandSink::View { .. } => {}
         }
@@ -802,15 +802,9 @@ pub(crate) fn read_buffer_with<T: bytemuck::Pod, R>(
     slice.map_async(wgpu::MapMode::Read, move |r| {
         let _ = tx.send(r);
     });
-    ctx.wait()?;
-    match rx.recv() {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => return Err(GpuError::DeviceLost(format!("reading pixels back: {e}"))),
-        Err(_) => {
-            return Err(GpuError::DeviceLost(
-                "reading pixels back: map callback dropped".into(),
-            ));
-        }
+    // Without holding the device: a window may share it (the viewer).
+    if let Err(e) = ctx.wait_until(&rx)? {
+        return Err(GpuError::DeviceLost(format!("reading pixels back: {e}")));
     }
     let out = {
         let view = slice
