@@ -5,8 +5,9 @@
 //                    into the accumulation (and the frame's steps, evaluations and
 //                    loop-limit suspects into `stats`)
 //   view_scale       the largest finite |value| of the AOV shown (its colour scale)
-//   view_colour      the AOV shown, as grin_view::display::rgba colours it, into the
-//                    texture (linear; the window's sampler and framebuffer encode sRGB)
+//   view_shade       the AOV shown, as grin_view::display::rgba colours it, a colour a
+//                    pixel (linear; the window's sampler and framebuffer encode sRGB)
+//   view_colour      those colours scaled to fill the texture the window draws
 
 // The render kernel's pixel (types.wgsl's PixelOut, gpu_data.rs's PixelOut). In the
 // accumulation r, g, b, steps and evals are sums weighted by samples; the other fields
@@ -67,6 +68,7 @@ const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2000.0;
 @group(0) @binding(2) var<storage, read_write> accum: array<Pixel>;
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>>;
 @group(0) @binding(4) var display: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(5) var<storage, read_write> shaded: array<vec4<f32>>;
 
 var<workgroup> wg_steps: atomic<u32>;
 var<workgroup> wg_evals: atomic<u32>;
@@ -213,17 +215,30 @@ fn colour_at(x: u32, y: u32, inv: f32) -> vec3<f32> {
     }
 }
 
-// One texel of the texture: the image's pixel there where the sizes agree, else the
-// image scaled to the texture (bilinear between pixel centres; nearest for status).
+// Each pixel's colour, once (the texture may have many texels a pixel).
 @compute @workgroup_size(8, 8)
-fn view_colour(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= params.out_width || gid.y >= params.out_height {
+fn view_shade(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.width || gid.y >= params.height {
         return;
     }
     let scale = bitcast<f32>(atomicLoad(&stats[STAT_SCALE]));
     var inv = 0.0;
     if scale > 0.0 {
         inv = 1.0 / scale;
+    }
+    shaded[gid.y * params.width + gid.x] = vec4<f32>(colour_at(gid.x, gid.y, inv), 1.0);
+}
+
+fn shaded_at(p: vec2<u32>) -> vec4<f32> {
+    return shaded[p.y * params.width + p.x];
+}
+
+// One texel of the texture: the image's pixel there where the sizes agree, else the
+// image scaled to the texture (bilinear between pixel centres; nearest for status).
+@compute @workgroup_size(8, 8)
+fn view_colour(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.out_width || gid.y >= params.out_height {
+        return;
     }
     let size = vec2<f32>(f32(params.width), f32(params.height));
     let out = vec2<f32>(f32(params.out_width), f32(params.out_height));
@@ -232,17 +247,16 @@ fn view_colour(@builtin(global_invocation_id) gid: vec3<u32>) {
         vec2<f32>(0.0),
         size - 1.0,
     );
-    var c: vec3<f32>;
+    var c: vec4<f32>;
     if params.aov == AOV_STATUS {
-        let n = vec2<u32>(round(f));
-        c = colour_at(n.x, n.y, inv);
+        c = shaded_at(vec2<u32>(round(f)));
     } else {
         let p0 = vec2<u32>(floor(f));
         let p1 = min(p0 + 1u, vec2<u32>(params.width - 1u, params.height - 1u));
         let t = f - floor(f);
-        let top = mix(colour_at(p0.x, p0.y, inv), colour_at(p1.x, p0.y, inv), t.x);
-        let bottom = mix(colour_at(p0.x, p1.y, inv), colour_at(p1.x, p1.y, inv), t.x);
+        let top = mix(shaded_at(p0), shaded_at(vec2<u32>(p1.x, p0.y)), t.x);
+        let bottom = mix(shaded_at(vec2<u32>(p0.x, p1.y)), shaded_at(p1), t.x);
         c = mix(top, bottom, t.y);
     }
-    textureStore(display, vec2<u32>(gid.x, gid.y), vec4<f32>(c, 1.0));
+    textureStore(display, vec2<u32>(gid.x, gid.y), c);
 }

@@ -78,6 +78,8 @@ pub struct DisplayTexture {
 #[derive(Debug)]
 pub struct ViewImage {
     accum: wgpu::Buffer,
+    /// A colour a pixel of the AOV shown (view_shade), scaled into the texture.
+    shaded: wgpu::Buffer,
     texture: wgpu::Texture,
     storage_view: wgpu::TextureView,
     /// Pixels the accumulation holds.
@@ -96,6 +98,7 @@ pub struct ViewImage {
     layout: wgpu::BindGroupLayout,
     accumulate: wgpu::ComputePipeline,
     scale: wgpu::ComputePipeline,
+    shade: wgpu::ComputePipeline,
     colour: wgpu::ComputePipeline,
     /// The image's size and samples accumulated.
     size: [u32; 2],
@@ -142,6 +145,7 @@ impl ViewImage {
                     storage(1, true),
                     storage(2, false),
                     storage(3, false),
+                    storage(5, false),
                     wgpu::BindGroupLayoutEntry {
                         binding: 4,
                         visibility: wgpu::ShaderStages::COMPUTE,
@@ -184,6 +188,7 @@ impl ViewImage {
             let (texture, storage_view) = display_texture(ctx, display);
             ViewImage {
                 accum: accumulation(ctx, capacity),
+                shaded: shaded(ctx, capacity),
                 texture,
                 storage_view,
                 capacity,
@@ -204,6 +209,7 @@ impl ViewImage {
                 no_band: buffer("view no band", 64, U::STORAGE),
                 accumulate: pipeline("view_accumulate"),
                 scale: pipeline("view_scale"),
+                shade: pipeline("view_shade"),
                 colour: pipeline("view_colour"),
                 layout,
                 size: [0, 0],
@@ -227,7 +233,9 @@ impl ViewImage {
         let pixels = u64::from(width) * u64::from(height);
         let display = [display[0].max(1), display[1].max(1)];
         if pixels > self.capacity {
-            self.accum = ctx.scoped("allocating the viewer's image", || accumulation(ctx, pixels))?;
+            (self.accum, self.shaded) = ctx.scoped("allocating the viewer's image", || {
+                (accumulation(ctx, pixels), shaded(ctx, pixels))
+            })?;
             self.capacity = pixels;
             self.samples = 0;
         }
@@ -356,6 +364,10 @@ impl ViewImage {
                     binding: 4,
                     resource: wgpu::BindingResource::TextureView(&self.storage_view),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: self.shaded.as_entire_binding(),
+                },
             ],
         })
     }
@@ -408,6 +420,7 @@ impl ViewImage {
         let [out_w, out_h] = self.display;
         for (label, pipeline, [w, h]) in [
             ("view_scale", &self.scale, [width, height]),
+            ("view_shade", &self.shade, [width, height]),
             ("view_colour", &self.colour, [out_w, out_h]),
         ] {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -547,6 +560,16 @@ fn accumulation(ctx: &GpuContext, pixels: u64) -> wgpu::Buffer {
         label: Some("view accumulation"),
         size: pixels.max(1) * std::mem::size_of::<PixelOut>() as u64,
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+/// A colour (4 f32) for each of `pixels` pixels.
+fn shaded(ctx: &GpuContext, pixels: u64) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("view colours"),
+        size: pixels.max(1) * 16,
+        usage: wgpu::BufferUsages::STORAGE,
         mapped_at_creation: false,
     })
 }

@@ -320,13 +320,17 @@ fn capture(session: &Session, r: Request) {
 pub fn internal_size(req: &Request, cost: Option<f64>) -> (u32, u32, f64) {
     let s = &req.settings;
     let mut scale = s.resolution_scale.clamp(MIN_MOVING_SCALE, 1.0);
-    if req.moving
-        && let Some(c) = cost
-    {
-        let budget = 1.0 / s.target_fps.max(1.0);
-        let full = f64::from(req.width) * f64::from(req.height) * f64::from(s.spp.max(1));
-        let fit = (budget / (c * full).max(1e-12)).sqrt();
-        scale = scale.min(fit).max(MIN_MOVING_SCALE);
+    if req.moving {
+        scale = match cost {
+            Some(c) => {
+                let budget = 1.0 / s.target_fps.max(1.0);
+                let full = f64::from(req.width) * f64::from(req.height) * f64::from(s.spp.max(1));
+                let fit = (budget / (c * full).max(1e-12)).sqrt();
+                scale.min(fit).max(MIN_MOVING_SCALE)
+            }
+            // The first frame, its cost unknown: the preview's size.
+            None => scale.min(FIRST_PREVIEW_SCALE),
+        };
     }
     scaled(req, scale)
 }

@@ -282,6 +282,11 @@ fn while_moving_the_resolution_drops_to_the_frame_budget() {
     );
     // Still: the full resolution, whatever it costs.
     assert_eq!(internal_size(&req(false), Some(1e-6)).2, 1.0);
+    // Moving before any frame's cost is known: the first preview's size.
+    assert_eq!(
+        internal_size(&req(true), None).2,
+        grin_view::worker::FIRST_PREVIEW_SCALE
+    );
 }
 
 #[test]
