@@ -191,7 +191,9 @@ fn view_orbits_and_reports_frame_rates() {
     let bytes = s["read_back_bytes"]["max"]
         .as_f64()
         .expect("read_back_bytes");
-    assert!((32.0..=64.0).contains(&bytes), "{s}");
+    // (a timestamp pair a pass and band: a few bands on lavapipe), far below a row of
+    // the image's pixels (128 x 64 bytes).
+    assert!((32.0..=512.0).contains(&bytes), "{s}");
     assert!(
         s["adapter"] == s["display_adapter"],
         "the window draws on the renderer's device: {s}"
@@ -329,7 +331,7 @@ fn view_offscreen_needs_no_display() {
     );
     assert!(s["fps"]["median"].as_f64().expect("fps") > 0.0, "{s}");
     let bytes = s["read_back_bytes"]["max"].as_f64().expect("bytes");
-    assert!((32.0..=64.0).contains(&bytes), "{s}");
+    assert!((32.0..=512.0).contains(&bytes), "{s}");
     let png = image::open(&shot).expect("the screenshot is a PNG");
     assert_eq!((png.width(), png.height()), (48, 27));
     // --offscreen is for headless runs only.
