@@ -63,7 +63,9 @@ const STAT_SCALE: u32 = 5u;
 const STATUS_ERROR: u32 = 4u;
 const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2000.0;
 
-@group(0) @binding(0) var<uniform> params: ViewParams;
+// A read-only storage buffer, not a uniform: lavapipe compiles a variant of a kernel for
+// each new value of a uniform it branches on (sizes change every frame while moving).
+@group(0) @binding(0) var<storage, read> params: ViewParams;
 @group(0) @binding(1) var<storage, read> band: array<Pixel>;
 @group(0) @binding(2) var<storage, read_write> accum: array<Pixel>;
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>>;

@@ -132,16 +132,7 @@ impl ViewImage {
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("view bindings"),
                 entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
+                    storage(0, true),
                     storage(1, true),
                     storage(2, false),
                     storage(3, false),
@@ -197,12 +188,12 @@ impl ViewImage {
                 params: buffer(
                     "view params",
                     std::mem::size_of::<ViewParams>() as u64,
-                    U::UNIFORM | U::COPY_DST,
+                    U::STORAGE | U::COPY_DST,
                 ),
                 colour_params: buffer(
                     "view colour params",
                     std::mem::size_of::<ViewParams>() as u64,
-                    U::UNIFORM | U::COPY_DST,
+                    U::STORAGE | U::COPY_DST,
                 ),
                 stats: buffer("view stats", STATS_BYTES, U::STORAGE | U::COPY_SRC | U::COPY_DST),
                 stats_readback: buffer("view stats readback", STATS_BYTES, U::MAP_READ | U::COPY_DST),
