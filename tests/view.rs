@@ -313,7 +313,15 @@ fn view_offscreen_needs_no_display() {
             .env("GRIN_CACHE_DIR", dir.path().join("cache"))
             .arg("view")
             .arg(scenes().join("paper-a.toml"))
-            .args(["--size", "48x27", "--frames", "3", "--orbit", "2", "--offscreen"])
+            .args([
+                "--size",
+                "48x27",
+                "--frames",
+                "3",
+                "--orbit",
+                "2",
+                "--offscreen",
+            ])
             .arg("--screenshot")
             .arg(&shot)
             .arg("--json"),

@@ -99,10 +99,11 @@ impl GpuContext {
     ) -> Result<Self, GpuError> {
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let instance = process_instance(backends);
-        let adapters: Vec<wgpu::Adapter> = pollster::block_on(instance.enumerate_adapters(backends))
-            .into_iter()
-            .filter(|a| surface.is_none_or(|s| a.is_surface_supported(s)))
-            .collect();
+        let adapters: Vec<wgpu::Adapter> =
+            pollster::block_on(instance.enumerate_adapters(backends))
+                .into_iter()
+                .filter(|a| surface.is_none_or(|s| a.is_surface_supported(s)))
+                .collect();
         let seen = if adapters.is_empty() {
             "none".to_owned()
         } else {
@@ -332,9 +333,7 @@ impl GpuContext {
                 }
                 Err(std::sync::mpsc::TryRecvError::Disconnected) => {
                     self.check_fault()?;
-                    return Err(GpuError::DeviceLost(
-                        "a device callback was dropped".into(),
-                    ));
+                    return Err(GpuError::DeviceLost("a device callback was dropped".into()));
                 }
                 Err(std::sync::mpsc::TryRecvError::Empty) => {}
             }

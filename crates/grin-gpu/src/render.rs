@@ -588,7 +588,6 @@ impl<'a> GpuRenderer<'a> {
             let rows = self.rows_per_band.min(height - row);
             let sink = BandSink::View {
                 image: &*image,
-                overwrite,
                 first: row == 0,
                 show: (row + rows >= height).then_some(aov),
             };
@@ -696,21 +695,8 @@ impl<'a> GpuRenderer<'a> {
                 BandSink::ReadBack(_) => {
                     encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
                 }
-                BandSink::View {
-                    image,
-                    overwrite,
-                    show,
-                    ..
-                } => {
-                    image.accumulate_band(
-                        ctx,
-                        &mut encoder,
-                        &self.out_buffer,
-                        first_row,
-                        rows,
-                        self.params.spp,
-                        *overwrite,
-                    );
+                BandSink::View { image, show, .. } => {
+                    image.accumulate_band(ctx, &mut encoder, &self.out_buffer, first_row, rows);
                     if let Some(aov) = show {
                         image.encode_show(ctx, &mut encoder, *aov);
                     }
@@ -751,7 +737,6 @@ enum BandSink<'s> {
     ReadBack(&'s mut dyn FnMut(&[PixelOut])),
     View {
         image: &'s ViewImage,
-        overwrite: bool,
         /// The frame's first band: clear its statistics first.
         first: bool,
         /// The frame's last band: colour this AOV after it.

@@ -103,6 +103,9 @@ pub struct ViewImage {
     /// The image's size and samples accumulated.
     size: [u32; 2],
     samples: u32,
+    /// The frame being added: its samples per pixel, and whether it starts the image.
+    frame_samples: u32,
+    frame_overwrites: bool,
     /// Bytes of statistics read back so far.
     stats_read: AtomicU64,
     /// Bytes of pixels read back so far (exports and tests only).
@@ -195,8 +198,16 @@ impl ViewImage {
                     std::mem::size_of::<ViewParams>() as u64,
                     U::STORAGE | U::COPY_DST,
                 ),
-                stats: buffer("view stats", STATS_BYTES, U::STORAGE | U::COPY_SRC | U::COPY_DST),
-                stats_readback: buffer("view stats readback", STATS_BYTES, U::MAP_READ | U::COPY_DST),
+                stats: buffer(
+                    "view stats",
+                    STATS_BYTES,
+                    U::STORAGE | U::COPY_SRC | U::COPY_DST,
+                ),
+                stats_readback: buffer(
+                    "view stats readback",
+                    STATS_BYTES,
+                    U::MAP_READ | U::COPY_DST,
+                ),
                 no_band: buffer("view no band", 64, U::STORAGE),
                 accumulate: pipeline("view_accumulate"),
                 scale: pipeline("view_scale"),
@@ -205,6 +216,8 @@ impl ViewImage {
                 layout,
                 size: [0, 0],
                 samples: 0,
+                frame_samples: 0,
+                frame_overwrites: true,
                 stats_read: AtomicU64::new(0),
                 pixels_read: AtomicU64::new(0),
             }
@@ -231,8 +244,9 @@ impl ViewImage {
             self.samples = 0;
         }
         if display != self.display {
-            let (texture, view) =
-                ctx.scoped("allocating the viewer's texture", || display_texture(ctx, display))?;
+            let (texture, view) = ctx.scoped("allocating the viewer's texture", || {
+                display_texture(ctx, display)
+            })?;
             self.texture = texture;
             self.storage_view = view;
             self.display = display;
@@ -245,7 +259,9 @@ impl ViewImage {
     pub fn display_texture(&self) -> DisplayTexture {
         DisplayTexture {
             texture: self.texture.clone(),
-            view: self.texture.create_view(&wgpu::TextureViewDescriptor::default()),
+            view: self
+                .texture
+                .create_view(&wgpu::TextureViewDescriptor::default()),
             generation: self.generation,
             size: self.display,
         }
@@ -278,6 +294,8 @@ impl ViewImage {
         if overwrite {
             self.samples = 0;
         }
+        self.frame_samples = samples;
+        self.frame_overwrites = overwrite;
         self.size = [width, height];
         self.samples += samples;
     }
@@ -287,9 +305,9 @@ impl ViewImage {
         encoder.clear_buffer(&self.stats, 0, Some(FRAME_STATS_BYTES));
     }
 
-    /// Add `band` (render_main's pixels of rows `first_row .. first_row + rows`),
-    /// weighted by `weight` samples, in `encoder`. `params` is written now: submit the
-    /// encoder before the next band's.
+    /// Add `band` (render_main's pixels of rows `first_row .. first_row + rows`) of the
+    /// frame [`Self::begin_frame`] started, weighted by its samples, in `encoder`.
+    /// `params` is written now: submit the encoder before the next band's.
     pub(crate) fn accumulate_band(
         &self,
         ctx: &GpuContext,
@@ -297,17 +315,15 @@ impl ViewImage {
         band: &wgpu::Buffer,
         first_row: u32,
         rows: u32,
-        weight: u32,
-        overwrite: bool,
     ) {
         let params = ViewParams {
             width: self.size[0],
             height: self.size[1],
             first_row,
             rows,
-            weight: weight as f32,
+            weight: self.frame_samples as f32,
             inv_samples: 0.0,
-            overwrite: u32::from(overwrite),
+            overwrite: u32::from(self.frame_overwrites),
             aov: 0,
             out_width: self.display[0],
             out_height: self.display[1],

@@ -51,7 +51,8 @@ fn count(f: &Frame, of: fn(&grin_render::image::PixelOut) -> f32) -> u64 {
 
 #[test]
 fn frames_added_on_the_device_are_the_frames_read_back_and_averaged() {
-    let Some(ctx) = harness::context("frames_added_on_the_device_are_the_frames_read_back_and_averaged")
+    let Some(ctx) =
+        harness::context("frames_added_on_the_device_are_the_frames_read_back_and_averaged")
     else {
         return;
     };
@@ -81,13 +82,21 @@ fn frames_added_on_the_device_are_the_frames_read_back_and_averaged() {
         frames.push(f);
     }
     assert_eq!(image.samples(), FRAMES * SPP);
-    assert_eq!(image.pixel_bytes_read_back(), 0, "no pixel read back per frame");
+    assert_eq!(
+        image.pixel_bytes_read_back(),
+        0,
+        "no pixel read back per frame"
+    );
     assert_eq!(
         image.stats_bytes_read_back(),
         u64::from(FRAMES) * grin_gpu::view::STATS_BYTES
     );
     assert!(
-        frames[0].pixels.iter().zip(&frames[1].pixels).any(|(a, b)| a.rgb != b.rgb),
+        frames[0]
+            .pixels
+            .iter()
+            .zip(&frames[1].pixels)
+            .any(|(a, b)| a.rgb != b.rgb),
         "jittered frames differ"
     );
 
@@ -110,7 +119,10 @@ fn frames_added_on_the_device_are_the_frames_read_back_and_averaged() {
         assert_eq!(p.deflection_deg, frames[0].pixels[i].deflection_deg);
         assert_eq!(p.status, frames[0].pixels[i].status);
     }
-    assert!(worst < 1e-5, "accumulated radiance off by {worst:e} (relative)");
+    assert!(
+        worst < 1e-5,
+        "accumulated radiance off by {worst:e} (relative)"
+    );
 
     // The texture: beauty is the mean radiance clamped to [0, 1] (linear, f16).
     let texels = image.read_display(&ctx).expect("read display");
@@ -118,13 +130,21 @@ fn frames_added_on_the_device_are_the_frames_read_back_and_averaged() {
     for (t, p) in texels.iter().zip(&got.pixels) {
         for c in 0..3 {
             let want = p.rgb[c].clamp(0.0, 1.0);
-            assert!((t[c] - want).abs() <= 1e-3 * want + 1e-6, "{t:?} vs {:?}", p.rgb);
+            assert!(
+                (t[c] - want).abs() <= 1e-3 * want + 1e-6,
+                "{t:?} vs {:?}",
+                p.rgb
+            );
         }
         assert_eq!(t[3], 1.0);
     }
     // Deflection: grey over the largest deflection of the image.
     let stats = image.show(&ctx, 1).expect("show deflection");
-    let largest = got.pixels.iter().map(|p| p.deflection_deg.abs()).fold(0.0, f32::max);
+    let largest = got
+        .pixels
+        .iter()
+        .map(|p| p.deflection_deg.abs())
+        .fold(0.0, f32::max);
     assert!(largest > 0.05, "the medium deflects: {largest}");
     assert_eq!(stats.scale, largest);
     let texels = image.read_display(&ctx).expect("read display");

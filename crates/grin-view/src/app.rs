@@ -366,10 +366,9 @@ impl App {
                             || self.frame.as_ref().is_some_and(|f| f.rendered.converged);
                         // A screenshot is of the size asked for: after an orbit's preview
                         // frames, one more still frame at that size.
-                        let preview = self
-                            .frame
-                            .as_ref()
-                            .is_some_and(|f| (f.rendered.width, f.rendered.height) != self.image_px);
+                        let preview = self.frame.as_ref().is_some_and(|f| {
+                            (f.rendered.width, f.rendered.height) != self.image_px
+                        });
                         if done && preview && self.opts.screenshot.is_some() && !self.final_still {
                             self.final_still = true;
                             self.last_move = None;
@@ -402,12 +401,9 @@ impl App {
         };
         if let Some(path) = &self.opts.screenshot {
             // The only pixels read back: the image shown, once, for the file.
-            let written = self
-                .capture()
-                .and_then(|frame| {
-                    crate::write_screenshot(path, &frame, f.settings.aov)
-                        .map_err(|e| format!("{e:#}"))
-                });
+            let written = self.capture().and_then(|frame| {
+                crate::write_screenshot(path, &frame, f.settings.aov).map_err(|e| format!("{e:#}"))
+            });
             if let Err(e) = written {
                 self.fatal = Some(e);
                 return;
@@ -668,9 +664,11 @@ impl App {
                 self.texture = Some((id, d.generation));
             }
             None => {
-                let id =
-                    g.renderer
-                        .register_native_texture(&g.device, &d.view, wgpu::FilterMode::Linear);
+                let id = g.renderer.register_native_texture(
+                    &g.device,
+                    &d.view,
+                    wgpu::FilterMode::Linear,
+                );
                 self.texture = Some((id, d.generation));
             }
         }
@@ -705,11 +703,7 @@ impl App {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("offscreen draw"),
             });
-        enc.copy_texture_to_texture(
-            d.texture.as_image_copy(),
-            t.as_image_copy(),
-            size,
-        );
+        enc.copy_texture_to_texture(d.texture.as_image_copy(), t.as_image_copy(), size);
         gpu.queue.submit([enc.finish()]);
     }
 

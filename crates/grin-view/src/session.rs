@@ -467,22 +467,21 @@ impl<'a> Session<'a> {
         };
         let read_before = g.renderer.bytes_read_back() + image.stats_bytes_read_back();
         let start = Instant::now();
-        let stats = match g.renderer.render_to_view(
-            image,
-            !continuing,
-            aov_index(settings.aov),
-            cancel,
-        ) {
-            Ok(stats) => stats,
-            Err(e) => {
-                // Part of the image may be this frame's: the next starts it again.
-                self.accum = None;
-                return Err(match e {
-                    grin_gpu::GpuError::Cancelled => RenderFailure::Cancelled,
-                    e => e.into(),
-                });
-            }
-        };
+        let stats =
+            match g
+                .renderer
+                .render_to_view(image, !continuing, aov_index(settings.aov), cancel)
+            {
+                Ok(stats) => stats,
+                Err(e) => {
+                    // Part of the image may be this frame's: the next starts it again.
+                    self.accum = None;
+                    return Err(match e {
+                        grin_gpu::GpuError::Cancelled => RenderFailure::Cancelled,
+                        e => e.into(),
+                    });
+                }
+            };
         self.shown_aov = Some(settings.aov);
         let gpu_seconds = start.elapsed().as_secs_f64();
         let device_seconds = g.renderer.last_device_seconds();

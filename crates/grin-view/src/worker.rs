@@ -47,7 +47,10 @@ pub struct Request {
 #[derive(Debug)]
 pub enum Reply {
     /// The scene's field is ready on the device.
-    Started { adapter: String, setup_seconds: f64 },
+    Started {
+        adapter: String,
+        setup_seconds: f64,
+    },
     /// The device or the scene could not be set up: the viewer ends with this error.
     Fatal(String),
     Frame(Box<FrameReply>),

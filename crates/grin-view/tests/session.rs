@@ -119,7 +119,11 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     }
     assert_eq!(s.pixel_bytes_read_back(), 0, "no pixel crossed to the CPU");
     let r0 = render(&mut s, &base);
-    assert_eq!(s.pixel_bytes_read_back(), u64::from(W * H) * 64, "read on request");
+    assert_eq!(
+        s.pixel_bytes_read_back(),
+        u64::from(W * H) * 64,
+        "read on request"
+    );
     assert!(max_deflection(&r0) > 0.05, "{}", max_deflection(&r0));
 
     // Integrator: rk4 spends 4 field evaluations a step, euler 1.
