@@ -1,3 +1,5 @@
+// #import shared/types.wgsl
+//
 // The viewer's image on the device (crates/grin-gpu/src/view.rs): the render kernel's
 // pixels are added to an accumulation buffer that stays on the GPU, and the image is
 // coloured into a texture the window draws, so no pixel crosses to the CPU per frame.
@@ -9,21 +11,8 @@
 //                    pixel (linear; the window's sampler and framebuffer encode sRGB)
 //   view_colour      those colours scaled to fill the texture the window draws
 
-// The render kernel's pixel (types.wgsl's PixelOut, gpu_data.rs's PixelOut). In the
-// accumulation r, g, b, steps and evals are sums weighted by samples; the other fields
-// are the first frame's.
-struct Pixel {
-    r: f32, g: f32, b: f32,
-    deflection_deg: f32,
-    exit_x: f32, exit_y: f32, exit_z: f32,
-    opd: f32,
-    steps: f32,
-    evals: f32,
-    status: f32,
-    pos_x: f32, pos_y: f32, pos_z: f32,
-    opd_plane: f32,
-    pad: f32,
-}
+// The render kernel's pixels (types.wgsl's PixelOut). In the accumulation r, g, b, steps
+// and evals are sums weighted by samples; the other fields are the first frame's.
 
 // view.rs's ViewParams.
 struct ViewParams {
@@ -66,8 +55,8 @@ const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2000.0;
 // A read-only storage buffer, not a uniform: lavapipe compiles a variant of a kernel for
 // each new value of a uniform it branches on (sizes change every frame while moving).
 @group(0) @binding(0) var<storage, read> params: ViewParams;
-@group(0) @binding(1) var<storage, read> band: array<Pixel>;
-@group(0) @binding(2) var<storage, read_write> accum: array<Pixel>;
+@group(0) @binding(1) var<storage, read> band: array<PixelOut>;
+@group(0) @binding(2) var<storage, read_write> accum: array<PixelOut>;
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>>;
 @group(0) @binding(4) var display: texture_storage_2d<rgba16float, write>;
 @group(0) @binding(5) var<storage, read_write> shaded: array<vec4<f32>>;
@@ -130,7 +119,7 @@ fn view_accumulate(
 }
 
 // The value an AOV maps to colour (display.rs's `value`).
-fn aov_value(a: Pixel) -> f32 {
+fn aov_value(a: PixelOut) -> f32 {
     switch params.aov {
         case AOV_DEFLECTION: { return a.deflection_deg; }
         case AOV_STEPS: { return a.steps * params.inv_samples; }

@@ -180,6 +180,7 @@ fn run(
         };
         // Nothing to render, but the image is wanted in another AOV: colour it again.
         if rendered
+            && !failed
             && let Some(r) = &current
             && session.shown_aov().is_some_and(|a| a != r.settings.aov)
         {
@@ -190,7 +191,11 @@ fn run(
                     display,
                     scale,
                 },
-                Err(e) => Reply::Error(format!("{e:#}")),
+                Err(e) => {
+                    // Shown once; the next request tries again.
+                    failed = true;
+                    Reply::Error(format!("{e:#}"))
+                }
             };
             if tx.send(reply).is_err() {
                 return;

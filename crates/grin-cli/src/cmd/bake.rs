@@ -7,7 +7,6 @@ use std::sync::Mutex;
 use anyhow::Context;
 use grin_field::bake::{self, BakeOptions, BakeReport, GradientMode};
 use grin_field::baked::{Interp, Storage};
-use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin bake`.
 #[derive(Debug, clap::Args)]
@@ -187,10 +186,7 @@ fn bake_one(
         gradient: GradientMode::for_field(&medium.field),
         ..Default::default()
     };
-    let bar = ProgressBar::new(1);
-    if let Ok(style) = ProgressStyle::with_template("{msg:>24} [{bar:40}] {pos}/{len} {elapsed}") {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = super::styled_bar(1, "{msg:>24} [{bar:40}] {pos}/{len} {elapsed}");
     let stage = Mutex::new(String::new());
     let progress = |name: &str, done: u64, total: u64| {
         if let Ok(mut s) = stage.lock()

@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use grin_pipeline::dataset::{Dataset, Kind, Media};
 use grin_pipeline::{Backend, Renderer};
-use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin dataset`.
 #[derive(Debug, clap::Args)]
@@ -85,12 +84,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     dataset.plates = args.plate;
     dataset.textures = args.texture;
     let renderer = Renderer::new(args.backend, true);
-    let bar = ProgressBar::new(indices.len() as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("samples [{bar:40}] {pos}/{len} {elapsed}<{eta}")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = super::styled_bar(
+        indices.len() as u64,
+        "samples [{bar:40}] {pos}/{len} {elapsed}<{eta}",
+    );
     let summary = dataset.write(&renderer, &args.output, args.count, &indices, &|done, _| {
         bar.set_position(done as u64)
     })?;

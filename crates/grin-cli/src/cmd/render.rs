@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use grin_pipeline::{Backend, Rendered, Renderer};
 use grin_render::image::{Frame, diff_frames, stage_channels_exr, stage_rgb8_png};
 use grin_scene::frames::FrameList;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 
 /// Arguments of `grin render`.
 #[derive(Debug, clap::Args)]
@@ -159,12 +159,7 @@ impl Bar {
 
 impl grin_pipeline::Progress for Bar {
     fn begin(&self, rows: u64) {
-        let bar = ProgressBar::new(rows);
-        if let Ok(style) =
-            ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} rows {elapsed}<{eta}")
-        {
-            bar.set_style(style.progress_chars("=> "));
-        }
+        let bar = super::styled_bar(rows, "{prefix} [{bar:40}] {pos}/{len} rows {elapsed}<{eta}");
         bar.set_prefix("rendering");
         self.with(|b| *b = Some(bar));
     }

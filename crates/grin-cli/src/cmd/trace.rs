@@ -155,12 +155,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         _ if rows.len() < PROGRESS_MIN_RAYS => ProgressBar::hidden(),
         Some(len) => {
             let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "tracing {bar:40} {percent}% of the table, {msg} rays ({elapsed}, eta {eta})",
-                )
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-            );
+            bar.set_style(super::bar_style(
+                "tracing {bar:40} {percent}% of the table, {msg} rays ({elapsed}, eta {eta})",
+            ));
             bar
         }
         None => {

@@ -7,7 +7,6 @@ use std::path::PathBuf;
 use grin_bench::accuracy;
 use grin_bench::cases::{self, Suite};
 use grin_bench::report;
-use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin bench accuracy`.
 #[derive(Debug, clap::Args)]
@@ -47,16 +46,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(want) = &args.case {
         cases = cases::select(cases, want)?;
     }
-    let bar = ProgressBar::new(1);
+    let bar = crate::cmd::styled_bar(1, "runs [{bar:40}] {pos}/{len} {elapsed} (eta {eta})");
     // Where stderr is not a terminal (a CI log) the bar is hidden: a line per 10% instead.
     let log_lines = !std::io::IsTerminal::is_terminal(&std::io::stderr());
     let logged = std::sync::atomic::AtomicU64::new(0);
     let started = std::time::Instant::now();
-    if let Ok(style) =
-        ProgressStyle::with_template("runs [{bar:40}] {pos}/{len} {elapsed} (eta {eta})")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
     let progress = |done: u64, total: u64| {
         bar.set_length(total);
         bar.set_position(done);

@@ -6,7 +6,7 @@ use std::cell::OnceCell;
 use std::path::PathBuf;
 
 use grin_bench::speed::{self, Options};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 
 /// Arguments of `grin bench speed`.
 #[derive(Debug, clap::Args)]
@@ -36,12 +36,7 @@ struct Bar(OnceCell<ProgressBar>);
 
 impl speed::Progress for Bar {
     fn begin(&self, len: u64) {
-        let bar = ProgressBar::new(len);
-        if let Ok(style) =
-            ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} {elapsed}")
-        {
-            bar.set_style(style.progress_chars("=> "));
-        }
+        let bar = crate::cmd::styled_bar(len, "{prefix} [{bar:30}] {pos}/{len} {msg} {elapsed}");
         bar.set_prefix("bench speed");
         let _ = self.0.set(bar);
     }

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 
 use grin_bench::report;
 use grin_bench::stability::{self, Outcome};
-use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `grin bench stability`.
 #[derive(Debug, clap::Args)]
@@ -28,10 +27,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let bar = ProgressBar::new(1);
-    if let Ok(style) = ProgressStyle::with_template("cells [{bar:40}] {pos}/{len} {elapsed}") {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = crate::cmd::styled_bar(1, "cells [{bar:40}] {pos}/{len} {elapsed}");
     let progress = |done: u64, total: u64| {
         bar.set_length(total);
         bar.set_position(done);
