@@ -242,8 +242,13 @@ impl App {
             window.theme(),
             Some(device.limits().max_texture_dimension_2d as usize),
         );
-        let renderer =
-            egui_wgpu::Renderer::new(&device, format, egui_wgpu::RendererOptions::default());
+        // On a CPU adapter every fragment of the window is the render thread's time (one
+        // queue): no dithering there.
+        let options = egui_wgpu::RendererOptions {
+            dithering: !gpu.is_cpu_adapter(),
+            ..Default::default()
+        };
+        let renderer = egui_wgpu::Renderer::new(&device, format, options);
         self.cpu_adapter = gpu.is_cpu_adapter();
         let wake = self.proxy.take().map(|p| {
             Box::new(move || {
