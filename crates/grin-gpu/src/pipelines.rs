@@ -5,6 +5,20 @@ use crate::gpu_data::*;
 
 /// The render kernels' bindings (shaders/shared/bindings.wgsl), one layout for both
 /// passes.
+/// A compute-stage storage buffer binding (`read_only` or read-write).
+pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
 pub(crate) fn render_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
         binding,

@@ -390,16 +390,7 @@ impl<'a> StageKit<'a> {
                 label: Some("stage frame bindings"),
                 entries: &frame_entries,
             });
-            let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            };
+            let storage = crate::pipelines::storage_entry;
             let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("stage io"),
                 entries: &[

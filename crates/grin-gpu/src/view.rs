@@ -122,16 +122,7 @@ impl ViewImage {
                 label: Some("view.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(shaders::VIEW_WGSL.into()),
             });
-            let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            };
+            let storage = crate::pipelines::storage_entry;
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("view bindings"),
                 entries: &[
@@ -464,24 +455,9 @@ impl ViewImage {
         let [width, height] = self.size;
         let n = u64::from(width) * u64::from(height);
         let bytes = n * std::mem::size_of::<PixelOut>() as u64;
-        let readback = ctx.scoped("reading the viewer's image back", || {
-            let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("view image readback"),
-                size: bytes.max(4),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("view image readback"),
-                });
-            encoder.copy_buffer_to_buffer(&self.accum, 0, &readback, 0, bytes);
-            ctx.queue.submit([encoder.finish()]);
-            readback
+        let sums: Vec<PixelOut> = self.read_copied(ctx, "the viewer's image", bytes, |e, to| {
+            e.copy_buffer_to_buffer(&self.accum, 0, to, 0, bytes);
         })?;
-        let sums: Vec<PixelOut> = read_buffer(ctx, &readback, bytes)?;
-        self.pixels_read.fetch_add(bytes, Ordering::Relaxed);
         let inv = 1.0 / self.samples.max(1) as f32;
         let pixels = sums
             .into_iter()
@@ -507,19 +483,8 @@ impl ViewImage {
         let row_bytes = u64::from(width) * 8;
         let padded = row_bytes.div_ceil(256) * 256;
         let bytes = padded * u64::from(height);
-        let readback = ctx.scoped("reading the viewer's texture back", || {
-            let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("view texture readback"),
-                size: bytes.max(4),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("view texture readback"),
-                });
-            encoder.copy_texture_to_buffer(
+        let halves: Vec<u16> = self.read_copied(ctx, "the viewer's texture", bytes, |e, to| {
+            e.copy_texture_to_buffer(
                 wgpu::TexelCopyTextureInfo {
                     texture: &self.texture,
                     mip_level: 0,
@@ -527,7 +492,7 @@ impl ViewImage {
                     aspect: wgpu::TextureAspect::All,
                 },
                 wgpu::TexelCopyBufferInfo {
-                    buffer: &readback,
+                    buffer: to,
                     layout: wgpu::TexelCopyBufferLayout {
                         offset: 0,
                         bytes_per_row: Some(padded as u32),
@@ -540,11 +505,7 @@ impl ViewImage {
                     depth_or_array_layers: 1,
                 },
             );
-            ctx.queue.submit([encoder.finish()]);
-            readback
         })?;
-        let halves: Vec<u16> = read_buffer(ctx, &readback, bytes)?;
-        self.pixels_read.fetch_add(bytes, Ordering::Relaxed);
         let per_row = (padded / 2) as usize;
         let mut out = Vec::with_capacity(width as usize * height as usize);
         for row in halves.chunks(per_row) {
@@ -557,6 +518,38 @@ impl ViewImage {
                 ]);
             }
         }
+        Ok(out)
+    }
+}
+
+impl ViewImage {
+    /// `bytes` of `what`, copied by `copy` into a mappable buffer and read back (counted
+    /// as pixels read).
+    fn read_copied<T: bytemuck::Pod>(
+        &self,
+        ctx: &GpuContext,
+        what: &str,
+        bytes: u64,
+        copy: impl FnOnce(&mut wgpu::CommandEncoder, &wgpu::Buffer),
+    ) -> Result<Vec<T>, GpuError> {
+        let readback = ctx.scoped(&format!("reading {what} back"), || {
+            let readback = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("view readback"),
+                size: bytes.max(4),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("view readback"),
+                });
+            copy(&mut encoder, &readback);
+            ctx.queue.submit([encoder.finish()]);
+            readback
+        })?;
+        let out = read_buffer(ctx, &readback, bytes)?;
+        self.pixels_read.fetch_add(bytes, Ordering::Relaxed);
         Ok(out)
     }
 }

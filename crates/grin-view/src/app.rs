@@ -458,19 +458,26 @@ impl App {
         });
     }
 
+    /// A request for the current settings at the image size.
+    fn request(&self, moving: bool, reload: bool) -> Request {
+        Request {
+            settings: self.settings.clone(),
+            width: self.image_px.0,
+            height: self.image_px.1,
+            moving,
+            reload,
+            capture: None,
+        }
+    }
+
     /// The image shown, read back by the render thread (a screenshot).
     fn capture(&self) -> Result<grin_render::image::Frame, String> {
         let worker = self.worker.as_ref().ok_or("no render thread")?;
         let (tx, rx) = std::sync::mpsc::channel();
-        let (w, h) = self.image_px;
         worker.send(
             Request {
-                settings: self.settings.clone(),
-                width: w,
-                height: h,
-                moving: false,
-                reload: false,
                 capture: Some(tx),
+                ..self.request(false, false)
             },
             false,
         );
@@ -510,17 +517,7 @@ impl App {
             self.converged_after = None;
         }
         let Some(worker) = &self.worker else { return };
-        worker.send(
-            Request {
-                settings: self.settings.clone(),
-                width: w,
-                height: h,
-                moving,
-                reload: false,
-                capture: None,
-            },
-            view_changed,
-        );
+        worker.send(self.request(moving, false), view_changed);
         self.last_sent = Some(key);
     }
 
@@ -532,19 +529,8 @@ impl App {
         let now = mtime(&self.opts.scene);
         if now != self.watched {
             self.watched = now;
-            let (w, h) = self.image_px;
             let Some(worker) = &self.worker else { return };
-            worker.send(
-                Request {
-                    settings: self.settings.clone(),
-                    width: w,
-                    height: h,
-                    moving: false,
-                    reload: true,
-                    capture: None,
-                },
-                true,
-            );
+            worker.send(self.request(false, true), true);
         }
     }
 
