@@ -35,6 +35,11 @@ use grin_scene::{FieldSpec, Interpolation, Scene};
 use crate::display::Aov;
 use crate::settings::ViewSettings;
 
+/// Pixels per band of a frame on a CPU adapter (lavapipe): the longest the window waits
+/// to draw is one band (heat haze at 2 spp: ~0.3 s; 32 Ki pixels, `grin render`'s band
+/// there, held the window 3.1 s).
+pub const CPU_BAND_PIXELS: u32 = 4096;
+
 /// Fields kept in memory (time steps of an animation, interpolations).
 const FIELDS_KEPT: usize = 4;
 /// Nodes along the longest axis of the bakes made while time plays (a full bake per
@@ -458,9 +463,15 @@ impl<'a> Session<'a> {
         } else {
             0.0
         };
-        let Some(g) = &self.gpus[slot] else {
+        let Some(g) = &mut self.gpus[slot] else {
             return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
         };
+        if self.ctx.is_cpu_adapter() {
+            // The window's submissions wait behind the band in flight on lavapipe's one
+            // queue: short bands keep it drawing (and cancels prompt).
+            g.renderer
+                .limit_band_rows((CPU_BAND_PIXELS / width.max(1)).max(1));
+        }
         let method = method_name(&g.scene.settings);
         let Some(image) = self.image.as_mut() else {
             return Err(RenderFailure::Error(anyhow::anyhow!("no image")));
