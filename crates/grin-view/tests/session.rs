@@ -260,6 +260,39 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     assert_eq!(s.frame().expect("frame").width, W / 2);
 }
 
+/// A frame cancelled part-way may have added some bands to the image on the device: the
+/// next frame of the same view starts the image again instead of adding to it.
+#[test]
+fn a_cancelled_frame_restarts_the_image() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = scene_file(dir.path(), SCENE);
+    let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
+    let mut s = Session::new(&ctx, &path, None).expect("session");
+    let mut v = ViewSettings::from_scene(s.scene());
+    v.spp = 2;
+    v.max_spp = 8;
+    assert_eq!(render_only(&mut s, &v, W, H).samples, 2);
+    assert_eq!(render_only(&mut s, &v, W, H).samples, 4);
+    let cancelled = s.render(&v, W, H, false, &AtomicBool::new(true));
+    assert!(matches!(
+        cancelled,
+        Err(grin_view::session::RenderFailure::Cancelled)
+    ));
+    assert!(s.needs_frame(&v, W, H));
+    let again = render_only(&mut s, &v, W, H);
+    assert_eq!(again.samples, 2, "started again, not 6 samples");
+    let fresh = {
+        let mut t = Session::new(&ctx, &path, None).expect("session");
+        render_only(&mut t, &v, W, H);
+        t.frame().expect("frame")
+    };
+    let restarted = s.frame().expect("frame");
+    // The same two samples as a fresh session's first frame.
+    for (a, b) in restarted.pixels.iter().zip(&fresh.pixels) {
+        assert_eq!(a.rgb, b.rgb);
+    }
+}
+
 #[test]
 fn while_moving_the_resolution_drops_to_the_frame_budget() {
     let mut v = ViewSettings::from_scene(
