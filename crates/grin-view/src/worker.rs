@@ -241,6 +241,11 @@ fn run(
             continue;
         }
         let (mut w, mut h, mut scale) = internal_size(req, cost);
+        // A still view whose image is complete (another AOV shown, the same view asked
+        // again): nothing to render; the loop's top colours it again where needed.
+        if !req.moving && !session.needs_frame(&req.settings, w, h) {
+            continue;
+        }
         // A new still view whose frame would take longer than the frame budget (or whose
         // cost is not known yet): a preview first, as a moving view gets, refined after.
         let preview = !req.moving

@@ -293,6 +293,91 @@ fn a_cancelled_frame_restarts_the_image() {
     }
 }
 
+/// The render thread (no window): a still view's frames, the image coloured again in
+/// another AOV without a new frame, and the image read back on request, once.
+#[test]
+fn the_render_thread_recolours_and_captures_without_new_frames() {
+    use grin_view::worker::{Reply, Worker};
+    use std::time::Duration;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = scene_file(dir.path(), SCENE);
+    let ctx = std::sync::Arc::new(GpuContext::new_headless().expect("a wgpu adapter"));
+    let worker = Worker::start(ctx, path.clone(), None, None);
+    let mut v = ViewSettings::from_scene(&grin_view::session::load(&path).expect("scene"));
+    v.max_spp = 1;
+    let request = |settings: &ViewSettings| Request {
+        settings: settings.clone(),
+        width: W,
+        height: H,
+        moving: false,
+        reload: false,
+        capture: None,
+    };
+    let next = || {
+        worker
+            .replies
+            .recv_timeout(Duration::from_secs(120))
+            .expect("a reply from the render thread")
+    };
+    worker.send(request(&v), false);
+    // Started, a preview maybe, then the full frame.
+    loop {
+        match next() {
+            Reply::Frame(f) if !f.preview => {
+                assert_eq!((f.rendered.width, f.rendered.height), (W, H));
+                assert_eq!(f.rendered.samples, 1);
+                break;
+            }
+            Reply::Started { .. } | Reply::Frame(_) => {}
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    let mut shown = v.clone();
+    shown.aov = Aov::Deflection;
+    worker.send(request(&shown), false);
+    let scale = match next() {
+        Reply::Shown {
+            aov,
+            scale,
+            display,
+        } => {
+            assert_eq!(aov, Aov::Deflection);
+            assert_eq!(display.size, [W, H]);
+            scale
+        }
+        other => panic!("expected the image coloured again, got {other:?}"),
+    };
+    let (tx, rx) = std::sync::mpsc::channel();
+    worker.send(
+        Request {
+            capture: Some(tx),
+            ..request(&shown)
+        },
+        false,
+    );
+    let frame = rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("captured")
+        .expect("the image read back");
+    assert_eq!((frame.width, frame.height), (W, H));
+    let largest = frame
+        .pixels
+        .iter()
+        .map(|p| p.deflection_deg.abs())
+        .fold(0.0, f32::max);
+    assert_eq!(
+        scale, largest,
+        "the colour scale is the image's largest deflection"
+    );
+    // Converged and shown: nothing more comes.
+    assert!(
+        worker
+            .replies
+            .recv_timeout(Duration::from_millis(300))
+            .is_err()
+    );
+}
+
 #[test]
 fn while_moving_the_resolution_drops_to_the_frame_budget() {
     let mut v = ViewSettings::from_scene(
