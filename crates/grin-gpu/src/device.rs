@@ -309,7 +309,7 @@ impl GpuContext {
     /// Wait for the work submitted so far on this thread's queue, without holding the
     /// device while waiting: wgpu's blocking poll keeps a device lock for the whole wait,
     /// so a window sharing the device (the viewer) could not submit or present meanwhile.
-    /// Polls without blocking, sleeping 20 us doubling to 1 ms in between.
+    /// Polls without blocking ([`Self::wait_until`]).
     pub fn wait_submitted(&self) -> Result<(), GpuError> {
         let (tx, rx) = std::sync::mpsc::channel();
         self.queue.on_submitted_work_done(move || {
@@ -320,7 +320,14 @@ impl GpuContext {
 
     /// Poll the device without blocking until `rx` holds a value (a callback of the
     /// device's fired), then return it; a lost device or a captured error ends the wait.
+    /// The pauses grow to 1 ms on a CPU adapter (its cores render) and 250 us on a GPU
+    /// (a frame of ~1 ms is not held much past its end).
     pub fn wait_until<T>(&self, rx: &std::sync::mpsc::Receiver<T>) -> Result<T, GpuError> {
+        let longest = std::time::Duration::from_micros(if self.is_cpu_adapter() {
+            1000
+        } else {
+            250
+        });
         let mut pause = std::time::Duration::from_micros(20);
         loop {
             self.device
@@ -339,7 +346,7 @@ impl GpuContext {
             }
             self.check_fault()?;
             std::thread::sleep(pause);
-            pause = (pause * 2).min(std::time::Duration::from_millis(1));
+            pause = (pause * 2).min(longest);
         }
     }
 
