@@ -1,6 +1,9 @@
 //! [`GpuRenderer`]: a [`RenderScene`] on the GPU. Uploads the scene and the baked field,
 //! dispatches the render kernel in bands of rows (progress and cancellation between
-//! bands), and reads the pixels back into the CPU renderer's [`Frame`].
+//! bands), and reads the pixels back into the CPU renderer's [`Frame`] (or adds them to the
+//! viewer's image on the device, [`crate::view`]).
+//!
+//! Over 800 lines: one concept, the renderer's buffers and the bands dispatched on them.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;

@@ -9,6 +9,8 @@
 //! where it is one band; [`ViewImage::show`] colours it again in another AOV. Pixels are read
 //! back only when asked ([`ViewImage::read_frame`], [`ViewImage::read_display`]: a
 //! screenshot, an export, a test), and counted apart ([`ViewImage::pixel_bytes_read_back`]).
+//!
+//! Over 600 lines: one concept, the image's buffers and the passes and read-backs on them.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 

@@ -2,10 +2,11 @@
 //! with. The render thread's image is a texture on that device, drawn by egui beside the
 //! panel (no pixel crosses to the CPU); mouse and keys move the orbit camera; the scene
 //! file is watched and reloaded. With `--frames N` the same window runs N rendered frames, writes
-//! the last one and reports frame rates (Xvfb in CI).
+//! the last one and reports frame rates (Xvfb in CI); `--offscreen` runs them without a
+//! window.
 //!
-//! Over 500 lines: the event loop, the panel and the headless run share the app's state
-//! and are read together.
+//! Over 1,000 lines: the event loop, the panel and the headless runs (windowed and
+//! offscreen) share the app's state and are read together.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};

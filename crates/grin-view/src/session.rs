@@ -13,6 +13,9 @@
 //! step's value only re-aim the renderer ([`GpuRenderer::retarget`]); the integrator,
 //! the step policy or the medium switched on or off build new pipelines; another field
 //! (time, interpolation, an edited medium) bakes its grid (memory, then the disk cache).
+//!
+//! Over 600 lines: one concept, the session's scene, fields, renderers and image kept
+//! between frames.
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
