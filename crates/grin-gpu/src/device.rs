@@ -323,11 +323,8 @@ impl GpuContext {
     /// The pauses grow to 1 ms on a CPU adapter (its cores render) and 250 us on a GPU
     /// (a frame of ~1 ms is not held much past its end).
     pub fn wait_until<T>(&self, rx: &std::sync::mpsc::Receiver<T>) -> Result<T, GpuError> {
-        let longest = std::time::Duration::from_micros(if self.is_cpu_adapter() {
-            1000
-        } else {
-            250
-        });
+        let longest =
+            std::time::Duration::from_micros(if self.is_cpu_adapter() { 1000 } else { 250 });
         let mut pause = std::time::Duration::from_micros(20);
         loop {
             self.device
