@@ -539,27 +539,15 @@ impl<'a> GpuRenderer<'a> {
             &format!("a {width}x{height} frame"),
         )
         .map_err(|e| GpuError::Memory(e.to_string()))?;
-        let mut row = 0;
-        let mut device_seconds = 0.0;
-        while row < height {
-            if cancel.load(Ordering::Relaxed) {
-                return Err(GpuError::Cancelled);
-            }
-            let rows = self.rows_per_band.min(height - row);
+        self.each_band(cancel, |row, rows| {
             // Converted straight from the mapped read-back buffer: no copy of the band.
             let mut take = |band: &[PixelOut]| {
                 pixels.extend(band.iter().map(|p| p.to_cpu()));
             };
             let seconds = self.render_band(row, rows, BandSink::ReadBack(&mut take))?;
-            device_seconds += seconds.unwrap_or(0.0);
-            row += rows;
             progress(rows);
-        }
-        if let Some(timer) = &self.timer {
-            timer
-                .last
-                .store(device_seconds.to_bits(), Ordering::Relaxed);
-        }
+            Ok(seconds)
+        })?;
         Ok(Frame {
             width,
             height,
@@ -582,6 +570,27 @@ impl<'a> GpuRenderer<'a> {
     ) -> Result<ViewStats, GpuError> {
         let (width, height) = (self.params.width, self.params.height);
         image.begin_frame(width, height, overwrite, self.params.spp);
+        let image = &*image;
+        self.each_band(cancel, |row, rows| {
+            let sink = BandSink::View {
+                image,
+                first: row == 0,
+                show: (row + rows >= height).then_some(aov),
+            };
+            self.render_band(row, rows, sink)
+        })?;
+        image.read_stats(self.ctx, aov)
+    }
+
+    /// Run `band(first_row, rows)` over the frame's bands, stopping between them with
+    /// [`GpuError::Cancelled`] when `cancel` is set; the device seconds they return are
+    /// the frame's ([`Self::last_device_seconds`]).
+    fn each_band(
+        &self,
+        cancel: &AtomicBool,
+        mut band: impl FnMut(u32, u32) -> Result<Option<f64>, GpuError>,
+    ) -> Result<(), GpuError> {
+        let height = self.params.height;
         let mut row = 0;
         let mut device_seconds = 0.0;
         while row < height {
@@ -589,12 +598,7 @@ impl<'a> GpuRenderer<'a> {
                 return Err(GpuError::Cancelled);
             }
             let rows = self.rows_per_band.min(height - row);
-            let sink = BandSink::View {
-                image: &*image,
-                first: row == 0,
-                show: (row + rows >= height).then_some(aov),
-            };
-            device_seconds += self.render_band(row, rows, sink)?.unwrap_or(0.0);
+            device_seconds += band(row, rows)?.unwrap_or(0.0);
             row += rows;
         }
         if let Some(timer) = &self.timer {
@@ -602,7 +606,7 @@ impl<'a> GpuRenderer<'a> {
                 .last
                 .store(device_seconds.to_bits(), Ordering::Relaxed);
         }
-        image.read_stats(self.ctx, aov)
+        Ok(())
     }
 
     /// Bytes read back from the device by this renderer's frames so far (pixels and
