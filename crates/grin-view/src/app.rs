@@ -275,11 +275,10 @@ impl App {
 
     /// Take the render thread's replies, waiting up to `wait` for the first.
     fn poll_worker(&mut self, wait: Duration) {
-        let first = self
+        let mut first = self
             .worker
             .as_ref()
             .and_then(|w| w.replies.recv_timeout(wait).ok());
-        let mut first = first;
         while let Some(reply) = first
             .take()
             .or_else(|| self.worker.as_ref().and_then(|w| w.replies.try_recv().ok()))

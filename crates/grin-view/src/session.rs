@@ -172,12 +172,6 @@ fn resolve_auto(scene: &mut RenderScene, cached: &mut Option<(String, TraceSetti
     }
 }
 
-/// The view accumulated in the image on the device.
-struct Accum {
-    view_key: String,
-    samples: u32,
-}
-
 /// The viewer's scene on the GPU.
 pub struct Session<'a> {
     ctx: &'a GpuContext,
@@ -188,7 +182,8 @@ pub struct Session<'a> {
     fields: VecDeque<FieldEntry>,
     /// The renderers of still frames and of preview frames (while the camera moves).
     gpus: [Option<Gpu<'a>>; 2],
-    accum: Option<Accum>,
+    /// The view whose samples the image on the device holds (its key).
+    accum: Option<String>,
     /// The accumulated image and the texture the window draws.
     image: Option<ViewImage>,
     /// The texture's size (the window's image area); `None`: the image's own size.
@@ -210,7 +205,7 @@ impl std::fmt::Debug for Session<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Session")
             .field("path", &self.path)
-            .field("samples", &self.accum.as_ref().map(|a| a.samples))
+            .field("samples", &self.image.as_ref().map(ViewImage::samples))
             .finish_non_exhaustive()
     }
 }
@@ -284,7 +279,7 @@ impl<'a> Session<'a> {
     /// changed, or its accumulation is short of `max_spp`.
     pub fn needs_frame(&self, settings: &ViewSettings, width: u32, height: u32) -> bool {
         self.accum_of(settings, width, height)
-            .is_none_or(|a| a.samples < settings.max_spp)
+            .is_none_or(|samples| samples < settings.max_spp)
     }
 
     /// An image of this view (`settings` at `width` x `height`) is accumulated, at any
@@ -346,11 +341,17 @@ impl<'a> Session<'a> {
             .map_or(0, ViewImage::pixel_bytes_read_back)
     }
 
-    /// The accumulation, where it is of this view.
-    fn accum_of(&self, settings: &ViewSettings, width: u32, height: u32) -> Option<&Accum> {
+    /// The samples accumulated, where the image holds this view.
+    fn accum_of(&self, settings: &ViewSettings, width: u32, height: u32) -> Option<u32> {
         let applied = settings.apply(&self.scene, width, height);
-        let key = view_key(&applied, settings);
-        self.accum.as_ref().filter(|a| a.view_key == key)
+        self.samples_of(&view_key(&applied, settings))
+    }
+
+    /// The samples the image holds of the view keyed `view` (none: another view, or an
+    /// image started again).
+    fn samples_of(&self, view: &str) -> Option<u32> {
+        let samples = self.image.as_ref().map_or(0, ViewImage::samples);
+        (self.accum.as_deref() == Some(view) && samples > 0).then_some(samples)
     }
 
     /// Render one frame of `settings` at `width` x `height` (the internal resolution)
@@ -382,17 +383,11 @@ impl<'a> Session<'a> {
                 self.image = Some(image);
             }
         }
-        let kept = self.image.as_ref().is_some_and(|i| i.samples() > 0);
-        let continuing = kept
-            && self
-                .accum
-                .as_ref()
-                .is_some_and(|a| a.view_key == view && a.samples < settings.max_spp);
-        let first_sample = if continuing {
-            self.accum.as_ref().map_or(0, |a| a.samples)
-        } else {
-            0
-        };
+        let first_sample = self
+            .samples_of(&view)
+            .filter(|&s| s < settings.max_spp)
+            .unwrap_or(0);
+        let continuing = first_sample > 0;
         let spp_total = settings.max_spp.max(applied.render.spp);
 
         let static_key = json(&(
@@ -507,10 +502,7 @@ impl<'a> Session<'a> {
         let spp = applied.render.spp;
         let rays = f64::from(width) * f64::from(height) * f64::from(spp);
         let samples = image.samples();
-        self.accum = Some(Accum {
-            view_key: view,
-            samples,
-        });
+        self.accum = Some(view);
         Ok(Rendered {
             width,
             height,
