@@ -38,9 +38,13 @@ use grin_scene::{FieldSpec, Interpolation, Scene};
 use crate::display::Aov;
 use crate::settings::ViewSettings;
 
-/// Pixels per band of a frame on a CPU adapter (lavapipe): the longest the window waits
-/// to draw is one band (heat haze at 2 spp: ~0.3 s; 32 Ki pixels, `grin render`'s band
-/// there, held the window 3.1 s).
+/// Seconds of work a band of a frame is cut to on a CPU adapter (lavapipe), at the cost
+/// the renderer last measured: the window's submissions wait behind the band in flight on
+/// its one queue, so this is the longest it waits to draw (32 Ki-pixel bands, `grin
+/// render`'s there, held a heat-haze window 3.1 s), and each band costs a submission and a
+/// wait (~15 ms), so bands are no shorter than they need to be.
+pub const CPU_BAND_SECONDS: f64 = 0.25;
+/// The fewest pixels a band has on a CPU adapter (and its size before a cost is measured).
 pub const CPU_BAND_PIXELS: u32 = 4096;
 
 /// Fields kept in memory (time steps of an animation, interpolations).
@@ -182,6 +186,9 @@ pub struct Session<'a> {
     fields: VecDeque<FieldEntry>,
     /// The renderers of still frames and of preview frames (while the camera moves).
     gpus: [Option<Gpu<'a>>; 2],
+    /// Each renderer's seconds per pixel-sample in its last frame (for band sizes on a CPU
+    /// adapter).
+    sample_seconds: [Option<f64>; 2],
     /// The view whose samples the image on the device holds (its key).
     accum: Option<String>,
     /// The accumulated image and the texture the window draws.
@@ -232,6 +239,7 @@ impl<'a> Session<'a> {
             cache,
             fields: VecDeque::new(),
             gpus: [None, None],
+            sample_seconds: [None, None],
             accum: None,
             image: None,
             display_size: None,
@@ -464,11 +472,14 @@ impl<'a> Session<'a> {
         let Some(g) = &mut self.gpus[slot] else {
             return Err(RenderFailure::Error(anyhow::anyhow!("no renderer")));
         };
+        let spp = applied.render.spp;
         if self.ctx.is_cpu_adapter() {
-            // The window's submissions wait behind the band in flight on lavapipe's one
-            // queue: short bands keep it drawing (and cancels prompt).
-            g.renderer
-                .limit_band_rows((CPU_BAND_PIXELS / width.max(1)).max(1));
+            // Bands of CPU_BAND_SECONDS keep the window drawing (and cancels prompt).
+            let pixels = self.sample_seconds[slot].map_or(CPU_BAND_PIXELS, |c| {
+                (CPU_BAND_SECONDS / (c * f64::from(spp.max(1))).max(1e-12))
+                    .clamp(f64::from(CPU_BAND_PIXELS), f64::from(u32::MAX)) as u32
+            });
+            g.renderer.limit_band_rows((pixels / width.max(1)).max(1));
         }
         let method = method_name(&g.scene.settings);
         let Some(image) = self.image.as_mut() else {
@@ -493,13 +504,14 @@ impl<'a> Session<'a> {
             };
         self.shown_aov = Some(settings.aov);
         let gpu_seconds = start.elapsed().as_secs_f64();
+        let pixel_samples = f64::from(width) * f64::from(height) * f64::from(spp.max(1));
+        self.sample_seconds[slot] = Some(gpu_seconds / pixel_samples.max(1.0));
         let device_seconds = g.renderer.last_device_seconds();
         let read_back_bytes =
             g.renderer.bytes_read_back() + image.stats_bytes_read_back() - read_before;
         self.frame_warning = g
             .renderer
             .loop_limit_warning_of(u64::from(stats.loop_limit_suspects));
-        let spp = applied.render.spp;
         let rays = f64::from(width) * f64::from(height) * f64::from(spp);
         let samples = image.samples();
         self.accum = Some(view);
