@@ -127,14 +127,22 @@ pub fn build_field_capped(
                 interpolation,
             },
             Some(ambient),
-        ) => {
-            let baked = crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)?;
-            Arc::new(match interpolation {
+        ) => match crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)? {
+            crate::grinf::Grinf::Dense(baked) => Arc::new(match interpolation {
                 Some(grin_scene::Interpolation::Trilinear) => baked.with_interp(Interp::Trilinear),
                 Some(grin_scene::Interpolation::Tricubic) => baked.with_interp(Interp::Tricubic),
                 None => baked,
-            })
-        }
+            }),
+            crate::grinf::Grinf::Sparse(_)
+                if interpolation == &Some(grin_scene::Interpolation::Tricubic) =>
+            {
+                return Err(FieldError::File {
+                        path: scene_dir.join(path).display().to_string(),
+                        message: "a sparse bake is sampled trilinearly only; `interpolation = \"tricubic\"` needs a dense bake".into(),
+                    });
+            }
+            crate::grinf::Grinf::Sparse(sparse) => Arc::new(sparse),
+        },
     };
     check_positive(field.as_ref(), &field.describe())?;
     Ok(field)

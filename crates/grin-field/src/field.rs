@@ -135,6 +135,19 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
     fn as_baked(&self) -> Option<&crate::baked::BakedField> {
         None
     }
+
+    /// The sparse grid itself when this field is a sparse bake (a version-2 `.grinf`):
+    /// what the GPU backend must not bake again as one dense box.
+    fn as_sparse(&self) -> Option<&crate::sparse::SparseField> {
+        None
+    }
+
+    /// An upper bound on |n - ambient| over the world box [`lo`, `hi`], where the field
+    /// can prove one (a sum of Gaussians bounded by each one's value at the box's nearest
+    /// point); `None` where it cannot, and a sparse bake then probes the box instead.
+    fn delta_bound(&self, _lo: DVec3, _hi: DVec3) -> Option<f64> {
+        None
+    }
 }
 
 /// [`IndexField::sample4`] one point at a time with [`IndexField::sample`] (the default,

@@ -17,11 +17,11 @@ pub const VERSION: u32 = 1;
 /// Bytes of the fixed part of the header (the description follows it).
 pub const FIXED_HEADER_BYTES: usize = 208;
 /// The voxel data starts at a multiple of this (so numpy/GPU views are aligned).
-const DATA_ALIGN: usize = 16;
+pub(crate) const DATA_ALIGN: usize = 16;
 /// Bytes of the trailing CRC-32.
-const CRC_BYTES: usize = 4;
+pub(crate) const CRC_BYTES: usize = 4;
 /// Longest source description kept in the header.
-const MAX_DESCRIPTION_BYTES: usize = 4096;
+pub(crate) const MAX_DESCRIPTION_BYTES: usize = 4096;
 
 /// Why a .grinf file could not be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -32,7 +32,10 @@ pub enum GrinfError {
     Write(#[from] grin_output::OutputError),
     #[error("{path}: not a .grinf file (bad magic {found:?}, expected {MAGIC:?})")]
     Magic { path: String, found: Vec<u8> },
-    #[error("{path}: unsupported .grinf version {found} (this grin reads version {VERSION})")]
+    #[error(
+        "{path}: unsupported .grinf version {found} (this grin reads version {VERSION}, dense, and {}, sparse)",
+        crate::sparse::file::VERSION
+    )]
     Version { path: String, found: u32 },
     #[error("{path}: file is {actual} bytes but its header says {expected} (truncated or padded)")]
     Size {
@@ -48,6 +51,10 @@ pub enum GrinfError {
         stored: u32,
         computed: u32,
     },
+    #[error(
+        "{path}: a sparse .grinf (version 2), where only a dense grid is read here (the CPU backend and `grin info` read it; the GPU backend, `grin export` and Python do not yet)"
+    )]
+    Sparse { path: String },
     #[error("{path}: bad header: {message}")]
     Header { path: String, message: String },
 }
@@ -176,11 +183,15 @@ pub fn load_for_medium(
     scene_dir: &Path,
     bounds: Bounds,
     ambient: f64,
-) -> Result<BakedField, FieldError> {
+) -> Result<Grinf, FieldError> {
     let full = scene_dir.join(path);
-    let field = load(&full)?;
+    let file = open(&full)?;
+    let field: &dyn crate::field::IndexField = match &file {
+        Grinf::Dense(f) => f,
+        Grinf::Sparse(f) => f,
+    };
     let name = full.display().to_string();
-    let file_ambient = crate::field::IndexField::ambient_index(&field);
+    let file_ambient = field.ambient_index();
     if (file_ambient - ambient).abs() > 1e-12 * ambient {
         return Err(FieldError::File {
             path: name,
@@ -189,7 +200,7 @@ pub fn load_for_medium(
             ),
         });
     }
-    let file_bounds = crate::field::IndexField::bounds(&field);
+    let file_bounds = field.bounds();
     if file_bounds != bounds {
         return Err(FieldError::File {
             path: name,
@@ -198,7 +209,45 @@ pub fn load_for_medium(
             ),
         });
     }
-    Ok(field)
+    Ok(file)
+}
+
+/// The version word of a .grinf image (after its magic; at least 12 bytes).
+pub(crate) fn version_of(b: &[u8]) -> u32 {
+    u32::from_le_bytes([b[8], b[9], b[10], b[11]])
+}
+
+/// A `.grinf` file of either layout.
+#[derive(Debug, Clone)]
+pub enum Grinf {
+    Dense(BakedField),
+    Sparse(crate::sparse::SparseField),
+}
+
+impl Grinf {
+    /// The field, to trace.
+    pub fn into_field(self) -> std::sync::Arc<dyn crate::field::IndexField> {
+        match self {
+            Grinf::Dense(f) => std::sync::Arc::new(f),
+            Grinf::Sparse(f) => std::sync::Arc::new(f),
+        }
+    }
+}
+
+/// Read a .grinf file, dense (version 1) or sparse (version 2).
+pub fn open(path: &Path) -> Result<Grinf, GrinfError> {
+    let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
+        path: path.display().to_string(),
+        err: source,
+    })?;
+    let name = path.display().to_string();
+    if bytes.len() >= MAGIC.len() + 4
+        && bytes[..MAGIC.len()] == MAGIC
+        && version_of(&bytes) == crate::sparse::file::VERSION
+    {
+        return crate::sparse::file::from_bytes(&bytes, &name).map(Grinf::Sparse);
+    }
+    from_bytes(&bytes, &name).map(Grinf::Dense)
 }
 
 /// Read only the header of a .grinf file (still checks size and checksum).
@@ -211,28 +260,28 @@ pub fn read_header(path: &Path) -> Result<GrinfHeader, GrinfError> {
 }
 
 /// Little-endian reader over the header.
-struct Reader<'a> {
-    b: &'a [u8],
-    at: usize,
+pub(crate) struct Reader<'a> {
+    pub(crate) b: &'a [u8],
+    pub(crate) at: usize,
 }
 
 impl Reader<'_> {
-    fn take<const N: usize>(&mut self) -> [u8; N] {
+    pub(crate) fn take<const N: usize>(&mut self) -> [u8; N] {
         let mut out = [0u8; N];
         out.copy_from_slice(&self.b[self.at..self.at + N]);
         self.at += N;
         out
     }
-    fn u32(&mut self) -> u32 {
+    pub(crate) fn u32(&mut self) -> u32 {
         u32::from_le_bytes(self.take())
     }
-    fn f32(&mut self) -> f32 {
+    pub(crate) fn f32(&mut self) -> f32 {
         f32::from_le_bytes(self.take())
     }
-    fn f64(&mut self) -> f64 {
+    pub(crate) fn f64(&mut self) -> f64 {
         f64::from_le_bytes(self.take())
     }
-    fn dvec3(&mut self) -> DVec3 {
+    pub(crate) fn dvec3(&mut self) -> DVec3 {
         DVec3::new(self.f64(), self.f64(), self.f64())
     }
 }
@@ -248,6 +297,9 @@ pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
             path: path.into(),
             found: b[..b.len().min(MAGIC.len())].to_vec(),
         });
+    }
+    if b.len() >= MAGIC.len() + 4 && version_of(b) == crate::sparse::file::VERSION {
+        return Err(GrinfError::Sparse { path: path.into() });
     }
     if b.len() < FIXED_HEADER_BYTES + CRC_BYTES {
         return Err(GrinfError::Size {

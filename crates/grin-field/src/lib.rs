@@ -19,6 +19,7 @@ pub mod grinf;
 pub mod interval;
 pub mod noise;
 pub mod real;
+pub mod sparse;
 pub mod vdb;
 
 pub use bounds::Bounds;

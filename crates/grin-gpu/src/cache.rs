@@ -293,6 +293,9 @@ pub fn scene_gpu_field(
     if m.field.as_baked().is_some() {
         return Ok(None);
     }
+    if m.field.as_sparse().is_some() {
+        return Err(GpuError::Bake(crate::render::SPARSE_ON_GPU.into()));
+    }
     let key = cache.map(|_| BakeCache::key(spec, scene_dir)).transpose()?;
     let cache = cache.zip(key.as_deref());
     gpu_bake_cached(m.field.as_ref(), cache).map(Some)

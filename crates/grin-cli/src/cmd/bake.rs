@@ -38,6 +38,14 @@ pub struct Args {
     /// Bake the whole bounds instead of cropping to where n differs from ambient.
     #[arg(long)]
     pub no_crop: bool,
+    /// Bake sparsely: bricks only where the index differs from ambient, each at the
+    /// coarsest of its levels that meets --error (a version-2 .grinf, trilinear; the CPU
+    /// backend renders it, the GPU backend not yet).
+    #[arg(long, conflicts_with_all = ["resolution", "interp", "no_crop"])]
+    pub sparse: bool,
+    /// With --sparse: bricks along the medium's longest axis.
+    #[arg(long, requires = "sparse", default_value_t = grin_field::sparse::bake::DEFAULT_TOP_BRICKS)]
+    pub bricks: usize,
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -168,6 +176,9 @@ fn bake_one(
         .with_context(|| format!("{}: [medium]", args.scene.display()))?;
     for w in field.warnings() {
         eprintln!("grin: warning: {w}");
+    }
+    if args.sparse {
+        return bake_sparse(args, field.as_ref(), &medium.field, output, json);
     }
     let opts = BakeOptions {
         resolution: args.resolution,
@@ -331,4 +342,141 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
         "source_evals": r.source_evals,
         "homogeneous_cells": r.homogeneous_cells,
     })
+}
+
+/// `grin bake --sparse`: bake `field` into a sparse .grinf at `output`.
+fn bake_sparse(
+    args: &Args,
+    field: &dyn grin_field::IndexField,
+    spec: &grin_scene::FieldSpec,
+    output: &Path,
+    json: bool,
+) -> anyhow::Result<serde_json::Value> {
+    use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+    let opts = SparseOptions {
+        error_budget: args.error,
+        max_memory: args.max_memory.unwrap_or(bake::DEFAULT_MAX_MEMORY),
+        storage: args.storage.map(|s| match s {
+            StorageArg::F32 => Storage::F32,
+            StorageArg::I16 => Storage::I16,
+        }),
+        top_bricks: args.bricks,
+        gradient: GradientMode::for_field(spec),
+        ..Default::default()
+    };
+    let bar = super::styled_bar(1, "{msg:>24} [{bar:40}] {pos}/{len} {elapsed}");
+    let stage = Mutex::new(String::new());
+    let progress = |name: &str, done: u64, total: u64| {
+        if let Ok(mut s) = stage.lock()
+            && *s != name
+        {
+            *s = name.to_string();
+            bar.set_message(name.to_string());
+            bar.set_length(total);
+        }
+        bar.set_position(done);
+    };
+    let result = bake_sparse(field, &opts, &progress);
+    bar.finish_and_clear();
+    let (sparse, r) = result.with_context(|| format!("{}: bake failed", args.scene.display()))?;
+    grin_field::sparse::file::save(&sparse, output)?;
+    if r.source_limited {
+        eprintln!(
+            "grin: warning: {}: the budget {:.1e} is not met (relative error {:.2e}): {} bricks \
+             reached half the source's voxel size, where what is left is the source's own \
+             interpolation, not missing data; the bake is kept",
+            args.scene.display(),
+            r.budget,
+            r.relative_error,
+            r.limited_bricks
+        );
+    }
+    let summary = serde_json::json!({
+        "output": output.display().to_string(),
+        "source": field.describe(),
+        "sparse": true,
+        "bricks_per_axis": r.top.dims,
+        "brick_edge": r.top.edge,
+        "active_bricks": r.active_bricks,
+        "total_bricks": r.total_bricks,
+        "levels": r.levels,
+        "finest_spacing": r.finest_spacing,
+        "storage": r.storage.name(),
+        "interp": "trilinear",
+        "bytes": r.bytes,
+        "memory_bytes": r.memory_bytes,
+        "dense_bytes": r.dense_bytes,
+        "max_err_n": r.errors.max_err_n,
+        "rms_err_n": r.errors.rms_err_n,
+        "max_err_grad": r.errors.max_err_grad,
+        "rms_err_grad": r.errors.rms_err_grad,
+        "error_points": r.errors.points,
+        "delta_n_range": r.delta_n_range,
+        "relative_error": r.relative_error,
+        "budget": r.budget,
+        "meets_budget": r.meets_budget,
+        "source_limited": r.source_limited,
+        "limited_bricks": r.limited_bricks,
+        "proven_empty": r.proven_empty,
+        "seconds": r.seconds,
+        "source_evals": r.source_evals,
+    });
+    let to_stream = crate::is_stream(output);
+    if json {
+        crate::report(to_stream, serde_json::to_string_pretty(&summary)?);
+    } else if !args.json {
+        let levels: Vec<String> = r
+            .levels
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n > 0)
+            .map(|(l, n)| format!("{n} x {}^3", (grin_field::sparse::BASE_CELLS << l) + 1))
+            .collect();
+        let text = [
+            format!("baked     {} (sparse)", field.describe()),
+            format!("to        {}", output.display()),
+            format!(
+                "bricks    {} of {} active ({}x{}x{} of edge {:.4}), nodes {}",
+                r.active_bricks,
+                r.total_bricks,
+                r.top.dims[0],
+                r.top.dims[1],
+                r.top.dims[2],
+                r.top.edge,
+                if levels.is_empty() { "none".to_string() } else { levels.join(", ") }
+            ),
+            format!(
+                "bytes     {} ({} {}; a dense grid at the finest spacing {:.4} over the active bricks: {})",
+                r.bytes,
+                r.storage.name(),
+                "trilinear",
+                r.finest_spacing,
+                r.dense_bytes
+            ),
+            format!(
+                "error     n: max {:.3e} rms {:.3e} ({:.3e} of the delta_n range {:.3e}; budget {:.1e}{})",
+                r.errors.max_err_n,
+                r.errors.rms_err_n,
+                r.relative_error,
+                r.delta_n_range,
+                r.budget,
+                if r.meets_budget {
+                    ", met"
+                } else {
+                    ", not met at half the source's voxel size"
+                }
+            ),
+            format!(
+                "          grad n: max {:.3e} rms {:.3e} ({} random points)",
+                r.errors.max_err_grad, r.errors.rms_err_grad, r.errors.points
+            ),
+            format!(
+                "time      {:.2} s ({} source evaluations)",
+                r.seconds, r.source_evals
+            ),
+        ]
+        .join("\n");
+        crate::report(to_stream, text);
+    }
+    Ok(summary)
 }

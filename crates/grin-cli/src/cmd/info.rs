@@ -70,8 +70,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn info_grinf(path: &Path, json: bool) -> anyhow::Result<()> {
+    let field = match grinf::open(path)? {
+        grinf::Grinf::Sparse(s) => return info_sparse(path, &s, json),
+        grinf::Grinf::Dense(f) => f,
+    };
     let h = grinf::read_header(path)?;
-    let field = grinf::load(path)?;
     let g = &h.geometry;
     let (lo, hi) = g.world_box();
     let (n_min, n_max) = field.n_range();
@@ -173,4 +176,89 @@ pub fn bounds_json(b: &grin_field::Bounds) -> serde_json::Value {
 /// The stable name of what a baked grid gives outside its nodes.
 fn outside_name(o: grin_field::baked::Outside) -> &'static str {
     o.into()
+}
+
+/// `grin info` of a sparse (version-2) `.grinf`.
+fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> anyhow::Result<()> {
+    use grin_field::sparse::BASE_CELLS;
+    let top = f.top();
+    let p = f.provenance();
+    let (n_min, n_max) = f.n_range();
+    let file_bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    let levels = f.level_counts();
+    if json {
+        let v = serde_json::json!({
+            "path": path.display().to_string(),
+            "format": "grinf",
+            "version": grin_field::sparse::file::VERSION,
+            "sparse": true,
+            "bricks_per_axis": top.dims,
+            "brick_edge": top.edge,
+            "origin": top.origin.to_array(),
+            "active_bricks": f.bricks().len(),
+            "levels": levels,
+            "finest_spacing": f.finest_spacing(),
+            "storage": f.storage().name(),
+            "interp": "trilinear",
+            "ambient_index": f.ambient_index(),
+            "bounds": bounds_json(&f.bounds()),
+            "source": p.source,
+            "max_err_n": p.max_err_n,
+            "rms_err_n": p.rms_err_n,
+            "max_err_grad": p.max_err_grad,
+            "rms_err_grad": p.rms_err_grad,
+            "n_min": n_min,
+            "n_max": n_max,
+            "max_grad_n": f.max_grad_n(),
+            "file_bytes": file_bytes,
+            "data_bytes": f.data_bytes(),
+            "memory_bytes": f.memory_bytes(),
+        });
+        outln!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    outln!(
+        "{}: grin sparse baked field, format version {}",
+        path.display(),
+        grin_field::sparse::file::VERSION
+    );
+    outln!("  source        {}", p.source);
+    outln!(
+        "  bricks        {} of {} active ({}x{}x{}, edge {}), {} storage, trilinear",
+        f.bricks().len(),
+        f.table().len(),
+        top.dims[0],
+        top.dims[1],
+        top.dims[2],
+        top.edge,
+        f.storage().name()
+    );
+    for (l, n) in levels.iter().enumerate().filter(|(_, n)| **n > 0) {
+        outln!(
+            "  level {l}       {n} bricks of {}^3 nodes (spacing {:.4e})",
+            (BASE_CELLS << l) + 1,
+            f.spacing(l as u8)
+        );
+    }
+    outln!("  origin        {:?}", top.origin.to_array());
+    outln!("  bounds        {:?}", f.bounds());
+    outln!("  ambient n     {}", f.ambient_index());
+    outln!(
+        "  n range       {n_min} .. {n_max}, max |grad n| {:.4e}",
+        f.max_grad_n()
+    );
+    outln!(
+        "  bake error    n: max {:.3e} rms {:.3e}; grad n: max {:.3e} rms {:.3e}",
+        p.max_err_n,
+        p.rms_err_n,
+        p.max_err_grad,
+        p.rms_err_grad
+    );
+    outln!(
+        "  bytes         {} on disk, {} of voxels, {} in memory",
+        file_bytes,
+        f.data_bytes(),
+        f.memory_bytes()
+    );
+    Ok(())
 }

@@ -109,6 +109,18 @@ impl IndexField for Plume {
     fn feature_size(&self) -> Option<f64> {
         self.blobs.iter().map(|b| b.s).reduce(f64::min)
     }
+    /// Each blob's |a| exp(-d^2 / s^2) at the box's point nearest its centre, summed.
+    fn delta_bound(&self, lo: DVec3, hi: DVec3) -> Option<f64> {
+        Some(
+            self.blobs
+                .iter()
+                .map(|b| {
+                    let d2 = b.center.clamp(lo, hi).distance_squared(b.center);
+                    b.a.abs() * (-d2 / (b.s * b.s)).exp()
+                })
+                .sum(),
+        )
+    }
 }
 
 #[cfg(test)]

@@ -140,6 +140,24 @@ pub enum BakeError {
         resolution: usize,
         best: f64,
     },
+    #[error(
+        "a sparse bake needs more than the memory cap of {cap} bytes ({need} bytes after {done} of {active} active bricks; raise --max-memory or --error)"
+    )]
+    SparseMemory {
+        need: u64,
+        cap: u64,
+        done: usize,
+        active: usize,
+    },
+    #[error(
+        "cannot meet the error budget {budget:e} with bricks down to a spacing of {spacing}: the sparse bake's relative error is {best:e} ({limited} bricks at their finest level; raise --error or --bricks)"
+    )]
+    SparseBudgetNotMet {
+        budget: f64,
+        best: f64,
+        spacing: f64,
+        limited: usize,
+    },
     #[error("invalid bake option: {0}")]
     Option(String),
     #[error(transparent)]
@@ -453,7 +471,7 @@ pub fn memory_bytes(geometry: &GridGeometry, storage: Storage, interp: Interp) -
 }
 
 /// i16 if half a quantization step of the delta_n range fits the budget share.
-fn choose_storage(range: f64, budget: f64) -> Storage {
+pub(crate) fn choose_storage(range: f64, budget: f64) -> Storage {
     let half_step = 0.5 / f64::from(i16::MAX);
     if range == 0.0 || half_step <= QUANT_FRACTION_OF_BUDGET * budget {
         Storage::I16
@@ -592,7 +610,7 @@ fn sample_grid(
     Ok(data)
 }
 
-fn sample_node(
+pub(crate) fn sample_node(
     source: &dyn IndexField,
     bounds: Bounds,
     ambient: f64,

@@ -1,0 +1,322 @@
+//! The sparse `.grinf` file (version 2): the same magic and checksum as the dense layout
+//! (version 1), a header, the brick table, the brick records and the voxel pool, all
+//! little-endian. docs/grinf.md documents it byte by byte.
+//!
+//! ```text
+//! 0    magic "GRINF\0\0\0"
+//! 8    u32 version = 2, u32 table offset (a multiple of 16)
+//! 16   u32 bricks per axis x3, u32 active bricks, u32 storage (0 f32, 1 i16), u32 interp (0)
+//! 40   f64 ambient index, f64 origin x3, f64 brick edge
+//! 80   u32 bounds kind (0 sphere, 1 box), u32 0, f64 x6 (centre, radius, 0, 0 | min, max)
+//! 136  f64 max and RMS |n error|, max and RMS |grad n error|
+//! 168  u32 description bytes, u32 0; the description (UTF-8) follows at 176
+//! table offset: u32 per top brick (x fastest): the active brick's number, 0xFFFFFFFF empty
+//! then, at a multiple of 16: 16 bytes per active brick: u32 level, f32 scale of delta_n,
+//!   f32 scale of the gradient (1, 1 for f32), u32 0
+//! then, at a multiple of 16: the voxels of brick 0, 1, ... in order, each brick
+//!   ((4 << level) + 1)^3 voxels x fastest, a voxel 4 f32 or 4 i16
+//! last 4 bytes: CRC-32 of everything before them
+//! ```
+//!
+//! A brick's position is where the table names it; its voxels start where the previous
+//! brick's end.
+
+use glam::DVec3;
+
+use super::{BASE_CELLS, Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid};
+use crate::baked::{BakeProvenance, Storage};
+use crate::bounds::Bounds;
+use crate::field::IndexField;
+use crate::grinf::{CRC_BYTES, DATA_ALIGN, GrinfError, MAGIC, MAX_DESCRIPTION_BYTES, Reader};
+
+/// The sparse layout's version word.
+pub const VERSION: u32 = 2;
+/// Bytes of the fixed header (the description follows).
+pub const FIXED_HEADER_BYTES: usize = 176;
+/// Bytes of a brick record.
+const RECORD_BYTES: usize = 16;
+/// Most bricks a file's top grid may have (1024^3 table entries, 4 GiB).
+const MAX_TABLE_ENTRIES: u64 = 1 << 30;
+
+fn align(n: usize) -> usize {
+    n.div_ceil(DATA_ALIGN) * DATA_ALIGN
+}
+
+/// Serialize a sparse field.
+pub fn to_bytes(field: &SparseField) -> Vec<u8> {
+    let top = field.top();
+    let prov = field.provenance();
+    let mut desc = prov.source.as_bytes().to_vec();
+    desc.truncate(MAX_DESCRIPTION_BYTES);
+    let table_offset = align(FIXED_HEADER_BYTES + desc.len());
+    let records_offset = align(table_offset + 4 * field.table().len());
+    let pool_offset = align(records_offset + RECORD_BYTES * field.bricks().len());
+    let mut b = Vec::with_capacity(pool_offset + field.data_bytes() + CRC_BYTES);
+    let u32s =
+        |b: &mut Vec<u8>, v: &[u32]| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    let f64s =
+        |b: &mut Vec<u8>, v: &[f64]| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    b.extend_from_slice(&MAGIC);
+    u32s(&mut b, &[VERSION, table_offset as u32]);
+    u32s(&mut b, &top.dims.map(|d| d as u32));
+    let storage = match field.storage() {
+        Storage::F32 => 0,
+        Storage::I16 => 1,
+    };
+    u32s(&mut b, &[field.bricks().len() as u32, storage, 0]);
+    f64s(&mut b, &[field.ambient_index()]);
+    f64s(&mut b, &top.origin.to_array());
+    f64s(&mut b, &[top.edge]);
+    match field.bounds() {
+        Bounds::Sphere { center, radius } => {
+            u32s(&mut b, &[0, 0]);
+            f64s(&mut b, &[center.x, center.y, center.z, radius, 0.0, 0.0]);
+        }
+        Bounds::Box { min, max } => {
+            u32s(&mut b, &[1, 0]);
+            f64s(&mut b, &[min.x, min.y, min.z, max.x, max.y, max.z]);
+        }
+    }
+    f64s(
+        &mut b,
+        &[
+            prov.max_err_n,
+            prov.rms_err_n,
+            prov.max_err_grad,
+            prov.rms_err_grad,
+        ],
+    );
+    u32s(&mut b, &[desc.len() as u32, 0]);
+    debug_assert_eq!(b.len(), FIXED_HEADER_BYTES);
+    b.extend_from_slice(&desc);
+    b.resize(table_offset, 0);
+    u32s(&mut b, field.table());
+    b.resize(records_offset, 0);
+    for brick in field.bricks() {
+        u32s(&mut b, &[u32::from(brick.level)]);
+        b.extend_from_slice(&brick.scale[0].to_le_bytes());
+        b.extend_from_slice(&brick.scale[1].to_le_bytes());
+        u32s(&mut b, &[0]);
+    }
+    b.resize(pool_offset, 0);
+    match field.pool() {
+        Pool::F32(v) => v
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+        Pool::I16(v) => v
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+    }
+    let crc = crc32fast::hash(&b);
+    b.extend_from_slice(&crc.to_le_bytes());
+    b
+}
+
+/// Write `field` to `path`, staged and renamed into place (no partial file on failure).
+pub fn save(field: &SparseField, path: &std::path::Path) -> Result<(), GrinfError> {
+    let bytes = to_bytes(field);
+    Ok(grin_output::write_file(path, |w| w.write_all(&bytes))?)
+}
+
+/// Parse a whole sparse `.grinf` image; every count is checked against the file's size
+/// before anything is allocated, the checksum before anything is parsed.
+pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
+    let header_err = |message: String| GrinfError::Header {
+        path: path.into(),
+        message,
+    };
+    let short = |expected: usize| GrinfError::Size {
+        path: path.into(),
+        expected: expected as u64,
+        actual: b.len() as u64,
+    };
+    if b.len() < MAGIC.len() || b[..MAGIC.len()] != MAGIC {
+        return Err(GrinfError::Magic {
+            path: path.into(),
+            found: b[..b.len().min(MAGIC.len())].to_vec(),
+        });
+    }
+    if b.len() < FIXED_HEADER_BYTES + CRC_BYTES {
+        return Err(short(FIXED_HEADER_BYTES + CRC_BYTES));
+    }
+    let mut r = Reader { b, at: MAGIC.len() };
+    let version = r.u32();
+    if version != VERSION {
+        return Err(GrinfError::Version {
+            path: path.into(),
+            found: version,
+        });
+    }
+    let table_offset = r.u32() as usize;
+    let dims = [r.u32() as usize, r.u32() as usize, r.u32() as usize];
+    let active = r.u32() as usize;
+    let storage = match r.u32() {
+        0 => Storage::F32,
+        1 => Storage::I16,
+        s => return Err(header_err(format!("unknown storage code {s}"))),
+    };
+    match r.u32() {
+        0 => {}
+        s => {
+            return Err(header_err(format!(
+                "unknown interpolation code {s} (sparse fields are trilinear)"
+            )));
+        }
+    }
+    let entries = dims.iter().map(|&d| d as u64).product::<u64>();
+    if dims.contains(&0) || entries > MAX_TABLE_ENTRIES {
+        return Err(header_err(format!(
+            "a top grid of {dims:?} bricks (each axis at least 1, at most {MAX_TABLE_ENTRIES} in all)"
+        )));
+    }
+    let entries = entries as usize;
+    if active > entries {
+        return Err(header_err(format!(
+            "{active} active bricks in a top grid of {entries}"
+        )));
+    }
+    if table_offset < FIXED_HEADER_BYTES || !table_offset.is_multiple_of(DATA_ALIGN) {
+        return Err(header_err(format!("table offset {table_offset}")));
+    }
+    let records_offset = align(table_offset + 4 * entries);
+    let pool_offset = align(records_offset + RECORD_BYTES * active);
+    if b.len() < pool_offset + CRC_BYTES {
+        return Err(short(pool_offset + CRC_BYTES));
+    }
+    // The levels give the pool's size.
+    let mut levels = Vec::with_capacity(active);
+    let mut voxels = 0u64;
+    for i in 0..active {
+        let at = records_offset + RECORD_BYTES * i;
+        let level = u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]);
+        if level > u32::from(MAX_LEVEL) {
+            return Err(header_err(format!(
+                "brick {i} has level {level} (at most {MAX_LEVEL})"
+            )));
+        }
+        levels.push(level as u8);
+        voxels += (((BASE_CELLS << level) + 1) as u64).pow(3);
+    }
+    let expected =
+        pool_offset as u64 + voxels * storage.bytes_per_voxel() as u64 + CRC_BYTES as u64;
+    if expected != b.len() as u64 {
+        return Err(GrinfError::Size {
+            path: path.into(),
+            expected,
+            actual: b.len() as u64,
+        });
+    }
+    let body = b.len() - CRC_BYTES;
+    let stored = u32::from_le_bytes([b[body], b[body + 1], b[body + 2], b[body + 3]]);
+    let computed = crc32fast::hash(&b[..body]);
+    if stored != computed {
+        return Err(GrinfError::Checksum {
+            path: path.into(),
+            stored,
+            computed,
+        });
+    }
+    let ambient = r.f64();
+    let origin = r.dvec3();
+    let edge = r.f64();
+    let kind = r.u32();
+    let _reserved = r.u32();
+    let bv = [r.f64(), r.f64(), r.f64(), r.f64(), r.f64(), r.f64()];
+    let bounds = match kind {
+        0 => Bounds::Sphere {
+            center: DVec3::new(bv[0], bv[1], bv[2]),
+            radius: bv[3],
+        },
+        1 => Bounds::Box {
+            min: DVec3::new(bv[0], bv[1], bv[2]),
+            max: DVec3::new(bv[3], bv[4], bv[5]),
+        },
+        s => return Err(header_err(format!("unknown bounds code {s}"))),
+    };
+    if !bv.iter().all(|v| v.is_finite()) {
+        return Err(header_err(format!("bounds {bv:?} are not finite")));
+    }
+    let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = (r.f64(), r.f64(), r.f64(), r.f64());
+    let desc_len = r.u32() as usize;
+    if FIXED_HEADER_BYTES + desc_len > table_offset {
+        return Err(header_err(format!(
+            "description of {desc_len} bytes does not fit before the table at {table_offset}"
+        )));
+    }
+    let source =
+        String::from_utf8_lossy(&b[FIXED_HEADER_BYTES..FIXED_HEADER_BYTES + desc_len]).into_owned();
+    let table: Vec<u32> = b[table_offset..table_offset + 4 * entries]
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    // Each brick's place is where the table names it.
+    let mut at = vec![None; active];
+    for (idx, &e) in table.iter().enumerate() {
+        if e == EMPTY {
+            continue;
+        }
+        let Some(slot) = at.get_mut(e as usize) else {
+            return Err(header_err(format!("the table names brick {e} of {active}")));
+        };
+        if slot.is_some() {
+            return Err(header_err(format!("brick {e} appears twice in the table")));
+        }
+        *slot = Some([
+            (idx % dims[0]) as u32,
+            ((idx / dims[0]) % dims[1]) as u32,
+            (idx / (dims[0] * dims[1])) as u32,
+        ]);
+    }
+    let mut bricks = Vec::with_capacity(active);
+    let mut offset = 0usize;
+    for (i, (&level, place)) in levels.iter().zip(&at).enumerate() {
+        let Some(place) = place else {
+            return Err(header_err(format!("brick {i} is not in the table")));
+        };
+        let rec = records_offset + RECORD_BYTES * i;
+        let f = |o: usize| f32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
+        let brick = Brick {
+            at: *place,
+            level,
+            offset,
+            scale: [f(rec + 4), f(rec + 8)],
+        };
+        offset += brick.voxel_count();
+        bricks.push(brick);
+    }
+    let data = &b[pool_offset..body];
+    let pool = match storage {
+        Storage::F32 => Pool::F32(
+            data.chunks_exact(16)
+                .map(|v| {
+                    std::array::from_fn(|c| {
+                        f32::from_le_bytes([v[4 * c], v[4 * c + 1], v[4 * c + 2], v[4 * c + 3]])
+                    })
+                })
+                .collect(),
+        ),
+        Storage::I16 => Pool::I16(
+            data.chunks_exact(8)
+                .map(|v| std::array::from_fn(|c| i16::from_le_bytes([v[2 * c], v[2 * c + 1]])))
+                .collect(),
+        ),
+    };
+    SparseField::new(
+        TopGrid { origin, edge, dims },
+        table,
+        bricks,
+        pool,
+        bounds,
+        ambient,
+        BakeProvenance {
+            source,
+            max_err_n,
+            rms_err_n,
+            max_err_grad,
+            rms_err_grad,
+        },
+    )
+    .map_err(header_err)
+}

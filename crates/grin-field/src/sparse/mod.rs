@@ -1,0 +1,463 @@
+//! [`SparseField`]: a baked field kept only where the index differs from ambient, each part
+//! at the resolution its own content needs.
+//!
+//! Layout. The medium's box is cut into a top grid of cubic *bricks* of world edge `edge`
+//! (brick (a, b, c) covers `origin + edge * [a, a+1] x [b, b+1] x [c, c+1]`, x fastest in
+//! the `table`). A brick the field leaves at ambient is empty (`table` holds [`EMPTY`]); an
+//! active brick holds a dense grid of `cells + 1` nodes per edge, `cells = BASE_CELLS <<
+//! level`, node (i, j, k) at `brick origin + edge / cells * (i, j, k)`, voxel `i + m * (j + m
+//! * k)` with `m = cells + 1`, channels `[delta_n, dn/dx, dn/dy, dn/dz]` as in a dense bake.
+//! Each brick's voxels start at its `offset` in one shared pool (an atlas).
+//!
+//! Every brick owns the nodes on its faces (the apron trilinear reads need), so a sample
+//! reads one brick only. Where bricks of different levels meet, their faces interpolate
+//! the same source at different spacings: the jump there is at most the coarser brick's
+//! interpolation error, inside the budget the bake measured. i16 storage keeps a scale per
+//! brick (delta_n, and one for the gradient's components).
+//!
+//! Only trilinear sampling: a tricubic spline needs a prefilter across brick edges (a wider
+//! apron), which this format does not store yet.
+//!
+//! One concept a file: the field and its sampling here, the bake in `bake`, the file in
+//! `file`.
+
+pub mod bake;
+pub mod file;
+#[cfg(test)]
+mod tests;
+
+use glam::DVec3;
+
+use crate::baked::{BakeProvenance, MacroGrid, Storage};
+use crate::bounds::Bounds;
+use crate::field::{FieldSample, IndexField};
+
+/// `table` entry of an empty brick.
+pub const EMPTY: u32 = u32::MAX;
+/// Cells per brick edge at level 0.
+pub const BASE_CELLS: usize = 4;
+/// Finest level: `BASE_CELLS << MAX_LEVEL` = 256 cells a brick edge.
+pub const MAX_LEVEL: u8 = 6;
+
+/// One active brick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Brick {
+    /// Top-grid coordinates.
+    pub at: [u32; 3],
+    /// `BASE_CELLS << level` cells per edge.
+    pub level: u8,
+    /// First voxel in the pool.
+    pub offset: usize,
+    /// i16 storage: the scale of delta_n and of the gradient's components (1 for f32).
+    pub scale: [f32; 2],
+}
+
+impl Brick {
+    pub fn cells(&self) -> usize {
+        BASE_CELLS << self.level
+    }
+    /// Nodes per edge.
+    pub fn nodes(&self) -> usize {
+        self.cells() + 1
+    }
+    pub fn voxel_count(&self) -> usize {
+        self.nodes().pow(3)
+    }
+}
+
+/// Voxels of every brick, one after another.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Pool {
+    F32(Vec<[f32; 4]>),
+    I16(Vec<[i16; 4]>),
+}
+
+impl Pool {
+    pub fn len(&self) -> usize {
+        match self {
+            Pool::F32(v) => v.len(),
+            Pool::I16(v) => v.len(),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    pub fn storage(&self) -> Storage {
+        match self {
+            Pool::F32(_) => Storage::F32,
+            Pool::I16(_) => Storage::I16,
+        }
+    }
+}
+
+/// The top grid: where the bricks sit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TopGrid {
+    pub origin: DVec3,
+    /// World edge of a brick.
+    pub edge: f64,
+    /// Bricks per axis.
+    pub dims: [usize; 3],
+}
+
+impl TopGrid {
+    pub fn brick_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    pub fn index(&self, at: [usize; 3]) -> usize {
+        at[0] + self.dims[0] * (at[1] + self.dims[1] * at[2])
+    }
+    /// World box of brick `at`.
+    pub fn brick_box(&self, at: [usize; 3]) -> (DVec3, DVec3) {
+        let lo = self.origin + self.edge * DVec3::new(at[0] as f64, at[1] as f64, at[2] as f64);
+        (lo, lo + DVec3::splat(self.edge))
+    }
+}
+
+/// A sparse, multi-resolution baked field (see the module docs).
+#[derive(Debug, Clone)]
+pub struct SparseField {
+    top: TopGrid,
+    table: Vec<u32>,
+    bricks: Vec<Brick>,
+    pool: Pool,
+    bounds: Bounds,
+    ambient: f64,
+    provenance: BakeProvenance,
+    // Derived on construction.
+    n_range: (f64, f64),
+    max_grad: f64,
+    macro_grid: MacroGrid,
+}
+
+/// Why a sparse field's parts do not fit together.
+pub fn check_parts(
+    top: &TopGrid,
+    table: &[u32],
+    bricks: &[Brick],
+    pool_len: usize,
+) -> Result<(), String> {
+    if !(top.edge.is_finite() && top.edge > 0.0 && top.origin.is_finite()) {
+        return Err(format!(
+            "brick edge {} and origin {} must be finite (edge positive)",
+            top.edge, top.origin
+        ));
+    }
+    let count = top
+        .dims
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d).filter(|_| d > 0));
+    if count != Some(table.len()) {
+        return Err(format!(
+            "a top grid of {:?} bricks does not match a table of {} entries",
+            top.dims,
+            table.len()
+        ));
+    }
+    let mut seen = vec![false; bricks.len()];
+    let mut at_end = 0usize;
+    for (i, b) in bricks.iter().enumerate() {
+        if b.level > MAX_LEVEL {
+            return Err(format!(
+                "brick {i} has level {} (at most {MAX_LEVEL})",
+                b.level
+            ));
+        }
+        if b.at.iter().zip(top.dims).any(|(&a, d)| a as usize >= d) {
+            return Err(format!(
+                "brick {i} at {:?} lies outside the top grid {:?}",
+                b.at, top.dims
+            ));
+        }
+        if b.offset != at_end {
+            return Err(format!(
+                "brick {i} starts at voxel {} where the previous brick ends at {at_end}",
+                b.offset
+            ));
+        }
+        if !b.scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err(format!(
+                "brick {i} has scale {:?} (must be positive)",
+                b.scale
+            ));
+        }
+        at_end += b.voxel_count();
+        let at = b.at.map(|a| a as usize);
+        if table[top.index(at)] != i as u32 {
+            return Err(format!(
+                "brick {i} at {:?} is not the table's entry there",
+                b.at
+            ));
+        }
+    }
+    if at_end != pool_len {
+        return Err(format!(
+            "the bricks hold {at_end} voxels but the pool has {pool_len}"
+        ));
+    }
+    for &e in table {
+        if e == EMPTY {
+            continue;
+        }
+        match seen.get_mut(e as usize) {
+            Some(s) if !*s => *s = true,
+            Some(_) => return Err(format!("brick {e} appears twice in the table")),
+            None => {
+                return Err(format!("the table names brick {e} of {}", bricks.len()));
+            }
+        }
+    }
+    Ok(())
+}
+
+impl SparseField {
+    /// Assemble a sparse field; refuses parts that do not fit together (a crafted file)
+    /// and non-finite voxels.
+    pub fn new(
+        top: TopGrid,
+        table: Vec<u32>,
+        bricks: Vec<Brick>,
+        pool: Pool,
+        bounds: Bounds,
+        ambient: f64,
+        provenance: BakeProvenance,
+    ) -> Result<Self, String> {
+        check_parts(&top, &table, &bricks, pool.len())?;
+        if !(ambient.is_finite() && ambient > 0.0) {
+            return Err(format!("ambient index {ambient} must be positive"));
+        }
+        let mut field = SparseField {
+            top,
+            table,
+            bricks,
+            pool,
+            bounds,
+            ambient,
+            provenance,
+            n_range: (ambient, ambient),
+            max_grad: 0.0,
+            macro_grid: MacroGrid {
+                cell: 1,
+                dims: top.dims,
+                max_grad: Vec::new(),
+                threshold: 0.5,
+            },
+        };
+        let (mut lo, mut hi, mut g) = (0.0f64, 0.0f64, 0.0f64);
+        for (bi, b) in field.bricks.iter().enumerate() {
+            for v in b.offset..b.offset + b.voxel_count() {
+                let x = field.voxel(b, v);
+                if !x.iter().all(|c| c.is_finite()) {
+                    return Err(format!("brick {bi} holds a non-finite voxel {x:?}"));
+                }
+                lo = lo.min(x[0]);
+                hi = hi.max(x[0]);
+                g = g.max(DVec3::new(x[1], x[2], x[3]).length());
+            }
+        }
+        if ambient + lo <= 0.0 {
+            return Err(format!("n = {} <= 0 in the stored voxels", ambient + lo));
+        }
+        field.n_range = (ambient + lo, ambient + hi);
+        field.max_grad = g;
+        // Straight flights over empty bricks: one macro cell a brick, homogeneous (0)
+        // where empty.
+        field.macro_grid.max_grad = field
+            .table
+            .iter()
+            .map(|&e| if e == EMPTY { 0.0 } else { 1.0 })
+            .collect();
+        Ok(field)
+    }
+
+    pub fn top(&self) -> &TopGrid {
+        &self.top
+    }
+    pub fn table(&self) -> &[u32] {
+        &self.table
+    }
+    pub fn bricks(&self) -> &[Brick] {
+        &self.bricks
+    }
+    pub fn pool(&self) -> &Pool {
+        &self.pool
+    }
+    pub fn storage(&self) -> Storage {
+        self.pool.storage()
+    }
+    pub fn provenance(&self) -> &BakeProvenance {
+        &self.provenance
+    }
+    pub fn set_provenance(&mut self, p: BakeProvenance) {
+        self.provenance = p;
+    }
+    /// Bytes of voxel data (what the file stores after its table).
+    pub fn data_bytes(&self) -> usize {
+        self.pool.len() * self.storage().bytes_per_voxel()
+    }
+    /// Bytes in memory: voxels, the table and the brick records.
+    pub fn memory_bytes(&self) -> usize {
+        self.data_bytes() + 4 * self.table.len() + std::mem::size_of::<Brick>() * self.bricks.len()
+    }
+    /// Node spacing of a brick at `level`.
+    pub fn spacing(&self, level: u8) -> f64 {
+        self.top.edge / (BASE_CELLS << level) as f64
+    }
+    /// The finest spacing any brick has (the top grid's edge when none is active).
+    pub fn finest_spacing(&self) -> f64 {
+        self.bricks
+            .iter()
+            .map(|b| b.level)
+            .max()
+            .map_or(self.top.edge, |l| self.spacing(l))
+    }
+    /// Active bricks per level.
+    pub fn level_counts(&self) -> [usize; MAX_LEVEL as usize + 1] {
+        let mut out = [0; MAX_LEVEL as usize + 1];
+        for b in &self.bricks {
+            out[b.level as usize] += 1;
+        }
+        out
+    }
+
+    /// Voxel `v` of brick `b` decoded to f64 channels.
+    #[inline]
+    fn voxel(&self, b: &Brick, v: usize) -> [f64; 4] {
+        match &self.pool {
+            Pool::F32(p) => p[v].map(f64::from),
+            Pool::I16(p) => {
+                let q = p[v];
+                let (sd, sg) = (f64::from(b.scale[0]), f64::from(b.scale[1]));
+                [
+                    f64::from(q[0]) * sd,
+                    f64::from(q[1]) * sg,
+                    f64::from(q[2]) * sg,
+                    f64::from(q[3]) * sg,
+                ]
+            }
+        }
+    }
+
+    /// The brick holding world point `p` and `p`'s coordinates in its cells, or `None`
+    /// where `p` is beyond the top grid or in an empty brick.
+    #[inline]
+    fn locate(&self, p: DVec3) -> Option<(&Brick, DVec3)> {
+        let g = (p - self.top.origin) / self.top.edge;
+        let mut at = [0usize; 3];
+        for a in 0..3 {
+            let d = self.top.dims[a] as f64;
+            if !(g[a] >= 0.0 && g[a] <= d) {
+                return None;
+            }
+            // g >= 0: truncation is floor; the far face belongs to the last brick.
+            at[a] = (g[a] as usize).min(self.top.dims[a] - 1);
+        }
+        let e = self.table[self.top.index(at)];
+        if e == EMPTY {
+            return None;
+        }
+        let b = &self.bricks[e as usize];
+        let corner = DVec3::new(at[0] as f64, at[1] as f64, at[2] as f64);
+        Some((b, (g - corner) * b.cells() as f64))
+    }
+
+    /// Trilinear [delta_n, grad n] at cell coordinates `u` in brick `b`.
+    #[inline]
+    fn trilinear(&self, b: &Brick, u: DVec3) -> [f64; 4] {
+        let cells = b.cells();
+        let m = cells + 1;
+        let mut i = [0usize; 3];
+        let mut t = [0.0f64; 3];
+        for a in 0..3 {
+            let x = u[a].clamp(0.0, cells as f64);
+            i[a] = (x as usize).min(cells - 1);
+            t[a] = x - i[a] as f64;
+        }
+        let mut out = [0.0f64; 4];
+        for dz in 0..2 {
+            let wz = if dz == 0 { 1.0 - t[2] } else { t[2] };
+            for dy in 0..2 {
+                let wy = if dy == 0 { 1.0 - t[1] } else { t[1] };
+                for dx in 0..2 {
+                    let wx = if dx == 0 { 1.0 - t[0] } else { t[0] };
+                    let w = wx * wy * wz;
+                    let v = b.offset + (i[0] + dx) + m * ((i[1] + dy) + m * (i[2] + dz));
+                    let x = self.voxel(b, v);
+                    for c in 0..4 {
+                        out[c] += w * x[c];
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+impl IndexField for SparseField {
+    fn sample(&self, p: DVec3) -> FieldSample<f64> {
+        match self.locate(p) {
+            None => FieldSample {
+                n: self.ambient,
+                grad_n: DVec3::ZERO,
+            },
+            Some((b, u)) => {
+                let x = self.trilinear(b, u);
+                FieldSample {
+                    n: self.ambient + x[0],
+                    grad_n: DVec3::new(x[1], x[2], x[3]),
+                }
+            }
+        }
+    }
+    fn bounds(&self) -> Bounds {
+        self.bounds
+    }
+    fn ambient_index(&self) -> f64 {
+        self.ambient
+    }
+    fn n_range(&self) -> (f64, f64) {
+        self.n_range
+    }
+    fn max_grad_n(&self) -> f64 {
+        self.max_grad
+    }
+    fn describe(&self) -> String {
+        format!(
+            "sparse bake ({} of {} bricks) of {}",
+            self.bricks.len(),
+            self.table.len(),
+            self.provenance.source
+        )
+    }
+    /// Empty bricks are exactly ambient: a ray in one flies straight to the next active
+    /// brick (the top grid is the macro-cell grid).
+    fn homogeneous_span(&self, p: DVec3, dir: DVec3) -> Option<f64> {
+        let g = (p - self.top.origin) / self.top.edge;
+        let d = DVec3::new(
+            self.top.dims[0] as f64,
+            self.top.dims[1] as f64,
+            self.top.dims[2] as f64,
+        );
+        if !(g.cmpge(DVec3::ZERO).all() && g.cmple(d).all()) {
+            return None;
+        }
+        let node_dims = self.top.dims.map(|n| n + 1);
+        self.macro_grid.span(g, dir / self.top.edge, node_dims)
+    }
+    /// Twice the finest spacing: no step passes over a node of the finest bricks unseen.
+    fn feature_size(&self) -> Option<f64> {
+        Some(2.0 * self.finest_spacing())
+    }
+    fn source_spacing(&self) -> Option<f64> {
+        Some(self.finest_spacing())
+    }
+    fn n_uncertainty(&self) -> f64 {
+        self.provenance.max_err_n
+    }
+    fn sample_eps(&self) -> f64 {
+        f64::from(f32::EPSILON)
+    }
+    fn as_sparse(&self) -> Option<&SparseField> {
+        Some(self)
+    }
+}
