@@ -121,7 +121,59 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
     return out;
 }
 
+// ---- Sparse bakes (grin_field::sparse::SparseField::sample) ----
+//
+// field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: first one
+// texel per top brick (x fastest), (first voxel / 65536, first voxel % 65536, level, 0)
+// with level -1 for an empty brick; then every active brick's ((4 << level) + 1)^3 nodes,
+// x fastest. The grid parameters place the top grid: grid_origin its corner,
+// grid_inv_spacing 1 / brick edge, grid_dims bricks + 1.
+
+const SPARSE_ROW: u32 = 256u;
+const SPARSE_BASE_CELLS: u32 = 4u;
+
+fn linear_texel(t: u32) -> vec4<f32> {
+    return textureLoad(field_tex, vec3<i32>(i32(t % SPARSE_ROW), i32((t / SPARSE_ROW) % SPARSE_ROW), i32(t / (SPARSE_ROW * SPARSE_ROW))), 0);
+}
+
+fn sparse_sample(p: vec3<f32>) -> FieldSample {
+    let g = grid_from_world_point(p);
+    let ambient = FieldSample(ambient_index(), vec3<f32>(0.0), 0.0);
+    if beyond_grid(g) {
+        return ambient;
+    }
+    let bricks = params.grid_dims - vec3<u32>(1u);
+    let b = min(vec3<u32>(g), bricks - vec3<u32>(1u));
+    let entry = linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z));
+    if entry.z < 0.0 {
+        return ambient;
+    }
+    let cells = SPARSE_BASE_CELLS << u32(entry.z);
+    let m = cells + 1u;
+    let u = clamp((g - vec3<f32>(b)) * f32(cells), vec3<f32>(0.0), vec3<f32>(f32(cells)));
+    let i = min(vec3<u32>(u), vec3<u32>(cells - 1u));
+    let t = u - vec3<f32>(i);
+    let first = u32(entry.x) * 65536u + u32(entry.y) + i.x + m * (i.y + m * i.z);
+    let c000 = linear_texel(first);
+    let c100 = linear_texel(first + 1u);
+    let c010 = linear_texel(first + m);
+    let c110 = linear_texel(first + m + 1u);
+    let c001 = linear_texel(first + m * m);
+    let c101 = linear_texel(first + m * m + 1u);
+    let c011 = linear_texel(first + m * m + m);
+    let c111 = linear_texel(first + m * m + m + 1u);
+    let x00 = mix(c000, c100, t.x);
+    let x10 = mix(c010, c110, t.x);
+    let x01 = mix(c001, c101, t.x);
+    let x11 = mix(c011, c111, t.x);
+    let v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+    return FieldSample(ambient_index() + v.x, v.yzw, v.x);
+}
+
 fn sample_field(p: vec3<f32>) -> FieldSample {
+    if (FLAGS & FLAG_SPARSE) != 0u {
+        return sparse_sample(p);
+    }
     let g = grid_from_world_point(p);
     if (FLAGS & FLAG_OUTSIDE_AMBIENT) != 0u && beyond_grid(g) {
         return FieldSample(ambient_index(), vec3<f32>(0.0), 0.0);

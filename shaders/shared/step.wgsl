@@ -163,7 +163,10 @@ fn take_adaptive(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSamp
 fn take_step(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample) -> Taken {
     let n0 = s0.n;
     let d0 = s0.grad_n * s0.n;
-    let feature = 2.0 / max_element(params.grid_inv_spacing);
+    var feature = 2.0 / max_element(params.grid_inv_spacing);
+    if params.feature_size > 0.0 {
+        feature = params.feature_size;
+    }
     let cap = min(length_scale_cap(n0, length(s0.grad_n)), FEATURE_STEP_FRACTION * feature);
     var ds: f32;
     switch STEP_POLICY {

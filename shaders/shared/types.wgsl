@@ -68,7 +68,7 @@ struct FrameParams {
     // STATUS_DEGRADED.
     accuracy: f32,
     estimate_limit: f32,
-    _pad3: f32,
+    feature_size: f32,           // a sparse bake's feature size (0: twice the grid spacing)
 }
 
 struct GpuObject {
@@ -130,6 +130,7 @@ const FLAG_TRICUBIC: u32 = 32u;
 const FLAG_EXIT_HERMITE: u32 = 64u;
 const FLAG_MEDIUM_OBJECTS: u32 = 128u;
 const FLAG_HAS_OBJECTS: u32 = 256u;
+const FLAG_SPARSE: u32 = 512u;
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_PLANE: u32 = 1u;
 const SHAPE_BOX: u32 = 2u;

@@ -293,8 +293,9 @@ pub fn scene_gpu_field(
     if m.field.as_baked().is_some() {
         return Ok(None);
     }
+    // A sparse bake is uploaded as it is (crate::field::upload_sparse).
     if m.field.as_sparse().is_some() {
-        return Err(GpuError::Bake(crate::render::SPARSE_ON_GPU.into()));
+        return Ok(None);
     }
     let key = cache.map(|_| BakeCache::key(spec, scene_dir)).transpose()?;
     let cache = cache.zip(key.as_deref());

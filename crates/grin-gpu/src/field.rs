@@ -13,6 +13,7 @@
 //! on upload.
 
 use grin_field::baked::{BakedField, Interp, Outside};
+use grin_field::sparse::SparseField;
 
 /// The policy for baking a field the GPU marches is grin-field's (its `bake::device`);
 /// re-exported here, where callers of the GPU look for it.
@@ -21,7 +22,9 @@ pub use grin_field::bake::device::{
     bake_warning,
 };
 
-use crate::gpu_data::{FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
+use crate::gpu_data::{
+    FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC, FrameParams,
+};
 use crate::{GpuContext, GpuError};
 
 /// Bytes per texel of the field texture (rgba32float).
@@ -203,6 +206,116 @@ pub fn upload_field(
         field,
         macro_cells,
         bytes: bytes + grid.max_grad.len() as u64 * 4,
+        dims,
+    })
+}
+
+/// Texels per row and rows per layer of a sparse field's linear texture (field.wgsl's
+/// `SPARSE_ROW`).
+pub const SPARSE_ROW: usize = 256;
+
+/// Upload a sparse bake: its brick table and voxels, as f32 texels in one linear 3D
+/// texture (layout in shaders/shared/field.wgsl), and its top grid as the macro cells
+/// (empty bricks 0, active 1, threshold 1/2: a ray flies over empty bricks).
+pub fn upload_sparse(
+    ctx: &GpuContext,
+    sparse: &SparseField,
+    params: &mut FrameParams,
+) -> Result<FieldTextures, GpuError> {
+    let top = sparse.top();
+    let table = sparse.table();
+    let bricks = sparse.bricks();
+    let voxels = sparse.pool().len();
+    let total = table.len() + voxels;
+    let layer = SPARSE_ROW * SPARSE_ROW;
+    let depth = total.div_ceil(layer).max(1);
+    let dims = dims_u32([SPARSE_ROW, SPARSE_ROW, depth], "sparse field")?;
+    check_dims(ctx, "sparse field", dims)?;
+    let bytes = (layer * depth) as u64 * FIELD_TEXEL_BYTES;
+    let max_buffer = ctx.limits().max_buffer_size;
+    if bytes > max_buffer {
+        return Err(GpuError::TooLarge {
+            what: format!("sparse field of {} bricks", bricks.len()),
+            needed: format!("{bytes} bytes"),
+            limit: format!("{max_buffer} bytes (max_buffer_size)"),
+            adapter: ctx.adapter_name(),
+        });
+    }
+    let mut texels: Vec<[f32; 4]> = Vec::new();
+    texels
+        .try_reserve_exact(layer * depth)
+        .map_err(|_| GpuError::TooLarge {
+            what: format!("sparse field of {} bricks", bricks.len()),
+            needed: format!("{bytes} bytes of host memory"),
+            limit: "what could be allocated".into(),
+            adapter: ctx.adapter_name(),
+        })?;
+    let base = table.len();
+    for &e in table {
+        texels.push(match bricks.get(e as usize) {
+            None => [0.0, 0.0, -1.0, 0.0],
+            Some(b) => {
+                let first = base + b.offset;
+                [
+                    (first / 65536) as f32,
+                    (first % 65536) as f32,
+                    f32::from(b.level),
+                    0.0,
+                ]
+            }
+        });
+    }
+    for b in bricks {
+        for v in b.offset..b.offset + b.voxel_count() {
+            texels.push(sparse.voxel_f32(b, v));
+        }
+    }
+    texels.resize(layer * depth, [0.0; 4]);
+    let field = texture_3d(
+        ctx,
+        "sparse field",
+        dims,
+        wgpu::TextureFormat::Rgba32Float,
+        FIELD_TEXEL_BYTES as u32,
+        bytemuck::cast_slice(&texels),
+    )?;
+    drop(texels);
+    let mdims = dims_u32(top.dims, "sparse top grid")?;
+    let occupancy: Vec<f32> = table
+        .iter()
+        .map(|&e| {
+            if e == grin_field::sparse::EMPTY {
+                0.0
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let macro_cells = texture_3d(
+        ctx,
+        "sparse top grid",
+        mdims,
+        wgpu::TextureFormat::R32Float,
+        4,
+        bytemuck::cast_slice(&occupancy),
+    )?;
+    params.grid_origin = top.origin.as_vec3().to_array();
+    params.grid_inv_spacing = [(1.0 / top.edge) as f32; 3];
+    params.grid_dims = mdims.map(|d| d + 1);
+    params.macro_dims = mdims;
+    params.macro_cell_voxels = 1;
+    params.macro_threshold = 0.5;
+    params.n_uncertainty = grin_field::IndexField::n_uncertainty(sparse) as f32;
+    // The step cap's feature: the finest bricks' (the CPU's IndexField::feature_size).
+    params.feature_size = grin_field::IndexField::feature_size(sparse).unwrap_or(0.0) as f32;
+    params.flags |= FLAG_OUTSIDE_AMBIENT | FLAG_SPARSE;
+    if !table.contains(&grin_field::sparse::EMPTY) {
+        params.flags &= !FLAG_MACRO_CELLS;
+    }
+    Ok(FieldTextures {
+        field,
+        macro_cells,
+        bytes: bytes + occupancy.len() as u64 * 4,
         dims,
     })
 }

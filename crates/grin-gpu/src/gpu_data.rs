@@ -38,6 +38,9 @@ pub const FLAG_EXIT_HERMITE: u32 = 64;
 pub const FLAG_MEDIUM_OBJECTS: u32 = 128;
 /// The scene has objects (else the kernel is compiled without its surface code).
 pub const FLAG_HAS_OBJECTS: u32 = 256;
+/// The field is a sparse bake: `field_tex` holds its brick table and voxels as one linear
+/// array (crate::field::upload_sparse), the grid parameters place its top grid.
+pub const FLAG_SPARSE: u32 = 512;
 
 /// Passes of a frame (the `PASS` pipeline constant, shaders/shared/types.wgsl).
 pub const PASS_ALL: u32 = 0;
@@ -194,7 +197,9 @@ pub struct FrameParams {
     /// (`TraceSettings::accuracy`, `estimate_limit`).
     pub accuracy: f32,
     pub estimate_limit: f32,
-    pub _pad3: f32,
+    /// The field's feature size where its grid spacing is not it (a sparse bake's finest
+    /// bricks: twice their spacing); 0: twice the grid spacing.
+    pub feature_size: f32,
 }
 const _: () = assert!(std::mem::size_of::<FrameParams>() == 24 * 16);
 
@@ -395,7 +400,7 @@ pub(crate) mod tests {
             roundoff_one,
             accuracy,
             estimate_limit,
-            _pad3,
+            feature_size,
         );
         same_layout!(
             RENDER_WGSL,

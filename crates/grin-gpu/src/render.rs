@@ -25,9 +25,6 @@ use crate::{GpuContext, GpuError, specialize};
 /// Pixels per dispatch on a CPU adapter (lavapipe): big enough to keep every core busy,
 /// small enough that progress updates and cancellation stay responsive (~0.1-1 s a band).
 const PIXELS_PER_BAND_CPU: u32 = 32 * 1024;
-/// Why a sparse field is refused here: baking it again as one dense box would lose what
-/// made it sparse (the budget a dense grid cannot meet), so the GPU says so instead.
-pub const SPARSE_ON_GPU: &str = "the field is a sparse bake, which the GPU marcher does not sample yet (its brick atlas is not built); render it with --backend cpu";
 /// Pixels per dispatch on a GPU. On an H200 (`GRIN_BAND_PIXELS=N grin bench speed
 /// --gpu-only --size 1920x1080`), paper (a)'s frame took 7.0 ms on the device in bands of
 /// 32 Ki pixels (64 round trips, each band an eighth of the chip's resident threads),
@@ -215,8 +212,11 @@ impl<'a> GpuRenderer<'a> {
             ));
         }
         let field = match &scene.medium {
+            // A sparse bake is marched as it is: baking it again as one dense box would
+            // lose what made it sparse.
             Some(m) if baked.is_none() && m.field.as_sparse().is_some() => {
-                return Err(GpuError::Bake(SPARSE_ON_GPU.into()));
+                let sparse = m.field.as_sparse().expect("checked");
+                crate::field::upload_sparse(ctx, sparse, &mut params)?
             }
             Some(m) => {
                 let owned;
@@ -434,7 +434,7 @@ impl<'a> GpuRenderer<'a> {
                 rows_per_band,
                 band_capacity: s.width * rows_per_band,
                 scene_flags: params.flags
-                    & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_MEDIUM_OBJECTS),
+                    & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_MEDIUM_OBJECTS | FLAG_SPARSE),
                 field,
                 warnings,
                 timer: PassTimer::new(ctx),

@@ -65,6 +65,7 @@ fn mirrored_constants_have_the_same_values() {
         ("FLAG_EXIT_HERMITE", u(g::FLAG_EXIT_HERMITE)),
         ("FLAG_MEDIUM_OBJECTS", u(g::FLAG_MEDIUM_OBJECTS)),
         ("FLAG_HAS_OBJECTS", u(g::FLAG_HAS_OBJECTS)),
+        ("FLAG_SPARSE", u(g::FLAG_SPARSE)),
         ("PASS_ALL", u(g::PASS_ALL)),
         ("PASS_FIRST", u(g::PASS_FIRST)),
         ("PASS_MEDIUM", u(g::PASS_MEDIUM)),

@@ -110,7 +110,17 @@ fn compare_scene_file(ctx: &grin_gpu::GpuContext, path: &Path) {
     assert!(aov.left > 0, "{name}: no pixel left the medium");
     assert!(aov.status_mismatch <= AOV_STATUS_TOL, "{name}: {aov:?}");
     assert!(aov.dir_p99 <= AOV_DIR_P99_TOL, "{name}: {aov:?}");
-    assert!(aov.opd_p99 <= AOV_OPD_P99_TOL, "{name}: {aov:?}");
+    // f32 holds a path's optical length to ~6e-8 of it a step: in a medium 1000 units
+    // across (eight-plumes) that is the floor, not the unit scenes' 2e-4.
+    let size = scene
+        .medium
+        .as_ref()
+        .map_or(1.0, |m| grin_field::Bounds::from_spec(&m.bounds).radius());
+    let opd_tol = AOV_OPD_P99_TOL.max(AOV_OPD_P99_PER_LENGTH * size);
+    assert!(
+        aov.opd_p99 <= opd_tol,
+        "{name}: {aov:?} (tolerance {opd_tol})"
+    );
 }
 
 /// Fraction of pixels whose status may differ between backends (none did).
@@ -119,6 +129,9 @@ const AOV_STATUS_TOL: f64 = 2e-3;
 const AOV_DIR_P99_TOL: f64 = 1e-4;
 /// 99th percentile of |OPD_cpu - OPD_gpu| (world units).
 const AOV_OPD_P99_TOL: f64 = 2e-4;
+/// The OPD tolerance per unit of the medium's size (its bounds' radius): measured 6.5e-3
+/// over eight-plumes' radius of 500 (1.3e-5 a unit).
+const AOV_OPD_P99_PER_LENGTH: f64 = 2e-5;
 
 /// Steps per pixel over the pixels whose ray met the medium: the median and the mean
 /// without the top 5%.
@@ -168,6 +181,7 @@ macro_rules! example_scene_tests {
 
 example_scene_tests! {
     scene_eaton => "eaton.toml",
+    scene_eight_plumes => "eight-plumes.toml",
     scene_grin_rod => "grin-rod.toml",
     scene_heat_haze => "heat-haze.toml",
     scene_heat_haze_plate => "heat-haze-plate.toml",

@@ -590,7 +590,7 @@ impl<'a> Session<'a> {
         // The field's own warnings (a VDB grid its bounds cut, an unproven positivity)
         // come first in the panel, then the bake's.
         let mut warnings = field.warnings();
-        if field.as_baked().is_some() {
+        if field.as_baked().is_some() || field.as_sparse().is_some() {
             return Ok(Some(FieldEntry {
                 key,
                 field,

@@ -338,6 +338,23 @@ impl SparseField {
         }
     }
 
+    /// Voxel `v` (a pool index) of brick `b` decoded to f32 channels (what a GPU upload
+    /// holds).
+    pub fn voxel_f32(&self, b: &Brick, v: usize) -> [f32; 4] {
+        match &self.pool {
+            Pool::F32(p) => p[v],
+            Pool::I16(p) => {
+                let q = p[v];
+                [
+                    f32::from(q[0]) * b.scale[0],
+                    f32::from(q[1]) * b.scale[1],
+                    f32::from(q[2]) * b.scale[1],
+                    f32::from(q[3]) * b.scale[1],
+                ]
+            }
+        }
+    }
+
     /// The brick holding world point `p` and `p`'s coordinates in its cells, or `None`
     /// where `p` is beyond the top grid or in an empty brick.
     #[inline]
