@@ -210,6 +210,37 @@ pub fn upload_field(
     })
 }
 
+/// A field the GPU marches as it is: a dense bake or a sparse one.
+#[derive(Debug, Clone, Copy)]
+pub enum DeviceField<'a> {
+    Dense(&'a BakedField),
+    Sparse(&'a SparseField),
+}
+
+impl<'a> From<&'a BakedField> for DeviceField<'a> {
+    fn from(f: &'a BakedField) -> Self {
+        DeviceField::Dense(f)
+    }
+}
+
+impl<'a> From<&'a SparseField> for DeviceField<'a> {
+    fn from(f: &'a SparseField) -> Self {
+        DeviceField::Sparse(f)
+    }
+}
+
+/// Upload `field` ([`upload_field`] or [`upload_sparse`]).
+pub fn upload(
+    ctx: &GpuContext,
+    field: DeviceField<'_>,
+    params: &mut FrameParams,
+) -> Result<FieldTextures, GpuError> {
+    match field {
+        DeviceField::Dense(b) => upload_field(ctx, b, params),
+        DeviceField::Sparse(s) => upload_sparse(ctx, s, params),
+    }
+}
+
 /// Texels per row and rows per layer of a sparse field's linear texture (field.wgsl's
 /// `SPARSE_ROW`).
 pub const SPARSE_ROW: usize = 256;

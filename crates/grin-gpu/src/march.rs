@@ -114,7 +114,7 @@ impl<'a> GpuRayTracer<'a> {
             &field,
             &TraceSettings::from_render(&RenderSettings::default()),
         )?;
-        let kit = StageKit::new(ctx, &scene, &field)?;
+        let kit = StageKit::new(ctx, &scene, field.as_ref().into())?;
         let uploaded = kit.params;
         Ok(GpuRayTracer {
             kit,
@@ -136,7 +136,7 @@ impl<'a> GpuRayTracer<'a> {
             &field,
             &TraceSettings::from_render(&RenderSettings::default()),
         )?;
-        self.kit.set_scene(&scene, &field)?;
+        self.kit.set_scene(&scene, field.as_ref().into())?;
         self.uploaded = self.kit.params;
         self.field = field;
         Ok(())

@@ -7,13 +7,12 @@
 //! holds each stage against its CPU twin): it compiles one small pipeline per call.
 
 use bytemuck::{Pod, Zeroable};
-use grin_field::baked::BakedField;
 use grin_render::scene::RenderScene;
 
 use std::marker::PhantomData;
 use std::time::Instant;
 
-use crate::field::{FieldTextures, upload_field};
+use crate::field::{DeviceField, FieldTextures, upload};
 use crate::gpu_data::{FrameParams, PASS_ALL};
 use crate::pack::{env_texels, env_texture, frame_params, scene_arrays};
 use crate::pipelines::{pipeline_constants, render_layout_entries};
@@ -326,17 +325,18 @@ pub struct MarchOut {
 const STAGE_WORKGROUP: u32 = 64;
 
 /// Run stage `S` on `input` with `scene`'s settings (integrator, step policy, exit
-/// method, bounds) over `baked`, as [`crate::GpuRenderer`] would upload them.
-pub fn run_stage<S: Stage>(
+/// method, bounds) over `field` (a dense or a sparse bake), as [`crate::GpuRenderer`]
+/// would upload it.
+pub fn run_stage<'f, S: Stage>(
     ctx: &GpuContext,
     scene: &RenderScene,
-    baked: &BakedField,
+    field: impl Into<DeviceField<'f>>,
     input: &[S::In],
 ) -> Result<Vec<S::Out>, GpuError> {
     if input.is_empty() {
         return Ok(Vec::new());
     }
-    let kit = StageKit::new(ctx, scene, baked)?;
+    let kit = StageKit::new(ctx, scene, field.into())?;
     let pipeline = kit.pipeline::<S>(&kit.params)?;
     kit.dispatch(&pipeline, input).map(|(out, _)| out)
 }
@@ -376,7 +376,7 @@ impl<'a> StageKit<'a> {
     pub(crate) fn new(
         ctx: &'a GpuContext,
         scene: &RenderScene,
-        baked: &BakedField,
+        field: DeviceField<'_>,
     ) -> Result<Self, GpuError> {
         let mut kit = ctx.scoped("preparing the marcher stages", || {
             let device = &ctx.device;
@@ -428,19 +428,19 @@ impl<'a> StageKit<'a> {
                 spare,
             }
         })?;
-        kit.set_scene(scene, baked)?;
+        kit.set_scene(scene, field)?;
         Ok(kit)
     }
 
-    /// Upload `scene`'s objects and sky and `baked`, and take the scene's parameters.
+    /// Upload `scene`'s objects and sky and `field`, and take the scene's parameters.
     pub(crate) fn set_scene(
         &mut self,
         scene: &RenderScene,
-        baked: &BakedField,
+        field: DeviceField<'_>,
     ) -> Result<(), GpuError> {
         let ctx = self.ctx;
         let mut params = frame_params(scene)?;
-        let field = upload_field(ctx, baked, &mut params)?;
+        let field = upload(ctx, field, &mut params)?;
         let (objects, _lights) = scene_arrays(scene, &mut params);
         let env = env_texels(ctx, scene)?;
         let frame = ctx.scoped("uploading a scene for the marcher stages", || {

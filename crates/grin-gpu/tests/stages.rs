@@ -224,7 +224,7 @@ fn states<I>(
 
 fn gpu<S: Stage>(setup: &Setup, input: &[S::In]) -> Option<Vec<S::Out>> {
     let ctx = harness::context(&format!("stage {}", S::ENTRY_POINT))?;
-    Some(run_stage::<S>(&ctx, &setup.scene, &setup.baked, input).expect("the stage runs"))
+    Some(run_stage::<S>(&ctx, &setup.scene, setup.baked.as_ref(), input).expect("the stage runs"))
 }
 
 fn v(a: [f32; 3]) -> Vec3 {
@@ -731,6 +731,128 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
     assert!(
         problems.len() as f64 <= FLIP_FRACTION * BATCH as f64,
         "straight flights: {} of {BATCH} states differ:\n{}",
+        problems.len(),
+        problems[..problems.len().min(12)].join("\n")
+    );
+}
+
+/// A sparse bake (grin_field::sparse) on the GPU: `sample_field` reads its brick table
+/// and voxels (one linear texture) and the straight-flight walk crosses its empty bricks
+/// (the top grid as macro cells), as SparseField does on the CPU; points inside active
+/// bricks of every level, and all over the box.
+#[test]
+fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
+    use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+    let text = std::fs::read_to_string(scene_path("plume")).unwrap();
+    let start = text.find("field = { kind = \"plume\"").unwrap();
+    let end = start + text[start..].find("] }").unwrap() + 3;
+    let text = format!(
+        "{}field = {{ kind = \"plume\", plumes = [{{ a = 6.0e-3, center = [-2.5, 0.4, 1.6], s = 0.15 }}, {{ a = 5.0e-3, center = [2.5, 0.9, 6.4], s = 0.25 }}] }}{}",
+        &text[..start],
+        &text[end..]
+    );
+    let path = std::env::temp_dir().join(format!("grin-stages-sparse-{}.toml", std::process::id()));
+    std::fs::write(&path, text).unwrap();
+    let scene: Scene = load_scene(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    let dir = path.parent().unwrap();
+    let source = grin_field::build_field(scene.medium.as_ref().unwrap(), dir).unwrap();
+    let opts = SparseOptions {
+        top_bricks: 24,
+        ..Default::default()
+    };
+    let (sparse, report) = bake_sparse(source.as_ref(), &opts, &|_, _, _| {}).unwrap();
+    let levels = report.levels.iter().filter(|&&n| n > 0).count();
+    assert!(levels >= 3, "bricks of several levels: {:?}", report.levels);
+    let sparse = Arc::new(sparse);
+    let rs = RenderScene::new(
+        &scene,
+        dir,
+        Some(Arc::clone(&sparse) as Arc<dyn IndexField>),
+    )
+    .unwrap();
+    let Some(ctx) = harness::context("stage sparse") else {
+        return;
+    };
+    // Half the points inside active bricks, half anywhere in the box.
+    let mut rng = Rng(31);
+    let (lo, hi) = sparse.bounds().aabb();
+    let top = *sparse.top();
+    let points: Vec<Vec3> = (0..BATCH)
+        .map(|i| {
+            let f = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            if i % 2 == 0 {
+                let b = sparse.bricks()[rng.below(sparse.bricks().len())];
+                let (blo, _) = top.brick_box(b.at.map(|a| a as usize));
+                blo.as_vec3() + f * top.edge as f32
+            } else {
+                lo.as_vec3() + (hi - lo).as_vec3() * f
+            }
+        })
+        .collect();
+    let input: Vec<SampleIn> = points.iter().map(|r| SampleIn::new(r.to_array())).collect();
+    let out = run_stage::<stages::Sample>(&ctx, &rs, sparse.as_ref(), &input).unwrap();
+    let mut problems = Vec::new();
+    let (mut worst_n, mut worst_g, mut varying) = (0.0f32, 0.0f32, 0);
+    for (i, (r, o)) in points.iter().zip(&out).enumerate() {
+        let c = sample(sparse.as_ref(), *r);
+        let dn = (o.n - c.n).abs();
+        let dg = (v(o.grad_n) - c.grad_n).abs().max_element() / (1.0 + c.grad_n.length());
+        worst_n = worst_n.max(dn);
+        worst_g = worst_g.max(dg);
+        if c.n != sparse.ambient_index() as f32 {
+            varying += 1;
+        }
+        if !(within(dn, SAMPLE_N_TOL) && within(dg, SAMPLE_GRAD_TOL)) {
+            problems.push(format!(
+                "point {i} {r}: n GPU {} CPU {}, grad n GPU {:?} CPU {}",
+                o.n, c.n, o.grad_n, c.grad_n
+            ));
+        }
+    }
+    eprintln!(
+        "sparse sample: {varying} of {BATCH} points off ambient, worst |n| {worst_n:.2e}, worst rel grad {worst_g:.2e}"
+    );
+    assert!(
+        varying >= BATCH / 3 && varying < BATCH,
+        "points where the field varies: {varying} of {BATCH}"
+    );
+    assert!(
+        problems.is_empty(),
+        "sparse sample_field: {} of {BATCH} points differ:\n{}",
+        problems.len(),
+        problems[..problems.len().min(12)].join("\n")
+    );
+    // Straight flights from the same points in random directions.
+    let dirs: Vec<Vec3> = (0..BATCH).map(|_| unit(&mut rng)).collect();
+    let input: Vec<RayIn> = points
+        .iter()
+        .zip(&dirs)
+        .map(|(r, d)| RayIn::new(r.to_array(), d.to_array()))
+        .collect();
+    let out = run_stage::<stages::Flight>(&ctx, &rs, sparse.as_ref(), &input).unwrap();
+    let (mut flights, mut worst) = (0, 0.0f64);
+    for (i, ((r, d), o)) in points.iter().zip(&dirs).zip(&out).enumerate() {
+        let cpu = sparse.homogeneous_span(r.as_dvec3(), d.as_dvec3());
+        let gpu = (o.span > 0.0).then_some(f64::from(o.span));
+        match (gpu, cpu) {
+            (None, None) => {}
+            (Some(g), Some(c)) => {
+                flights += 1;
+                let rel = (g - c).abs() / c.max(1e-3);
+                worst = worst.max(rel);
+                if rel > 1e-3 {
+                    problems.push(format!("state {i}: span GPU {g} vs CPU {c}"));
+                }
+            }
+            _ => problems.push(format!("state {i}: span GPU {gpu:?} vs CPU {cpu:?}")),
+        }
+    }
+    eprintln!("sparse flights: {flights} of {BATCH} fly on both, worst rel span {worst:.2e}");
+    assert!(flights >= BATCH / 4, "too few flights to test: {flights}");
+    assert!(
+        problems.len() as f64 <= FLIP_FRACTION * BATCH as f64,
+        "sparse flights: {} of {BATCH} differ:\n{}",
         problems.len(),
         problems[..problems.len().min(12)].join("\n")
     );
