@@ -814,7 +814,7 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
         "sparse sample: {varying} of {BATCH} points off ambient, worst |n| {worst_n:.2e}, worst rel grad {worst_g:.2e}"
     );
     assert!(
-        varying >= BATCH / 3 && varying < BATCH,
+        (BATCH / 3..BATCH).contains(&varying),
         "points where the field varies: {varying} of {BATCH}"
     );
     assert!(
