@@ -297,6 +297,24 @@ fn bench_speed_quick_reports_both_backends() {
             .is_some_and(|x| x.is_finite() && x > 0.0),
         "{r}"
     );
+    // Each scene baked sparsely at its dense bake's error: the sparse bake meets it, and
+    // its rows name both fields' bytes and the frame-time ratios.
+    let sparse = r["sparse"].as_array().expect("sparse rows");
+    assert_eq!(sparse.len(), 3, "{r}");
+    for row in sparse {
+        let f = |k: &str| row[k].as_f64().unwrap_or(f64::NAN);
+        assert!(f("sparse_error") <= f("error"), "{row}");
+        assert!(f("sparse_bytes") > 0.0 && f("dense_bytes") > 0.0, "{row}");
+        assert!(
+            f("gpu_time_ratio") > 0.0 && f("cpu_time_ratio") > 0.0,
+            "{row}"
+        );
+        let label = format!("{} sparse", row["scene"].as_str().expect("scene"));
+        assert!(
+            runs.iter().any(|x| x["scene"] == label.as_str()),
+            "{label}: {r}"
+        );
+    }
     let frac = r["field_evals_fraction_of_raw"].as_f64().expect("fraction");
     assert!(
         frac > 0.0 && frac < 2.0,

@@ -124,13 +124,12 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
 // ---- Sparse bakes (grin_field::sparse::SparseField::sample) ----
 //
 // field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: first one
-// texel per top brick (x fastest), (first voxel / 65536, first voxel % 65536, level, 0)
-// with level -1 for an empty brick; then every active brick's ((4 << level) + 1)^3 nodes,
-// x fastest. The grid parameters place the top grid: grid_origin its corner,
+// texel per top brick (x fastest), (first voxel / 65536, first voxel % 65536, cells a
+// brick edge, 0) with 0 cells for an empty brick; then every active brick's (cells + 1)^3
+// nodes, x fastest. The grid parameters place the top grid: grid_origin its corner,
 // grid_inv_spacing 1 / brick edge, grid_dims bricks + 1.
 
 const SPARSE_ROW: u32 = 256u;
-const SPARSE_BASE_CELLS: u32 = 4u;
 
 fn linear_texel(t: u32) -> vec4<f32> {
     return textureLoad(field_tex, vec3<i32>(i32(t % SPARSE_ROW), i32((t / SPARSE_ROW) % SPARSE_ROW), i32(t / (SPARSE_ROW * SPARSE_ROW))), 0);
@@ -145,10 +144,10 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let bricks = params.grid_dims - vec3<u32>(1u);
     let b = min(vec3<u32>(g), bricks - vec3<u32>(1u));
     let entry = linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z));
-    if entry.z < 0.0 {
+    if entry.z < 1.0 {
         return ambient;
     }
-    let cells = SPARSE_BASE_CELLS << u32(entry.z);
+    let cells = u32(entry.z);
     let m = cells + 1u;
     let u = clamp((g - vec3<f32>(b)) * f32(cells), vec3<f32>(0.0), vec3<f32>(f32(cells)));
     let i = min(vec3<u32>(u), vec3<u32>(cells - 1u));

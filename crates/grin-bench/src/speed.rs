@@ -3,7 +3,9 @@
 //! scene (a) (analytic sphere), (c) (Perlin noise) and the heat-haze scene; the
 //! noise/analytic frame-time ratio (the paper had 2.0); and the marcher's field-sample
 //! rate as a fraction of the adapter's raw trilinear 3D-texture sample rate measured by
-//! a microbenchmark (shaders/texture_bench.wgsl).
+//! a microbenchmark (shaders/texture_bench.wgsl). Each of the three scenes is also baked
+//! sparsely (grin_field::sparse) at the dense bake's measured error and timed the same
+//! way: the field's bytes and frame time, sparse against dense.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -103,6 +105,9 @@ pub struct Run {
     pub device_ray_steps_per_second: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub device_field_evals_per_second: Option<f64>,
+    /// The field's bytes as the backend holds it: the GPU's upload (f32 texels), the CPU's
+    /// grid (its storage).
+    pub field_bytes: u64,
 }
 
 impl Run {
@@ -126,6 +131,8 @@ pub struct Report {
     pub cpu_threads: usize,
     pub bake_resolution: usize,
     pub runs: Vec<Run>,
+    /// Per scene: the sparse bake against the dense one at the dense bake's error.
+    pub sparse: Vec<SparseRow>,
     /// Frame time of paper (c) over paper (a), both baked (the paper: 2.0).
     pub noise_over_analytic_gpu: f64,
     pub noise_over_analytic_cpu: Option<f64>,
@@ -188,6 +195,28 @@ fn timed_frames(
     Ok((best.map(|(frame, _)| frame), times))
 }
 
+/// A scene baked sparsely at its dense bake's error.
+#[derive(Debug, Clone, Serialize)]
+pub struct SparseRow {
+    pub scene: String,
+    /// The dense bake's measured relative error: the sparse bake's budget.
+    pub error: f64,
+    /// The sparse bake's own measured relative error.
+    pub sparse_error: f64,
+    pub dense_bytes: u64,
+    pub sparse_bytes: u64,
+    pub active_bricks: usize,
+    pub total_bricks: usize,
+    /// Sparse over dense frame time on the GPU (and the CPU when it ran).
+    pub gpu_time_ratio: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cpu_time_ratio: Option<f64>,
+}
+
+/// Label suffix of the sparse bakes' runs.
+const SPARSE: &str = " sparse";
+
+#[allow(clippy::too_many_arguments)]
 fn run_of(
     scene: &str,
     backend: &'static str,
@@ -195,6 +224,7 @@ fn run_of(
     spp: u32,
     times: &[f64],
     device_times: &[f64],
+    field_bytes: u64,
     progress: &dyn Progress,
 ) -> Run {
     let (min, median, max) = min_median_max(times);
@@ -234,6 +264,7 @@ fn run_of(
         field_evals_per_second: evals * rays / s,
         device_ray_steps_per_second: device_s.map(|d| steps * rays / d),
         device_field_evals_per_second: device_s.map(|d| evals * rays / d),
+        field_bytes,
     }
 }
 
@@ -252,6 +283,8 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
     let pipeline = grin_pipeline::Renderer::new(grin_pipeline::Backend::Gpu, false);
     // Load and bake every scene first: input errors stop the run before any GPU work.
     let mut prepared = Vec::new();
+    let mut sparse_prepared = Vec::new();
+    let mut sparse_bakes = Vec::new();
     for (file, label) in SCENES {
         let path = options.scenes.join(file);
         if !path.is_file() {
@@ -282,7 +315,27 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
                 Some(baked.clone() as Arc<dyn IndexField>),
             )?
             .render_scene;
-        prepared.push((label, rs, baked));
+        prepared.push((label.to_owned(), rs, Some(baked.clone())));
+        // The same field sparsely, at the error the dense grid has.
+        let error = bake.relative_error.max(1e-6);
+        let opts = grin_field::sparse::bake::SparseOptions {
+            error_budget: error,
+            ..Default::default()
+        };
+        let (sparse, report) =
+            grin_field::sparse::bake::bake_sparse(field.as_ref(), &opts, &|_, _, _| {})
+                .with_context(|| format!("{name}: sparse bake at relative error {error:.2e}"))?;
+        let sparse = Arc::new(sparse);
+        let rs = pipeline
+            .prepare(
+                &scene,
+                dir,
+                &name,
+                Some(sparse.clone() as Arc<dyn IndexField>),
+            )?
+            .render_scene;
+        sparse_prepared.push((format!("{label}{SPARSE}"), rs, None));
+        sparse_bakes.push((label, error, report, baked.data_bytes() as u64, sparse));
     }
 
     // The marcher alone: paper (c)'s medium filling the whole frame (its silhouette
@@ -290,6 +343,7 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
     // cost is the march (for the fraction of the raw sample rate).
     let closeup = {
         let (_, rs, baked) = &prepared[1];
+        let baked: Option<Arc<grin_field::baked::BakedField>> = baked.clone();
         let mut rs = rs.clone();
         let m = rs.medium.as_ref().context("paper (c) has a medium")?;
         let (centre, radius) = (m.bounds.center(), m.bounds.radius());
@@ -315,7 +369,7 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         rs.objects.clear();
         rs.materials.clear();
         rs.lights.clear();
-        (MARCH_ONLY, rs, baked.clone())
+        (MARCH_ONLY.to_owned(), rs, baked)
     };
     // The same close-up marched with verlet: one new field evaluation per step (sharma
     // makes three), so its ray-steps/s is directly comparable with the raw sample rate.
@@ -325,10 +379,11 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         if let Some(m) = rs.medium.as_mut() {
             m.trace.integrator = grin_scene::IntegratorKind::Verlet;
         }
-        (MARCH_ONLY_VERLET, rs, closeup.2.clone())
+        (MARCH_ONLY_VERLET.to_owned(), rs, closeup.2.clone())
     };
     prepared.push(closeup);
     prepared.push(closeup_verlet);
+    prepared.extend(sparse_prepared);
 
     let ctx = GpuContext::new_headless()?;
     let adapter = ctx.adapter_name();
@@ -340,7 +395,7 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
     let mut raw_rate = 0.0;
     for (label, rs, baked) in &prepared {
         progress.phase(&format!("{label} (gpu)"));
-        let renderer = GpuRenderer::new(&ctx, rs, Some(baked.as_ref()))?;
+        let renderer = GpuRenderer::new(&ctx, rs, baked.as_deref())?;
         renderer.render(&|_| {}, &cancel)?; // warm-up: lavapipe compiles lazily
         progress.advance();
         let mut device_times = Vec::new();
@@ -357,10 +412,11 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
                 rs.settings.spp,
                 &times,
                 &device_times,
+                renderer.field_bytes(),
                 progress,
             ));
         }
-        if *label == MARCH_ONLY {
+        if label == MARCH_ONLY {
             raw_rate = renderer.field_sample_rate(3)?;
         }
         if !options.gpu_only {
@@ -368,6 +424,14 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
             let (best, times) =
                 timed_frames(frames, progress, || Ok(render_cpu(rs, &|_| {}, &cancel)?))?;
             if let Some(frame) = best {
+                let field_bytes = match baked {
+                    Some(b) => b.data_bytes() as u64,
+                    None => rs
+                        .medium
+                        .as_ref()
+                        .and_then(|m| m.field.as_sparse())
+                        .map_or(0, |s| s.memory_bytes() as u64),
+                };
                 runs.push(run_of(
                     label,
                     "cpu",
@@ -375,6 +439,7 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
                     rs.settings.spp,
                     &times,
                     &[],
+                    field_bytes,
                     progress,
                 ));
             }
@@ -390,6 +455,31 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         (Some(c), Some(a)) => Some(c.ms_per_frame / a.ms_per_frame),
         _ => None,
     };
+    let exact = |scene: &str, backend: &str| {
+        runs.iter()
+            .find(|r| r.scene == scene && r.backend == backend)
+    };
+    let sparse = sparse_bakes
+        .iter()
+        .map(|(label, error, report, dense_bytes, _)| {
+            let with = format!("{label}{SPARSE}");
+            let ratio = |backend: &str| match (exact(&with, backend), exact(label, backend)) {
+                (Some(s), Some(d)) => Some(s.ms_per_frame / d.ms_per_frame),
+                _ => None,
+            };
+            SparseRow {
+                scene: (*label).to_owned(),
+                error: *error,
+                sparse_error: report.relative_error,
+                dense_bytes: *dense_bytes,
+                sparse_bytes: report.memory_bytes,
+                active_bricks: report.active_bricks,
+                total_bricks: report.total_bricks,
+                gpu_time_ratio: ratio("gpu").unwrap_or(f64::NAN),
+                cpu_time_ratio: ratio("cpu"),
+            }
+        })
+        .collect();
     let noise_gpu = find(MARCH_ONLY, "gpu");
     let verlet_gpu = find(MARCH_ONLY_VERLET, "gpu");
     Ok(Report {
@@ -405,6 +495,7 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
             .map_or(f64::NAN, |r| r.marcher_rates().0 / raw_rate),
         timed_on_device: ctx.has_timestamps(),
         runs,
+        sparse,
     })
 }
 

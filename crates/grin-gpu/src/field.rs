@@ -284,13 +284,13 @@ pub fn upload_sparse(
     let base = table.len();
     for &e in table {
         texels.push(match bricks.get(e as usize) {
-            None => [0.0, 0.0, -1.0, 0.0],
+            None => [0.0; 4],
             Some(b) => {
                 let first = base + b.offset;
                 [
                     (first / 65536) as f32,
                     (first % 65536) as f32,
-                    f32::from(b.level),
+                    b.cells() as f32,
                     0.0,
                 ]
             }

@@ -758,7 +758,7 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
     let dir = path.parent().unwrap();
     let source = grin_field::build_field(scene.medium.as_ref().unwrap(), dir).unwrap();
     let opts = SparseOptions {
-        top_bricks: 24,
+        top_bricks: Some(24),
         ..Default::default()
     };
     let (sparse, report) = bake_sparse(source.as_ref(), &opts, &|_, _, _| {}).unwrap();

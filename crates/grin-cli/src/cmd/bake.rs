@@ -43,9 +43,11 @@ pub struct Args {
     /// backend renders it, the GPU backend not yet).
     #[arg(long, conflicts_with_all = ["resolution", "interp", "no_crop"])]
     pub sparse: bool,
-    /// With --sparse: bricks along the medium's longest axis.
-    #[arg(long, requires = "sparse", default_value_t = grin_field::sparse::bake::DEFAULT_TOP_BRICKS)]
-    pub bricks: usize,
+    /// With --sparse: bricks along the medium's longest axis (default: chosen, bricks of
+    /// 1, 2, 4 or 8 32ths of it, whichever the probes predict holds the budget in the
+    /// fewest voxels).
+    #[arg(long, requires = "sparse")]
+    pub bricks: Option<usize>,
     /// Print a machine-readable summary (JSON) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -430,7 +432,7 @@ fn bake_sparse(
             .iter()
             .enumerate()
             .filter(|(_, n)| **n > 0)
-            .map(|(l, n)| format!("{n} x {}^3", (grin_field::sparse::BASE_CELLS << l) + 1))
+            .map(|(l, n)| format!("{n} x {}^3", grin_field::sparse::cells_of(l as u8) + 1))
             .collect();
         let text = [
             format!("baked     {} (sparse)", field.describe()),

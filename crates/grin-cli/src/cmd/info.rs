@@ -180,7 +180,6 @@ fn outside_name(o: grin_field::baked::Outside) -> &'static str {
 
 /// `grin info` of a sparse (version-2) `.grinf`.
 fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> anyhow::Result<()> {
-    use grin_field::sparse::BASE_CELLS;
     let top = f.top();
     let p = f.provenance();
     let (n_min, n_max) = f.n_range();
@@ -236,7 +235,7 @@ fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> 
     for (l, n) in levels.iter().enumerate().filter(|(_, n)| **n > 0) {
         outln!(
             "  level {l}       {n} bricks of {}^3 nodes (spacing {:.4e})",
-            (BASE_CELLS << l) + 1,
+            grin_field::sparse::cells_of(l as u8) + 1,
             f.spacing(l as u8)
         );
     }

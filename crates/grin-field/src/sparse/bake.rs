@@ -23,7 +23,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::{BASE_CELLS, Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid};
+use super::{BASE_CELLS, Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, cells_of};
 use crate::bake::{
     BUDGET_SAFETY, BakeError, CROP_FRACTION_OF_BUDGET, DEFAULT_ERROR_BUDGET, DEFAULT_ERROR_POINTS,
     DEFAULT_MAX_MEMORY, ErrorStats, GRID_MARGIN_TRILINEAR, GradientMode, Progress, SplitMix64,
@@ -38,6 +38,8 @@ pub const DEFAULT_TOP_BRICKS: usize = 32;
 pub const MAX_TOP_BRICKS: usize = 1024;
 /// Random points a brick's level search measures its error at.
 pub const ERROR_POINTS_PER_BRICK: usize = 64;
+/// Rounds of baking again the bricks whose measured error is over their share.
+const REFINE_ROUNDS: u64 = 3;
 /// Share of the final error points drawn inside active bricks.
 const ERROR_POINTS_IN_BRICKS: f64 = 0.75;
 
@@ -50,8 +52,12 @@ pub struct SparseOptions {
     pub max_memory: u64,
     /// Storage; `None` picks i16 when its rounding fits the budget.
     pub storage: Option<Storage>,
-    /// Bricks along the medium's longest axis.
-    pub top_bricks: usize,
+    /// Bricks along the medium's longest axis; `None` chooses: the medium is probed on
+    /// [`DEFAULT_TOP_BRICKS`] and bricks of 1, 2, 4 or 8 of those a side are kept, whichever
+    /// the probes' curvature predicts holds the budget in the fewest voxels (small bricks
+    /// pay for their shared faces, (cells + 1)^3 nodes for cells^3 cells; large ones are
+    /// as fine everywhere as their finest corner).
+    pub top_bricks: Option<usize>,
     pub gradient: GradientMode,
     /// Random points the final error is measured at.
     pub error_points: usize,
@@ -64,7 +70,7 @@ impl Default for SparseOptions {
             error_budget: DEFAULT_ERROR_BUDGET,
             max_memory: DEFAULT_MAX_MEMORY,
             storage: None,
-            top_bricks: DEFAULT_TOP_BRICKS,
+            top_bricks: None,
             gradient: GradientMode::Exact,
             error_points: DEFAULT_ERROR_POINTS,
             seed: 1,
@@ -79,7 +85,7 @@ pub struct SparseReport {
     pub active_bricks: usize,
     /// Bricks of the top grid.
     pub total_bricks: usize,
-    /// Active bricks per level (`BASE_CELLS << level` cells a side).
+    /// Active bricks per level (`LEVEL_CELLS[level]` cells a side).
     pub levels: [usize; MAX_LEVEL as usize + 1],
     pub finest_spacing: f64,
     pub storage: Storage,
@@ -132,10 +138,10 @@ pub fn bake_sparse(
             opts.error_budget
         )));
     }
-    if !(1..=MAX_TOP_BRICKS).contains(&opts.top_bricks) {
+    let probe_bricks = opts.top_bricks.unwrap_or(DEFAULT_TOP_BRICKS);
+    if !(1..=MAX_TOP_BRICKS).contains(&probe_bricks) {
         return Err(BakeError::Option(format!(
-            "{} bricks along the longest axis: must be 1 to {MAX_TOP_BRICKS}",
-            opts.top_bricks
+            "{probe_bricks} bricks along the longest axis: must be 1 to {MAX_TOP_BRICKS}"
         )));
     }
     if opts.error_points == 0 {
@@ -143,7 +149,7 @@ pub fn bake_sparse(
     }
     let bounds = source.bounds();
     let ambient = source.ambient_index();
-    let top = top_grid(bounds.aabb(), opts.top_bricks);
+    let top = top_grid(bounds.aabb(), probe_bricks);
     let table_bytes = 4 * top.brick_count() as u64;
     if table_bytes > opts.max_memory {
         return Err(BakeError::SparseMemory {
@@ -160,7 +166,9 @@ pub fn bake_sparse(
     let features = source.feature_points();
     let done = AtomicU64::new(0);
     progress("probe bricks", 0, count as u64);
-    let probes: Vec<Option<(f64, Option<f64>)>> = (0..count)
+    // Per brick meeting the medium: max |delta_n| probed, the proven bound, the probes'
+    // curvature error (what a level-0 grid would miss).
+    let probes: Vec<Option<(f64, Option<f64>, f64)>> = (0..count)
         .into_par_iter()
         .map(|idx| {
             let at = [
@@ -179,18 +187,26 @@ pub fn bake_sparse(
             let m = BASE_CELLS + 1;
             let h = top.edge / BASE_CELLS as f64;
             let mut max = 0.0f64;
+            let mut nodes = [[0.0f32; 4]; (BASE_CELLS + 1) * (BASE_CELLS + 1) * (BASE_CELLS + 1)];
+            let node =
+                |i: usize, j: usize, k: usize| lo + h * DVec3::new(i as f64, j as f64, k as f64);
             for k in 0..m {
                 for j in 0..m {
                     for i in 0..m {
-                        let p = lo + h * DVec3::new(i as f64, j as f64, k as f64);
+                        let p = node(i, j, k);
+                        let d = source.n(p) - ambient;
+                        nodes[i + m * (j + m * k)][0] = d as f32;
                         if bounds.contains(p) {
-                            max = max.max((source.n(p) - ambient).abs());
+                            max = max.max(d.abs());
                         }
                     }
                 }
             }
             evals.fetch_add((m * m * m) as u64, Ordering::Relaxed);
-            Some((max, source.delta_bound(lo, hi)))
+            let curvature = curvature_error(&nodes, BASE_CELLS, |i, j, k| {
+                bounds.signed_distance(node(i, j, k)) <= 0.0
+            });
+            Some((max, source.delta_bound(lo, hi), curvature))
         })
         .collect();
     let mut range = probes.iter().flatten().map(|p| p.0).fold(0.0f64, f64::max);
@@ -206,7 +222,7 @@ pub fn bake_sparse(
         .iter()
         .enumerate()
         .filter_map(|(idx, p)| {
-            let (max, bound) = (*p)?;
+            let (max, bound, _) = (*p)?;
             (bound.unwrap_or(max) > threshold).then_some(idx)
         })
         .collect();
@@ -221,13 +237,35 @@ pub fn bake_sparse(
     active.sort_unstable();
     active.dedup();
     let proven_empty = probes.iter().flatten().all(|p| p.1.is_some());
+    let tolerance = BUDGET_SAFETY * opts.error_budget * range;
+
+    // The bricks: the probe grid's, or (chosen) blocks of f x f x f of them.
+    let (top, active) = match opts.top_bricks {
+        Some(_) => (top, active),
+        None => {
+            let needed: Vec<(usize, f64)> = active
+                .iter()
+                .map(|&idx| {
+                    let e = probes[idx].map_or(0.0, |p| p.2);
+                    (idx, BASE_CELLS as f64 * (e / tolerance).sqrt() * 1.05)
+                })
+                .collect();
+            let f = [1usize, 2, 4, 8]
+                .into_iter()
+                .filter(|&f| f == 1 || top.dims.iter().any(|&d| d >= f))
+                .min_by_key(|&f| (predicted_voxels(&top, &needed, f), usize::MAX - f))
+                .unwrap_or(1);
+            merged(&top, &active, f)
+        }
+    };
+    let count = top.brick_count();
+    let table_bytes = 4 * count as u64;
 
     // 3. Bake the active bricks.
     let storage = opts
         .storage
         .unwrap_or_else(|| choose_storage(range, opts.error_budget));
     let level_max = finest_level(top.edge, source.source_spacing());
-    let tolerance = BUDGET_SAFETY * opts.error_budget * range;
     let used = AtomicU64::new(table_bytes);
     let over = AtomicBool::new(false);
     let done = AtomicU64::new(0);
@@ -245,7 +283,7 @@ pub fn bake_sparse(
                 idx / (top.dims[0] * top.dims[1]),
             ];
             let b = bake_brick(
-                source, &top, at, idx, &features, level_max, tolerance, storage, opts, &evals,
+                source, &top, at, idx, &features, 0, level_max, tolerance, storage, opts, &evals,
             )?;
             let bytes = match &b.voxels {
                 BrickVoxels::F32(v) => 16 * v.len(),
@@ -281,87 +319,93 @@ pub fn bake_sparse(
         });
     }
 
-    // Assemble: bricks in table order, voxels one after another.
-    let voxel_total: usize = baked
-        .iter()
-        .map(|b| (BASE_CELLS << b.level) + 1)
-        .map(|m| m * m * m)
-        .sum();
-    let mut table = crate::alloc::try_filled(count, EMPTY, "a sparse field's brick table")?;
-    let mut bricks = Vec::with_capacity(baked.len());
-    let mut offset = 0usize;
-    let limited_bricks = baked.iter().filter(|b| b.limited).count();
-    let pool = match storage {
-        Storage::F32 => {
-            let mut pool = crate::alloc::try_with_capacity(voxel_total, "a sparse field's voxels")?;
-            for b in &baked {
-                if let BrickVoxels::F32(v) = &b.voxels {
-                    pool.extend_from_slice(v);
-                }
-            }
-            Pool::F32(pool)
-        }
-        Storage::I16 => {
-            let mut pool = crate::alloc::try_with_capacity(voxel_total, "a sparse field's voxels")?;
-            for b in &baked {
-                if let BrickVoxels::I16(v) = &b.voxels {
-                    pool.extend_from_slice(v);
-                }
-            }
-            Pool::I16(pool)
-        }
-    };
-    for (i, (&idx, b)) in active.iter().zip(&baked).enumerate() {
-        table[idx] = i as u32;
-        let at = [
-            idx % top.dims[0],
-            (idx / top.dims[0]) % top.dims[1],
-            idx / (top.dims[0] * top.dims[1]),
-        ];
-        bricks.push(Brick {
-            at: at.map(|a| a as u32),
-            level: b.level,
-            offset,
-            scale: b.scale,
-        });
-        offset += ((BASE_CELLS << b.level) + 1).pow(3);
-    }
-    drop(baked);
-    let mut field = SparseField::new(
-        top,
-        table,
-        bricks,
-        pool,
-        bounds,
-        ambient,
-        BakeProvenance {
-            source: source.describe(),
-            ..Default::default()
-        },
-    )
-    .map_err(BakeError::Option)?;
-
-    // 4. Measure.
-    progress("measure error", 0, 1);
-    let mut points = error_points(&field, opts.error_points, opts.seed);
+    // 4. Assemble and measure. Bricks where the measured error is over their share are
+    // baked again finer: a level search judges a brick by 64 points and its nodes'
+    // curvature, which a field its grid under-resolves (noise at a loose budget) can fool.
+    let mut points = error_points(&top, &active, bounds, opts.error_points, opts.seed);
     points.extend(features.iter().copied());
-    let errors = measure_error_at(source, &field, opts.gradient, &points);
-    progress("measure error", 1, 1);
-    let range = range.max(errors.max_source_delta_n);
-    let rel = if range > 0.0 {
-        errors.max_err_n / range
-    } else if errors.max_err_n > 0.0 {
-        f64::INFINITY
-    } else {
-        0.0
+    let mut baked = baked;
+    let mut round = 0u64;
+    let (mut field, errors, range, rel) = loop {
+        progress("measure error", round, REFINE_ROUNDS + 1);
+        let field = assemble(&top, &active, &baked, storage, bounds, ambient, source)?;
+        let errors = measure_error_at(source, &field, opts.gradient, &points);
+        let range = range.max(errors.max_source_delta_n);
+        let rel = if range > 0.0 {
+            errors.max_err_n / range
+        } else if errors.max_err_n > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        };
+        if rel <= opts.error_budget || round == REFINE_ROUNDS {
+            break (field, errors, range, rel);
+        }
+        let tol = BUDGET_SAFETY * opts.error_budget * range;
+        let mut worst = std::collections::BTreeMap::new();
+        for &p in &points {
+            let err = (field.sample(p).n - source.n(p)).abs();
+            if err > tol
+                && let Some(idx) = brick_of(&top, p)
+                && let Ok(pos) = active.binary_search(&idx)
+            {
+                let w = worst.entry(pos).or_insert(0.0f64);
+                *w = w.max(err);
+            }
+        }
+        let redo: Vec<(usize, u8)> = worst
+            .into_iter()
+            .filter(|&(pos, _)| baked[pos].level < level_max)
+            .map(|(pos, err)| {
+                let wanted = cells_of(baked[pos].level) as f64 * (err / tol).sqrt() * 1.05;
+                let level = (baked[pos].level + 1..=level_max)
+                    .find(|&l| cells_of(l) as f64 >= wanted)
+                    .unwrap_or(level_max);
+                (pos, level)
+            })
+            .collect();
+        if redo.is_empty() {
+            break (field, errors, range, rel);
+        }
+        drop(field);
+        let rebaked: Vec<BakedBrick> = redo
+            .par_iter()
+            .map(|&(pos, level)| {
+                let idx = active[pos];
+                let at = [
+                    idx % top.dims[0],
+                    (idx / top.dims[0]) % top.dims[1],
+                    idx / (top.dims[0] * top.dims[1]),
+                ];
+                bake_brick(
+                    source, &top, at, idx, &features, level, level_max, tolerance, storage, opts,
+                    &evals,
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        for (&(pos, _), b) in redo.iter().zip(rebaked) {
+            baked[pos] = b;
+        }
+        round += 1;
     };
+    let limited_bricks = baked.iter().filter(|b| b.limited).count();
+    drop(baked);
+    if field.memory_bytes() as u64 > opts.max_memory {
+        return Err(BakeError::SparseMemory {
+            need: field.memory_bytes() as u64,
+            cap: opts.max_memory,
+            done: active.len(),
+            active: active.len(),
+        });
+    }
+    progress("measure error", REFINE_ROUNDS + 1, REFINE_ROUNDS + 1);
     let source_limited =
         rel > opts.error_budget && limited_bricks > 0 && source.source_spacing().is_some();
     if rel > opts.error_budget && !source_limited {
         return Err(BakeError::SparseBudgetNotMet {
             budget: opts.error_budget,
             best: rel,
-            spacing: top.edge / (BASE_CELLS << level_max) as f64,
+            spacing: top.edge / cells_of(level_max) as f64,
             limited: limited_bricks,
         });
     }
@@ -394,6 +438,51 @@ pub fn bake_sparse(
         source_evals: evals.load(Ordering::Relaxed),
     };
     Ok((field, report))
+}
+
+/// Voxels the bricks of `f` x `f` x `f` probe bricks would hold, each at the level the
+/// finest of its probe bricks needs (`needed`: probe brick, cells it needs a side).
+fn predicted_voxels(top: &TopGrid, needed: &[(usize, f64)], f: usize) -> u64 {
+    let mut finest = std::collections::HashMap::new();
+    for &(idx, cells) in needed {
+        let parent = parent_of(top, idx, f);
+        let e = finest.entry(parent).or_insert(0.0f64);
+        *e = e.max(cells * f as f64);
+    }
+    finest
+        .values()
+        .map(|&c| {
+            let level = (0..=MAX_LEVEL)
+                .find(|&l| cells_of(l) as f64 >= c)
+                .unwrap_or(MAX_LEVEL);
+            (cells_of(level) as u64 + 1).pow(3)
+        })
+        .sum()
+}
+
+/// The index, in the grid of `f`-fold bricks, of probe brick `idx`'s block.
+fn parent_of(top: &TopGrid, idx: usize, f: usize) -> usize {
+    let pd = top.dims.map(|d| d.div_ceil(f));
+    let at = [
+        idx % top.dims[0] / f,
+        (idx / top.dims[0]) % top.dims[1] / f,
+        idx / (top.dims[0] * top.dims[1]) / f,
+    ];
+    at[0] + pd[0] * (at[1] + pd[1] * at[2])
+}
+
+/// The grid of `f`-fold bricks (same origin) and its active bricks (those holding an
+/// active probe brick).
+fn merged(top: &TopGrid, active: &[usize], f: usize) -> (TopGrid, Vec<usize>) {
+    let grid = TopGrid {
+        origin: top.origin,
+        edge: top.edge * f as f64,
+        dims: top.dims.map(|d| d.div_ceil(f)),
+    };
+    let mut out: Vec<usize> = active.iter().map(|&idx| parent_of(top, idx, f)).collect();
+    out.sort_unstable();
+    out.dedup();
+    (grid, out)
 }
 
 /// Cubic bricks of edge `longest / bricks` covering the box, centred on it.
@@ -429,7 +518,7 @@ fn finest_level(edge: f64, source_spacing: Option<f64>) -> u8 {
         return MAX_LEVEL;
     };
     (0..=MAX_LEVEL)
-        .take_while(|&l| edge / (BASE_CELLS << l) as f64 >= 0.5 * h * (1.0 - 1e-9))
+        .take_while(|&l| edge / cells_of(l) as f64 >= 0.5 * h * (1.0 - 1e-9))
         .last()
         .unwrap_or(0)
 }
@@ -442,6 +531,7 @@ fn bake_brick(
     at: [usize; 3],
     idx: usize,
     features: &[DVec3],
+    first_level: u8,
     level_max: u8,
     tolerance: f64,
     storage: Storage,
@@ -475,9 +565,9 @@ fn bake_brick(
         GradientMode::Exact => 1,
         GradientMode::CentralDifference => 7,
     };
-    let mut level = 0u8;
+    let mut level = first_level.min(level_max);
     loop {
-        let cells = BASE_CELLS << level;
+        let cells = cells_of(level);
         let m = cells + 1;
         let h = top.edge / cells as f64;
         let shell = GRID_MARGIN_TRILINEAR as f64 * h;
@@ -500,11 +590,18 @@ fn bake_brick(
             }
         }
         evals.fetch_add((m * m * m * per_node) as u64, Ordering::Relaxed);
+        // Curvature only where its stencil holds the field itself: beyond the shell
+        // sample_node holds the shell's value, a kink no grid resolves (a brick across a
+        // sphere's surface climbed to 256 cells on it).
+        let inside = |i: usize, j: usize, k: usize| {
+            let p = lo + h * DVec3::new(i as f64, j as f64, k as f64);
+            bounds.signed_distance(p) <= 0.0
+        };
         let err = points
             .iter()
             .zip(&reference)
             .map(|(&p, &r)| (delta_at(&raw, cells, (p - lo) / h) - r).abs())
-            .fold(curvature_error(&raw, cells), f64::max);
+            .fold(curvature_error(&raw, cells, inside), f64::max);
         let met = err <= tolerance;
         if met || level >= level_max {
             let (voxels, scale) = match storage {
@@ -521,16 +618,25 @@ fn bake_brick(
                 limited: !met,
             });
         }
-        level += 1;
+        // Trilinear error goes as h^2: the next level is the first whose cells the error
+        // predicts enough for (5% margin), at least one finer.
+        let wanted = cells as f64 * (err / tolerance).sqrt() * 1.05;
+        level = (level + 1..=level_max)
+            .find(|&l| cells_of(l) as f64 >= wanted)
+            .unwrap_or(level_max);
     }
 }
 
 /// The largest trilinear interpolation error the nodes' own curvature predicts: inside a
 /// cell the error is sum_a t_a (1 - t_a) h^2 |f_aa| / 2 to leading order, at most
-/// sum_a |second difference along a| / 8, taken at every interior node. Random points
+/// sum_a |second difference along a| / 8, taken at every node inside the medium. Random points
 /// alone miss the one cell where a narrow peak's error is largest (64 points a brick left
 /// an eight-plume bake at 1.9e-3 against a 1e-3 budget).
-fn curvature_error(raw: &[[f32; 4]], cells: usize) -> f64 {
+fn curvature_error(
+    raw: &[[f32; 4]],
+    cells: usize,
+    inside: impl Fn(usize, usize, usize) -> bool,
+) -> f64 {
     let m = cells + 1;
     let at = |i: usize, j: usize, k: usize| f64::from(raw[i + m * (j + m * k)][0]);
     // On a face the difference is the one centred a node inwards (one-sided there).
@@ -539,6 +645,9 @@ fn curvature_error(raw: &[[f32; 4]], cells: usize) -> f64 {
     for k in 0..m {
         for j in 0..m {
             for i in 0..m {
+                if !inside(i, j, k) {
+                    continue;
+                }
                 let (ci, cj, ck) = (inner(i), inner(j), inner(k));
                 let s = (at(ci + 1, j, k) + at(ci - 1, j, k) - 2.0 * at(ci, j, k)).abs()
                     + (at(i, cj + 1, k) + at(i, cj - 1, k) - 2.0 * at(i, cj, k)).abs()
@@ -603,10 +712,14 @@ fn quantize(raw: &[[f32; 4]]) -> (Vec<[i16; 4]>, [f32; 2]) {
 
 /// The final error points: most inside active bricks (and the medium), the rest anywhere
 /// in the medium.
-fn error_points(field: &SparseField, count: usize, seed: u64) -> Vec<DVec3> {
-    let bounds = field.bounds();
-    let bricks = field.bricks();
-    let in_bricks = if bricks.is_empty() {
+fn error_points(
+    top: &TopGrid,
+    active: &[usize],
+    bounds: crate::bounds::Bounds,
+    count: usize,
+    seed: u64,
+) -> Vec<DVec3> {
+    let in_bricks = if active.is_empty() {
         0
     } else {
         (count as f64 * ERROR_POINTS_IN_BRICKS) as usize
@@ -616,14 +729,85 @@ fn error_points(field: &SparseField, count: usize, seed: u64) -> Vec<DVec3> {
     let mut tries = 0usize;
     while pts.len() < count && tries < 1000 * count {
         tries += 1;
-        let b = &bricks[(rng.next_u64() % bricks.len() as u64) as usize];
-        let (lo, hi) = field.top().brick_box(b.at.map(|a| a as usize));
+        let idx = active[(rng.next_u64() % active.len() as u64) as usize];
+        let at = [
+            idx % top.dims[0],
+            (idx / top.dims[0]) % top.dims[1],
+            idx / (top.dims[0] * top.dims[1]),
+        ];
+        let (lo, hi) = top.brick_box(at);
         let p = lo + (hi - lo) * DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64());
         if bounds.contains(p) {
             pts.push(p);
         }
     }
     pts
+}
+
+/// The field of `baked` (one per `active` brick, in order): the table, the brick records
+/// and the voxels copied into one pool.
+fn assemble(
+    top: &TopGrid,
+    active: &[usize],
+    baked: &[BakedBrick],
+    storage: Storage,
+    bounds: crate::bounds::Bounds,
+    ambient: f64,
+    source: &dyn IndexField,
+) -> Result<SparseField, BakeError> {
+    let voxel_total: usize = baked.iter().map(|b| (cells_of(b.level) + 1).pow(3)).sum();
+    let mut table =
+        crate::alloc::try_filled(top.brick_count(), EMPTY, "a sparse field's brick table")?;
+    let mut bricks = Vec::with_capacity(baked.len());
+    let pool = match storage {
+        Storage::F32 => {
+            let mut pool = crate::alloc::try_with_capacity(voxel_total, "a sparse field's voxels")?;
+            for b in baked {
+                if let BrickVoxels::F32(v) = &b.voxels {
+                    pool.extend_from_slice(v);
+                }
+            }
+            Pool::F32(pool)
+        }
+        Storage::I16 => {
+            let mut pool = crate::alloc::try_with_capacity(voxel_total, "a sparse field's voxels")?;
+            for b in baked {
+                if let BrickVoxels::I16(v) = &b.voxels {
+                    pool.extend_from_slice(v);
+                }
+            }
+            Pool::I16(pool)
+        }
+    };
+    let mut offset = 0usize;
+    for (i, (&idx, b)) in active.iter().zip(baked).enumerate() {
+        table[idx] = i as u32;
+        let at = [
+            idx % top.dims[0],
+            (idx / top.dims[0]) % top.dims[1],
+            idx / (top.dims[0] * top.dims[1]),
+        ];
+        bricks.push(Brick {
+            at: at.map(|a| a as u32),
+            level: b.level,
+            offset,
+            scale: b.scale,
+        });
+        offset += (cells_of(b.level) + 1).pow(3);
+    }
+    SparseField::new(
+        *top,
+        table,
+        bricks,
+        pool,
+        bounds,
+        ambient,
+        BakeProvenance {
+            source: source.describe(),
+            ..Default::default()
+        },
+    )
+    .map_err(BakeError::Option)
 }
 
 /// Bytes of a dense grid at `field`'s finest spacing over the box of its active bricks.

@@ -14,7 +14,8 @@
 //! then, at a multiple of 16: 16 bytes per active brick: u32 level, f32 scale of delta_n,
 //!   f32 scale of the gradient (1, 1 for f32), u32 0
 //! then, at a multiple of 16: the voxels of brick 0, 1, ... in order, each brick
-//!   ((4 << level) + 1)^3 voxels x fastest, a voxel 4 f32 or 4 i16
+//!   (cells + 1)^3 voxels x fastest, cells = LEVEL_CELLS[level] (4, 5, 6, 8, 10, 12, 16,
+//!   20, 24, 32, 40, 48, 64, 80, 96, 128, 160, 192, 256), a voxel 4 f32 or 4 i16
 //! last 4 bytes: CRC-32 of everything before them
 //! ```
 //!
@@ -23,7 +24,7 @@
 
 use glam::DVec3;
 
-use super::{BASE_CELLS, Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid};
+use super::{Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, cells_of};
 use crate::baked::{BakeProvenance, Storage};
 use crate::bounds::Bounds;
 use crate::field::IndexField;
@@ -197,7 +198,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
             )));
         }
         levels.push(level as u8);
-        voxels += (((BASE_CELLS << level) + 1) as u64).pow(3);
+        voxels += ((cells_of(level as u8) + 1) as u64).pow(3);
     }
     let expected =
         pool_offset as u64 + voxels * storage.bytes_per_voxel() as u64 + CRC_BYTES as u64;

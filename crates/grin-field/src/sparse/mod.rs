@@ -4,8 +4,9 @@
 //! Layout. The medium's box is cut into a top grid of cubic *bricks* of world edge `edge`
 //! (brick (a, b, c) covers `origin + edge * [a, a+1] x [b, b+1] x [c, c+1]`, x fastest in
 //! the `table`). A brick the field leaves at ambient is empty (`table` holds [`EMPTY`]); an
-//! active brick holds a dense grid of `cells + 1` nodes per edge, `cells = BASE_CELLS <<
-//! level`, node (i, j, k) at `brick origin + edge / cells * (i, j, k)`, voxel `i + m * (j + m
+//! active brick holds a dense grid of `cells + 1` nodes per edge, `cells =
+//! LEVEL_CELLS[level]` (a ladder of ratio ~1.25 from 4 to 256, so a brick is at most 25%
+//! finer per axis than its content needs), node (i, j, k) at `brick origin + edge / cells * (i, j, k)`, voxel `i + m * (j + m
 //! * k)` with `m = cells + 1`, channels `[delta_n, dn/dx, dn/dy, dn/dz]` as in a dense bake.
 //! Each brick's voxels start at its `offset` in one shared pool (an atlas).
 //!
@@ -34,17 +35,27 @@ use crate::field::{FieldSample, IndexField};
 
 /// `table` entry of an empty brick.
 pub const EMPTY: u32 = u32::MAX;
+/// Cells per brick edge at each level: steps of ~1.25 (a power-of-two ladder overshot
+/// what a brick needs by up to 2x per axis, 8x in memory).
+pub const LEVEL_CELLS: [usize; 19] = [
+    4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64, 80, 96, 128, 160, 192, 256,
+];
 /// Cells per brick edge at level 0.
-pub const BASE_CELLS: usize = 4;
-/// Finest level: `BASE_CELLS << MAX_LEVEL` = 256 cells a brick edge.
-pub const MAX_LEVEL: u8 = 6;
+pub const BASE_CELLS: usize = LEVEL_CELLS[0];
+/// Finest level (256 cells a brick edge).
+pub const MAX_LEVEL: u8 = (LEVEL_CELLS.len() - 1) as u8;
+
+/// Cells per brick edge at `level` (at most [`MAX_LEVEL`]).
+pub fn cells_of(level: u8) -> usize {
+    LEVEL_CELLS[usize::from(level)]
+}
 
 /// One active brick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Brick {
     /// Top-grid coordinates.
     pub at: [u32; 3],
-    /// `BASE_CELLS << level` cells per edge.
+    /// `LEVEL_CELLS[level]` cells per edge.
     pub level: u8,
     /// First voxel in the pool.
     pub offset: usize,
@@ -54,7 +65,7 @@ pub struct Brick {
 
 impl Brick {
     pub fn cells(&self) -> usize {
-        BASE_CELLS << self.level
+        cells_of(self.level)
     }
     /// Nodes per edge.
     pub fn nodes(&self) -> usize {
@@ -301,7 +312,7 @@ impl SparseField {
     }
     /// Node spacing of a brick at `level`.
     pub fn spacing(&self, level: u8) -> f64 {
-        self.top.edge / (BASE_CELLS << level) as f64
+        self.top.edge / cells_of(level) as f64
     }
     /// The finest spacing any brick has (the top grid's edge when none is active).
     pub fn finest_spacing(&self) -> f64 {

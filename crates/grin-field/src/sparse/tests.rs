@@ -78,7 +78,7 @@ fn empty_bricks_are_ambient_and_flown_over() {
     let (f, r) = bake(
         &src,
         &SparseOptions {
-            top_bricks: 16,
+            top_bricks: Some(16),
             ..Default::default()
         },
     );
@@ -194,7 +194,7 @@ fn file_round_trip_is_exact() {
             &src,
             &SparseOptions {
                 storage: Some(storage),
-                top_bricks: 12,
+                top_bricks: Some(12),
                 ..Default::default()
             },
         );

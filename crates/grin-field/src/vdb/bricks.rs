@@ -27,6 +27,8 @@ pub(super) struct Bricks {
     /// Bricks along each axis.
     counts: [usize; 3],
     bricks: Vec<Option<Box<[f64]>>>,
+    /// max |value| of each stored brick (0 where none is stored).
+    maxes: Vec<f64>,
 }
 
 impl Bricks {
@@ -41,6 +43,7 @@ impl Bricks {
             dims,
             counts,
             bricks: vec![None; counts.iter().product()],
+            maxes: vec![0.0; counts.iter().product()],
         }
     }
 
@@ -113,8 +116,35 @@ impl Bricks {
     fn put(&mut self, b: [usize; 3], values: Box<[f64]>) {
         if values.iter().any(|&v| v != 0.0) {
             let slot = self.slot(b);
+            self.maxes[slot] = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             self.bricks[slot] = Some(values);
         }
+    }
+
+    /// An upper bound on |value| over the index box [`lo`, `hi`]: the largest max of the
+    /// stored bricks it meets (0 where it meets none).
+    pub(super) fn max_abs_in(&self, lo: [i64; 3], hi: [i64; 3]) -> f64 {
+        let mut range = [(0usize, 0usize); 3];
+        for a in 0..3 {
+            let l = lo[a] - i64::from(self.origin[a]);
+            let h = hi[a] - i64::from(self.origin[a]);
+            if h < 0 || l >= self.dims[a] as i64 || l > h {
+                return 0.0;
+            }
+            range[a] = (
+                l.max(0) as usize / BRICK,
+                (h.min(self.dims[a] as i64 - 1) as usize) / BRICK,
+            );
+        }
+        let mut m = 0.0f64;
+        for k in range[2].0..=range[2].1 {
+            for j in range[1].0..=range[1].1 {
+                for i in range[0].0..=range[0].1 {
+                    m = m.max(self.maxes[self.slot([i, j, k])]);
+                }
+            }
+        }
+        m
     }
 
     /// The value at index `ijk`: 0 outside the store or in a brick not stored.

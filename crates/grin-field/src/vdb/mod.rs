@@ -244,6 +244,36 @@ impl IndexField for VdbField {
         self.n_range
     }
 
+    /// From the stored bricks the box's stencils reach (2 voxels around it in index
+    /// space): their largest |delta_n| times 1.25^3 (Catmull-Rom's weights sum to at most
+    /// 1.25 in absolute value a axis), and never past the clamp to the mapped range.
+    fn delta_bound(&self, lo: DVec3, hi: DVec3) -> Option<f64> {
+        let mut ilo = DVec3::splat(f64::INFINITY);
+        let mut ihi = DVec3::splat(f64::NEG_INFINITY);
+        for c in 0..8 {
+            let corner = DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            let i = self.index_from_world(corner);
+            ilo = ilo.min(i);
+            ihi = ihi.max(i);
+        }
+        if !(ilo.is_finite() && ihi.is_finite()) {
+            return None;
+        }
+        let reach = |v: f64, d: f64| (v + d).clamp(-1e15, 1e15) as i64;
+        let local = self.voxels.max_abs_in(
+            [0, 1, 2].map(|a| reach(ilo[a].floor(), -2.0)),
+            [0, 1, 2].map(|a| reach(ihi[a].ceil(), 2.0)),
+        );
+        let global = (self.n_range.0 - self.ambient)
+            .abs()
+            .max((self.n_range.1 - self.ambient).abs());
+        Some((local * 1.25f64.powi(3)).min(global))
+    }
+
     /// Two voxels.
     fn feature_size(&self) -> Option<f64> {
         self.source_spacing().map(|h| 2.0 * h)

@@ -84,7 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.bake_resolution
     );
     outln!(
-        "{:<20} {:<4} {:>9} {:>22} {:>10} {:>11} {:>9} {:>9} {:>12}",
+        "{:<24} {:<4} {:>9} {:>22} {:>10} {:>11} {:>9} {:>9} {:>12}",
         "scene",
         "",
         "size",
@@ -97,7 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for r in &report.runs {
         outln!(
-            "{:<20} {:<4} {:>9} {:>22} {:>10} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
+            "{:<24} {:<4} {:>9} {:>22} {:>10} {:>11.3} {:>9.1} {:>9.1} {:>12.2}",
             r.scene,
             r.backend,
             format!("{}x{}", r.width, r.height),
@@ -108,6 +108,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r.steps_per_ray,
             r.evals_per_ray,
             r.ray_steps_per_second / 1e6
+        );
+    }
+    for s in &report.sparse {
+        outln!(
+            "sparse {:<18} at error {:.2e} (sparse's {:.2e}): {} of {} bricks, {} bytes vs dense {} ({:.2}x), frame time gpu {:.2}x{} (aim: bytes <= 1x, time <= 1.3x)",
+            s.scene,
+            s.error,
+            s.sparse_error,
+            s.active_bricks,
+            s.total_bricks,
+            s.sparse_bytes,
+            s.dense_bytes,
+            s.sparse_bytes as f64 / s.dense_bytes.max(1) as f64,
+            s.gpu_time_ratio,
+            s.cpu_time_ratio
+                .map(|c| format!(", cpu {c:.2}x"))
+                .unwrap_or_default()
         );
     }
     outln!(
