@@ -244,6 +244,8 @@ pub fn upload(
 /// Texels per row and rows per layer of a sparse field's linear texture (field.wgsl's
 /// `SPARSE_ROW`).
 pub const SPARSE_ROW: usize = 256;
+/// Layers of the sparse field's texture written at a time (64 MiB of f32 texels).
+const SPARSE_UPLOAD_LAYERS: usize = 64;
 
 /// Upload a sparse bake: its brick table and voxels, as f32 texels in one linear 3D
 /// texture (layout in shaders/shared/field.wgsl), and its top grid as the macro cells
@@ -272,45 +274,89 @@ pub fn upload_sparse(
             adapter: ctx.adapter_name(),
         });
     }
-    let mut texels: Vec<[f32; 4]> = Vec::new();
-    texels
-        .try_reserve_exact(layer * depth)
-        .map_err(|_| GpuError::TooLarge {
-            what: format!("sparse field of {} bricks", bricks.len()),
-            needed: format!("{bytes} bytes of host memory"),
-            limit: "what could be allocated".into(),
-            adapter: ctx.adapter_name(),
-        })?;
+    // Written a slab of layers at a time, each slab's texels made just before (the table's
+    // entries, then the bricks' voxels decoded to f32) and its staging flushed by a
+    // submission: host memory holds one slab, not a copy of the whole field.
+    let field = ctx.scoped("uploading the sparse field texture", || {
+        ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("sparse field"),
+            size: wgpu::Extent3d {
+                width: dims[0],
+                height: dims[1],
+                depth_or_array_layers: dims[2],
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rgba32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        })
+    })?;
     let base = table.len();
-    for &e in table {
-        texels.push(match bricks.get(e as usize) {
-            None => [0.0; 4],
-            Some(b) => {
-                let first = base + b.offset;
-                [
-                    (first / 65536) as f32,
-                    (first % 65536) as f32,
-                    b.cells() as f32,
-                    0.0,
-                ]
-            }
-        });
-    }
-    for b in bricks {
-        for v in b.offset..b.offset + b.voxel_count() {
-            texels.push(sparse.voxel_f32(b, v));
+    let texel = |t: usize, brick: &mut usize| -> [f32; 4] {
+        if t < base {
+            return match bricks.get(table[t] as usize) {
+                None => [0.0; 4],
+                Some(b) => {
+                    let first = base + b.offset;
+                    [
+                        (first / 65536) as f32,
+                        (first % 65536) as f32,
+                        b.cells() as f32,
+                        0.0,
+                    ]
+                }
+            };
         }
+        let v = t - base;
+        if v >= voxels {
+            return [0.0; 4];
+        }
+        while *brick + 1 < bricks.len() && bricks[*brick + 1].offset <= v {
+            *brick += 1;
+        }
+        sparse.voxel_f32(&bricks[*brick], v)
+    };
+    let mut slab = Vec::new();
+    let mut z = 0;
+    while z < depth {
+        let layers = SPARSE_UPLOAD_LAYERS.min(depth - z);
+        let first = z * layer;
+        let mut brick = bricks
+            .partition_point(|b| b.offset + base <= first)
+            .saturating_sub(1);
+        slab.clear();
+        slab.extend((first..first + layers * layer).map(|t| texel(t, &mut brick)));
+        ctx.scoped("uploading the sparse field texture", || {
+            ctx.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &field,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: z as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(&slab),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(dims[0] * FIELD_TEXEL_BYTES as u32),
+                    rows_per_image: Some(dims[1]),
+                },
+                wgpu::Extent3d {
+                    width: dims[0],
+                    height: dims[1],
+                    depth_or_array_layers: layers as u32,
+                },
+            );
+            ctx.queue.submit(None);
+        })?;
+        z += layers;
     }
-    texels.resize(layer * depth, [0.0; 4]);
-    let field = texture_3d(
-        ctx,
-        "sparse field",
-        dims,
-        wgpu::TextureFormat::Rgba32Float,
-        FIELD_TEXEL_BYTES as u32,
-        bytemuck::cast_slice(&texels),
-    )?;
-    drop(texels);
+    drop(slab);
     let mdims = dims_u32(top.dims, "sparse top grid")?;
     let occupancy: Vec<f32> = table
         .iter()

@@ -38,6 +38,9 @@ pub const DEFAULT_TOP_BRICKS: usize = 32;
 pub const MAX_TOP_BRICKS: usize = 1024;
 /// Random points a brick's level search measures its error at.
 pub const ERROR_POINTS_PER_BRICK: usize = 64;
+/// Bricks are merged only where no probe brick needs more than this many times the
+/// probes' own cells a side.
+const MERGE_PROBE_LIMIT: usize = 4;
 /// Rounds of baking again the bricks whose measured error is over their share.
 const REFINE_ROUNDS: u64 = 3;
 /// Share of the final error points drawn inside active bricks.
@@ -250,9 +253,15 @@ pub fn bake_sparse(
                     (idx, BASE_CELLS as f64 * (e / tolerance).sqrt() * 1.05)
                 })
                 .collect();
+            // Where the probes are 4x coarser than a brick needs, their curvature is
+            // aliased (a sheet 1.3 probe spacings thick predicted bricks 3x too coarse):
+            // no merging then.
+            let resolved = needed
+                .iter()
+                .all(|&(_, c)| c <= (MERGE_PROBE_LIMIT * BASE_CELLS) as f64);
             let f = [1usize, 2, 4, 8]
                 .into_iter()
-                .filter(|&f| f == 1 || top.dims.iter().any(|&d| d >= f))
+                .filter(|&f| f == 1 || (resolved && top.dims.iter().any(|&d| d >= f)))
                 .min_by_key(|&f| (predicted_voxels(&top, &needed, f), usize::MAX - f))
                 .unwrap_or(1);
             merged(&top, &active, f)
@@ -328,7 +337,7 @@ pub fn bake_sparse(
     let mut round = 0u64;
     let (mut field, errors, range, rel) = loop {
         progress("measure error", round, REFINE_ROUNDS + 1);
-        let field = assemble(&top, &active, &baked, storage, bounds, ambient, source)?;
+        let field = assemble(&top, &active, &mut baked, storage, bounds, ambient, source)?;
         let errors = measure_error_at(source, &field, opts.gradient, &points);
         let range = range.max(errors.max_source_delta_n);
         let rel = if range > 0.0 {
@@ -367,7 +376,7 @@ pub fn bake_sparse(
         if redo.is_empty() {
             break (field, errors, range, rel);
         }
-        drop(field);
+        disassemble(field, &mut baked);
         let rebaked: Vec<BakedBrick> = redo
             .par_iter()
             .map(|&(pos, level)| {
@@ -389,7 +398,6 @@ pub fn bake_sparse(
         round += 1;
     };
     let limited_bricks = baked.iter().filter(|b| b.limited).count();
-    drop(baked);
     if field.memory_bytes() as u64 > opts.max_memory {
         return Err(BakeError::SparseMemory {
             need: field.memory_bytes() as u64,
@@ -745,11 +753,12 @@ fn error_points(
 }
 
 /// The field of `baked` (one per `active` brick, in order): the table, the brick records
-/// and the voxels copied into one pool.
+/// and the voxels moved into one pool (each brick's freed as it is copied, so the bake's
+/// peak is about one pool, not two).
 fn assemble(
     top: &TopGrid,
     active: &[usize],
-    baked: &[BakedBrick],
+    baked: &mut [BakedBrick],
     storage: Storage,
     bounds: crate::bounds::Bounds,
     ambient: f64,
@@ -762,25 +771,27 @@ fn assemble(
     let pool = match storage {
         Storage::F32 => {
             let mut pool = crate::alloc::try_with_capacity(voxel_total, "a sparse field's voxels")?;
-            for b in baked {
-                if let BrickVoxels::F32(v) = &b.voxels {
+            for b in baked.iter_mut() {
+                if let BrickVoxels::F32(v) = &mut b.voxels {
                     pool.extend_from_slice(v);
+                    *v = Vec::new();
                 }
             }
             Pool::F32(pool)
         }
         Storage::I16 => {
             let mut pool = crate::alloc::try_with_capacity(voxel_total, "a sparse field's voxels")?;
-            for b in baked {
-                if let BrickVoxels::I16(v) = &b.voxels {
+            for b in baked.iter_mut() {
+                if let BrickVoxels::I16(v) = &mut b.voxels {
                     pool.extend_from_slice(v);
+                    *v = Vec::new();
                 }
             }
             Pool::I16(pool)
         }
     };
     let mut offset = 0usize;
-    for (i, (&idx, b)) in active.iter().zip(baked).enumerate() {
+    for (i, (&idx, b)) in active.iter().zip(baked.iter()).enumerate() {
         table[idx] = i as u32;
         let at = [
             idx % top.dims[0],
@@ -808,6 +819,17 @@ fn assemble(
         },
     )
     .map_err(BakeError::Option)
+}
+
+/// Give each of `baked` its voxels back from `field`'s pool (to bake some again).
+fn disassemble(field: SparseField, baked: &mut [BakedBrick]) {
+    for (b, brick) in baked.iter_mut().zip(field.bricks()) {
+        let span = brick.offset..brick.offset + brick.voxel_count();
+        b.voxels = match field.pool() {
+            Pool::F32(p) => BrickVoxels::F32(p[span].to_vec()),
+            Pool::I16(p) => BrickVoxels::I16(p[span].to_vec()),
+        };
+    }
 }
 
 /// Bytes of a dense grid at `field`'s finest spacing over the box of its active bricks.

@@ -43,8 +43,28 @@ fn align(n: usize) -> usize {
     n.div_ceil(DATA_ALIGN) * DATA_ALIGN
 }
 
-/// Serialize a sparse field.
-pub fn to_bytes(field: &SparseField) -> Vec<u8> {
+/// A writer that keeps the CRC-32 of what passed through it.
+struct Crc<W> {
+    w: W,
+    crc: crc32fast::Hasher,
+    written: usize,
+}
+
+impl<W: std::io::Write> std::io::Write for Crc<W> {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        let n = self.w.write(b)?;
+        self.crc.update(&b[..n]);
+        self.written += n;
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.w.flush()
+    }
+}
+
+/// Write `field` to `w` in the version-2 layout, a part at a time (the voxels are never
+/// copied into one buffer: a 10^8-voxel bake writes in its own memory).
+pub fn write_to(field: &SparseField, w: &mut dyn std::io::Write) -> std::io::Result<()> {
     let top = field.top();
     let prov = field.provenance();
     let mut desc = prov.source.as_bytes().to_vec();
@@ -52,7 +72,16 @@ pub fn to_bytes(field: &SparseField) -> Vec<u8> {
     let table_offset = align(FIXED_HEADER_BYTES + desc.len());
     let records_offset = align(table_offset + 4 * field.table().len());
     let pool_offset = align(records_offset + RECORD_BYTES * field.bricks().len());
-    let mut b = Vec::with_capacity(pool_offset + field.data_bytes() + CRC_BYTES);
+    let mut out = Crc {
+        w: std::io::BufWriter::with_capacity(1 << 20, w),
+        crc: crc32fast::Hasher::new(),
+        written: 0,
+    };
+    let pad = |out: &mut Crc<_>, to: usize| -> std::io::Result<()> {
+        let n = to - out.written;
+        std::io::Write::write_all(out, &vec![0u8; n])
+    };
+    let mut b = Vec::with_capacity(FIXED_HEADER_BYTES);
     let u32s =
         |b: &mut Vec<u8>, v: &[u32]| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
     let f64s =
@@ -90,35 +119,57 @@ pub fn to_bytes(field: &SparseField) -> Vec<u8> {
     u32s(&mut b, &[desc.len() as u32, 0]);
     debug_assert_eq!(b.len(), FIXED_HEADER_BYTES);
     b.extend_from_slice(&desc);
-    b.resize(table_offset, 0);
-    u32s(&mut b, field.table());
-    b.resize(records_offset, 0);
+    std::io::Write::write_all(&mut out, &b)?;
+    pad(&mut out, table_offset)?;
+    let mut table = Vec::with_capacity(4 * field.table().len());
+    u32s(&mut table, field.table());
+    std::io::Write::write_all(&mut out, &table)?;
+    pad(&mut out, records_offset)?;
     for brick in field.bricks() {
-        u32s(&mut b, &[u32::from(brick.level)]);
-        b.extend_from_slice(&brick.scale[0].to_le_bytes());
-        b.extend_from_slice(&brick.scale[1].to_le_bytes());
-        u32s(&mut b, &[0]);
+        let mut r = Vec::with_capacity(RECORD_BYTES);
+        u32s(&mut r, &[u32::from(brick.level)]);
+        r.extend_from_slice(&brick.scale[0].to_le_bytes());
+        r.extend_from_slice(&brick.scale[1].to_le_bytes());
+        u32s(&mut r, &[0]);
+        std::io::Write::write_all(&mut out, &r)?;
     }
-    b.resize(pool_offset, 0);
+    pad(&mut out, pool_offset)?;
+    let mut chunk = Vec::with_capacity(1 << 16);
     match field.pool() {
-        Pool::F32(v) => v
-            .iter()
-            .flatten()
-            .for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
-        Pool::I16(v) => v
-            .iter()
-            .flatten()
-            .for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+        Pool::F32(v) => {
+            for part in v.chunks(4096) {
+                chunk.clear();
+                part.iter()
+                    .flatten()
+                    .for_each(|x| chunk.extend_from_slice(&x.to_le_bytes()));
+                std::io::Write::write_all(&mut out, &chunk)?;
+            }
+        }
+        Pool::I16(v) => {
+            for part in v.chunks(8192) {
+                chunk.clear();
+                part.iter()
+                    .flatten()
+                    .for_each(|x| chunk.extend_from_slice(&x.to_le_bytes()));
+                std::io::Write::write_all(&mut out, &chunk)?;
+            }
+        }
     }
-    let crc = crc32fast::hash(&b);
-    b.extend_from_slice(&crc.to_le_bytes());
+    let crc = out.crc.clone().finalize();
+    std::io::Write::write_all(&mut out.w, &crc.to_le_bytes())?;
+    std::io::Write::flush(&mut out.w)
+}
+
+/// Serialize a sparse field into memory ([`write_to`]).
+pub fn to_bytes(field: &SparseField) -> Vec<u8> {
+    let mut b = Vec::new();
+    write_to(field, &mut b).expect("writing to memory cannot fail");
     b
 }
 
 /// Write `field` to `path`, staged and renamed into place (no partial file on failure).
 pub fn save(field: &SparseField, path: &std::path::Path) -> Result<(), GrinfError> {
-    let bytes = to_bytes(field);
-    Ok(grin_output::write_file(path, |w| w.write_all(&bytes))?)
+    Ok(grin_output::write_file(path, |w| write_to(field, w))?)
 }
 
 /// Parse a whole sparse `.grinf` image; every count is checked against the file's size

@@ -27,7 +27,7 @@ pub mod file;
 #[cfg(test)]
 mod tests;
 
-use glam::DVec3;
+use glam::{DVec3, Vec4};
 
 use crate::baked::{BakeProvenance, MacroGrid, Storage};
 use crate::bounds::Bounds;
@@ -389,35 +389,45 @@ impl SparseField {
         Some((b, (g - corner) * b.cells() as f64))
     }
 
-    /// Trilinear [delta_n, grad n] at cell coordinates `u` in brick `b`.
+    /// Trilinear [delta_n, grad n] at cell coordinates `u` in brick `b`: the 8 taps as one
+    /// f32 vector each (as the GPU and the dense grid interpolate), the storage matched
+    /// once a sample; i16 taps are blended as integers and scaled once.
     #[inline]
     fn trilinear(&self, b: &Brick, u: DVec3) -> [f64; 4] {
         let cells = b.cells();
         let m = cells + 1;
         let mut i = [0usize; 3];
-        let mut t = [0.0f64; 3];
+        let mut t = [0.0f32; 3];
         for a in 0..3 {
             let x = u[a].clamp(0.0, cells as f64);
             i[a] = (x as usize).min(cells - 1);
-            t[a] = x - i[a] as f64;
+            t[a] = (x - i[a] as f64) as f32;
         }
-        let mut out = [0.0f64; 4];
-        for dz in 0..2 {
-            let wz = if dz == 0 { 1.0 - t[2] } else { t[2] };
-            for dy in 0..2 {
-                let wy = if dy == 0 { 1.0 - t[1] } else { t[1] };
-                for dx in 0..2 {
-                    let wx = if dx == 0 { 1.0 - t[0] } else { t[0] };
-                    let w = wx * wy * wz;
-                    let v = b.offset + (i[0] + dx) + m * ((i[1] + dy) + m * (i[2] + dz));
-                    let x = self.voxel(b, v);
-                    for c in 0..4 {
-                        out[c] += w * x[c];
-                    }
-                }
+        let base = b.offset + i[0] + m * (i[1] + m * i[2]);
+        let offsets = [0, 1, m, m + 1, m * m, m * m + 1, m * m + m, m * m + m + 1];
+        let blend = |c: [Vec4; 8]| {
+            let x00 = c[0].lerp(c[1], t[0]);
+            let x10 = c[2].lerp(c[3], t[0]);
+            let x01 = c[4].lerp(c[5], t[0]);
+            let x11 = c[6].lerp(c[7], t[0]);
+            x00.lerp(x10, t[1]).lerp(x01.lerp(x11, t[1]), t[2])
+        };
+        let v = match &self.pool {
+            Pool::F32(p) => blend(offsets.map(|o| Vec4::from(p[base + o]))),
+            Pool::I16(p) => {
+                let q = blend(offsets.map(|o| {
+                    let q = p[base + o];
+                    Vec4::new(
+                        f32::from(q[0]),
+                        f32::from(q[1]),
+                        f32::from(q[2]),
+                        f32::from(q[3]),
+                    )
+                }));
+                q * Vec4::new(b.scale[0], b.scale[1], b.scale[1], b.scale[1])
             }
-        }
-        out
+        };
+        v.to_array().map(f64::from)
     }
 }
 
