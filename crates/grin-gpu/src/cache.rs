@@ -20,12 +20,13 @@
 use std::path::{Path, PathBuf};
 
 use grin_field::IndexField;
-use grin_field::baked::BakedField;
 use grin_scene::{FieldSpec, MediumSpec};
 use sha2::{Digest, Sha256};
 
 use crate::GpuError;
-use crate::field::{DEFAULT_GPU_BAKE_RESOLUTION, bake_for_gpu_auto, bake_warning};
+use crate::field::{
+    DEFAULT_GPU_BAKE_RESOLUTION, FIELD_TEXEL_BYTES, GpuGrid, bake_for_gpu_auto, bake_warning,
+};
 
 /// Total size of the cache's entries kept on disk.
 pub const CACHE_CAP_BYTES: u64 = 4 << 30;
@@ -96,7 +97,7 @@ impl BakeCache {
     /// digits. Errors when a file the medium names cannot be read.
     pub fn key(medium: &MediumSpec, scene_dir: &Path) -> Result<String, GpuError> {
         let mut h = Sha256::new();
-        h.update(b"grin-gpu bake cache v5\0");
+        h.update(b"grin-gpu bake cache v6\0");
         h.update(env!("CARGO_PKG_VERSION").as_bytes());
         h.update(format!("\0res={DEFAULT_GPU_BAKE_RESOLUTION}\0").as_bytes());
         h.update(format!("budget={}\0", grin_field::bake::DEFAULT_ERROR_BUDGET).as_bytes());
@@ -134,7 +135,7 @@ impl BakeCache {
     /// The cached bake under `key` (its warnings with it): `Ok(None)` when there is no
     /// entry, `Err(why)` when there is one that cannot be trusted (see the module's
     /// notes); the caller bakes again either way.
-    pub fn get(&self, key: &str) -> Result<Option<(BakedField, Vec<String>)>, String> {
+    pub fn get(&self, key: &str) -> Result<Option<(GpuGrid, Vec<String>)>, String> {
         let grid = self.grid_path(key);
         let meta_path = self.warnings_path(key);
         if !grid.is_file() && !meta_path.is_file() {
@@ -153,18 +154,25 @@ impl BakeCache {
         // another bake (a test with two writers caught exactly that).
         let name = grid.display().to_string();
         let bytes = std::fs::read(&grid).map_err(|e| bad(e.to_string()))?;
-        let header =
-            grin_field::grinf::parse_header(&bytes, &name).map_err(|e| bad(e.to_string()))?;
-        if (header.crc32, header.file_bytes, header.version)
-            != (meta.crc32, meta.bytes, meta.grinf_version)
-        {
+        let (crc32, file_bytes, version) = identity(&bytes);
+        if (crc32, file_bytes, version) != (meta.crc32, meta.bytes, meta.grinf_version) {
             return Err(bad(format!(
-                "is not the grid its record names (checksum {:#010x} of {} bytes, recorded \
-                 {:#010x} of {} bytes)",
-                header.crc32, header.file_bytes, meta.crc32, meta.bytes
+                "is not the grid its record names (checksum {crc32:#010x} of {file_bytes} \
+                 bytes, recorded {:#010x} of {} bytes)",
+                meta.crc32, meta.bytes
             )));
         }
-        let baked = grin_field::grinf::from_bytes(&bytes, &name).map_err(|e| bad(e.to_string()))?;
+        // Either layout; each parser checks the checksum and every count itself.
+        let baked = if version == grin_field::sparse::file::VERSION {
+            GpuGrid::Sparse(
+                grin_field::sparse::file::from_bytes(&bytes, &name)
+                    .map_err(|e| bad(e.to_string()))?,
+            )
+        } else {
+            GpuGrid::Dense(
+                grin_field::grinf::from_bytes(&bytes, &name).map_err(|e| bad(e.to_string()))?,
+            )
+        };
         // Touch for least-recently-used eviction.
         let _ = std::fs::File::options()
             .append(true)
@@ -177,17 +185,19 @@ impl BakeCache {
     /// written first, its record last: a record names the checksum of the grid it was
     /// written with, so writers that cross leave an entry [`BakeCache::get`] refuses, never
     /// one that mixes two bakes.
-    pub fn put(&self, key: &str, baked: &BakedField, warnings: &[String]) -> Result<(), String> {
+    pub fn put(&self, key: &str, grid: &GpuGrid, warnings: &[String]) -> Result<(), String> {
         std::fs::create_dir_all(&self.dir)
             .map_err(|e| format!("{}: cannot create the bake cache: {e}", self.dir.display()))?;
-        let bytes = grin_field::grinf::to_bytes(baked);
-        let header =
-            grin_field::grinf::parse_header(&bytes, "the bake").map_err(|e| e.to_string())?;
+        let bytes = match grid {
+            GpuGrid::Dense(b) => grin_field::grinf::to_bytes(b),
+            GpuGrid::Sparse(s) => grin_field::sparse::file::to_bytes(s),
+        };
+        let (crc32, file_bytes, version) = identity(&bytes);
         let meta = EntryMeta {
             key: key.to_owned(),
-            bytes: header.file_bytes,
-            crc32: header.crc32,
-            grinf_version: header.version,
+            bytes: file_bytes,
+            crc32,
+            grinf_version: version,
             warnings: warnings.to_vec(),
         };
         let json = serde_json::to_vec(&meta).map_err(|e| e.to_string())?;
@@ -227,14 +237,60 @@ impl BakeCache {
     }
 }
 
-/// A field baked for the GPU (the coarsest grid meeting the error budget, as
-/// [`bake_for_gpu_auto`]), read from `cache` under `key` when it is there, else baked and
-/// stored. The warnings are the bake's (an under-resolved grid) plus, when the cache
-/// could not be written, why.
+/// A .grinf image's checksum (its last 4 bytes), length and version word (0 for an image
+/// too short to hold them): what a cache record names its grid by.
+fn identity(bytes: &[u8]) -> (u32, u64, u32) {
+    let n = bytes.len();
+    if n < 16 {
+        return (0, n as u64, 0);
+    }
+    let crc = u32::from_le_bytes([bytes[n - 4], bytes[n - 3], bytes[n - 2], bytes[n - 1]]);
+    let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+    (crc, n as u64, version)
+}
+
+/// A dense GPU grid that misses the budget is followed by a sparse bake only where at least
+/// this share of its macro cells is homogeneous: a medium mostly ambient (plumes in a large
+/// box), where sparse bricks pay; noise filling its bounds would only spend the time.
+pub const SPARSE_WHEN_HOMOGENEOUS: f64 = 0.5;
+
+/// The GPU's grid for `field`: the coarsest dense grid meeting the error budget
+/// ([`bake_for_gpu_auto`]); where the best dense grid within the GPU's cap misses it (not
+/// because it reached a grid source's own voxels) and is mostly homogeneous
+/// ([`SPARSE_WHEN_HOMOGENEOUS`]), a sparse bake at the default budget whose f32 upload
+/// fits the same cap, if it meets the budget. The warnings are the kept dense bake's.
+pub fn bake_for_gpu_grid(field: &dyn IndexField) -> Result<(GpuGrid, Vec<String>), GpuError> {
+    let (baked, report) = bake_for_gpu_auto(field).map_err(|e| GpuError::Bake(e.to_string()))?;
+    if report.relative_error > grin_field::bake::DEFAULT_ERROR_BUDGET
+        && !report.source_limited
+        && report.homogeneous_cells >= SPARSE_WHEN_HOMOGENEOUS
+    {
+        let opts = grin_field::sparse::bake::SparseOptions {
+            // i16 on the host, f32 texels on the device: half the cap on the host.
+            max_memory: grin_field::bake::device::GPU_BAKE_MAX_BYTES / 2,
+            ..Default::default()
+        };
+        if let Ok((sparse, r)) = grin_field::sparse::bake::bake_sparse(field, &opts, &|_, _, _| {})
+            && r.meets_budget
+            && (sparse.pool().len() + sparse.table().len()) as u64 * FIELD_TEXEL_BYTES
+                <= grin_field::bake::device::GPU_BAKE_MAX_BYTES
+        {
+            return Ok((GpuGrid::Sparse(sparse), Vec::new()));
+        }
+    }
+    Ok((
+        GpuGrid::Dense(baked),
+        bake_warning(&report).into_iter().collect(),
+    ))
+}
+
+/// A field baked for the GPU ([`bake_for_gpu_grid`]), read from `cache` under `key` when
+/// it is there, else baked and stored. The warnings are the bake's (an under-resolved
+/// grid) plus, when the cache could not be written, why.
 pub fn gpu_bake_cached(
     field: &dyn IndexField,
     cache: Option<(&BakeCache, &str)>,
-) -> Result<(BakedField, Vec<String>, CacheUse), GpuError> {
+) -> Result<(GpuGrid, Vec<String>, CacheUse), GpuError> {
     let mut distrusted = None;
     if let Some((c, key)) = cache {
         match c.get(key) {
@@ -251,8 +307,7 @@ pub fn gpu_bake_cached(
             Err(why) => distrusted = Some(why),
         }
     }
-    let (baked, report) = bake_for_gpu_auto(field).map_err(|e| GpuError::Bake(e.to_string()))?;
-    let mut warnings: Vec<String> = bake_warning(&report).into_iter().collect();
+    let (baked, mut warnings) = bake_for_gpu_grid(field)?;
     let used = match cache {
         Some((c, key)) => match c.put(key, &baked, &warnings) {
             Ok(()) => CacheUse::Stored,
@@ -271,7 +326,8 @@ pub fn gpu_bake_cached(
 }
 
 /// Whether a cached grid is a bake of `field`'s medium: the same bounds and ambient index.
-fn same_medium(baked: &BakedField, field: &dyn IndexField) -> bool {
+fn same_medium(grid: &GpuGrid, field: &dyn IndexField) -> bool {
+    let baked = grid.field();
     baked.bounds() == field.bounds()
         && (baked.ambient_index() - field.ambient_index()).abs() <= 1e-12 * field.ambient_index()
 }
@@ -286,7 +342,7 @@ pub fn scene_gpu_field(
     medium: Option<&MediumSpec>,
     scene_dir: &Path,
     cache: Option<&BakeCache>,
-) -> Result<Option<(BakedField, Vec<String>, CacheUse)>, GpuError> {
+) -> Result<Option<(GpuGrid, Vec<String>, CacheUse)>, GpuError> {
     let (Some(m), Some(spec)) = (&scene.medium, medium) else {
         return Ok(None);
     };
@@ -319,15 +375,17 @@ mod tests {
         Luneburg::new(bounds, 1.0, None).expect("lens")
     }
 
-    fn small_bake(field: &dyn IndexField) -> BakedField {
+    fn small_bake(field: &dyn IndexField) -> GpuGrid {
         let opts = BakeOptions {
             resolution: Some(10),
             error_points: 50,
             ..Default::default()
         };
-        bake(field, &opts, &|_: &str, _: u64, _: u64| {})
-            .expect("bake")
-            .0
+        GpuGrid::Dense(
+            bake(field, &opts, &|_: &str, _: u64, _: u64| {})
+                .expect("bake")
+                .0,
+        )
     }
 
     /// Two writers storing different bakes under one key while a reader reads it: every
@@ -359,8 +417,8 @@ mod tests {
                         let want = if warnings == ["a"] { &a } else { &b };
                         assert!(warnings == ["a"] || warnings == ["b"], "{warnings:?}");
                         assert_eq!(
-                            baked.bounds(),
-                            want.bounds(),
+                            baked.field().bounds(),
+                            want.field().bounds(),
                             "a grid with another's record"
                         );
                     }
@@ -391,7 +449,7 @@ mod tests {
         cache.put("ka", &a, &["wa".into()]).expect("put");
         cache.put("kb", &b, &[]).expect("put");
         let (got, warnings) = cache.get("ka").expect("verifies").expect("hit");
-        assert_eq!(got.bounds(), a.bounds());
+        assert_eq!(got.field().bounds(), a.field().bounds());
         assert_eq!(warnings, ["wa"]);
 
         // Another scene's valid bake in place of the grid.
@@ -413,7 +471,7 @@ mod tests {
         cache.put("kc", &b, &[]).expect("put");
         let (baked, warnings, used) = gpu_bake_cached(&field, Some((&cache, "kc"))).expect("bakes");
         assert_eq!(used, CacheUse::Stored);
-        assert_eq!(baked.bounds(), field.bounds());
+        assert_eq!(baked.field().bounds(), field.bounds());
         assert!(
             warnings
                 .iter()

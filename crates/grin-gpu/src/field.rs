@@ -229,6 +229,31 @@ impl<'a> From<&'a SparseField> for DeviceField<'a> {
     }
 }
 
+/// A grid baked for the GPU: one dense box, or (where a dense grid within the GPU's cap
+/// misses the error budget and a sparse bake meets it) a sparse one.
+#[derive(Debug, Clone)]
+pub enum GpuGrid {
+    Dense(BakedField),
+    Sparse(SparseField),
+}
+
+impl GpuGrid {
+    /// The grid to upload.
+    pub fn device(&self) -> DeviceField<'_> {
+        match self {
+            GpuGrid::Dense(b) => DeviceField::Dense(b),
+            GpuGrid::Sparse(s) => DeviceField::Sparse(s),
+        }
+    }
+    /// The grid as a field.
+    pub fn field(&self) -> &dyn grin_field::IndexField {
+        match self {
+            GpuGrid::Dense(b) => b,
+            GpuGrid::Sparse(s) => s,
+        }
+    }
+}
+
 /// Upload `field` ([`upload_field`] or [`upload_sparse`]).
 pub fn upload(
     ctx: &GpuContext,

@@ -13,8 +13,7 @@ use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
 
 use crate::field::{
-    DEFAULT_GPU_BAKE_RESOLUTION, FieldTextures, bake_for_gpu_auto, empty_field, fits_device,
-    upload_field,
+    DEFAULT_GPU_BAKE_RESOLUTION, DeviceField, FieldTextures, empty_field, fits_device, upload_field,
 };
 use crate::gpu_data::*;
 use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_arrays};
@@ -195,7 +194,8 @@ impl<'a> GpuRenderer<'a> {
     /// interpolation, so GPU and CPU march the same field) and fits the device (else it
     /// is baked again, with a warning in [`Self::warnings`]), else through a bake of the
     /// field at the coarsest grid meeting the error budget, at most
-    /// [`crate::field::DEFAULT_GPU_BAKE_RESOLUTION`] nodes ([`crate::field::bake_for_gpu_auto`]). For
+    /// [`crate::field::DEFAULT_GPU_BAKE_RESOLUTION`] nodes ([`crate::field::bake_for_gpu_auto`]),
+    /// or sparse where no dense grid within the cap meets it ([`crate::cache::bake_for_gpu_grid`]). For
     /// GPU and CPU images to agree in that last case, render the CPU reference with the
     /// same baked field.
     pub fn new(
@@ -203,6 +203,21 @@ impl<'a> GpuRenderer<'a> {
         scene: &RenderScene,
         baked: Option<&BakedField>,
     ) -> Result<Self, GpuError> {
+        Self::new_with(ctx, scene, baked.map(DeviceField::Dense))
+    }
+
+    /// [`Self::new`] with the grid dense or sparse (a [`crate::field::GpuGrid`]'s
+    /// [`crate::field::GpuGrid::device`]).
+    pub fn new_with(
+        ctx: &'a GpuContext,
+        scene: &RenderScene,
+        grid: Option<DeviceField<'_>>,
+    ) -> Result<Self, GpuError> {
+        let (baked, sparse_grid) = match grid {
+            Some(DeviceField::Dense(b)) => (Some(b), None),
+            Some(DeviceField::Sparse(s)) => (None, Some(s)),
+            None => (None, None),
+        };
         let s = &scene.settings;
         let mut params = frame_params(scene)?;
         let mut warnings = Vec::new();
@@ -211,14 +226,17 @@ impl<'a> GpuRenderer<'a> {
                 "GRIN_BAND_PIXELS={v:?} is not a positive number of pixels: the adapter's default band is used"
             ));
         }
-        let field = match &scene.medium {
-            // A sparse bake is marched as it is: baking it again as one dense box would
-            // lose what made it sparse.
-            Some(m) if baked.is_none() && m.field.as_sparse().is_some() => {
-                let sparse = m.field.as_sparse().expect("checked");
-                crate::field::upload_sparse(ctx, sparse, &mut params)?
-            }
-            Some(m) => {
+        // A sparse grid (the caller's, else the scene's own sparse file) is marched as it
+        // is: baking it again as one dense box would lose what made it sparse.
+        let sparse = sparse_grid.or_else(|| {
+            baked
+                .is_none()
+                .then(|| scene.medium.as_ref().and_then(|m| m.field.as_sparse()))
+                .flatten()
+        });
+        let field = match (&scene.medium, sparse) {
+            (Some(_), Some(sparse)) => crate::field::upload_sparse(ctx, sparse, &mut params)?,
+            (Some(m), None) => {
                 let owned;
                 // The caller's grid, else the scene's own baked file as it is (if the
                 // device can hold it), else a bake of the field here; warnings are kept
@@ -232,19 +250,17 @@ impl<'a> GpuRenderer<'a> {
                         false
                     }
                 });
-                let baked = match baked.or(file) {
-                    Some(b) => b,
+                match baked.or(file) {
+                    Some(b) => upload_field(ctx, b, &mut params)?,
                     None => {
-                        let (b, report) = bake_for_gpu_auto(m.field.as_ref())
-                            .map_err(|e| GpuError::Bake(e.to_string()))?;
-                        warnings.extend(crate::field::bake_warning(&report));
-                        owned = b;
-                        &owned
+                        let (grid, w) = crate::cache::bake_for_gpu_grid(m.field.as_ref())?;
+                        warnings.extend(w);
+                        owned = grid;
+                        crate::field::upload(ctx, owned.device(), &mut params)?
                     }
-                };
-                upload_field(ctx, baked, &mut params)?
+                }
             }
-            None => empty_field(ctx, &mut params)?,
+            (None, _) => empty_field(ctx, &mut params)?,
         };
 
         let device = &ctx.device;

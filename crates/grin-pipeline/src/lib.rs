@@ -670,8 +670,9 @@ impl Renderer {
                 let field =
                     grin_gpu::cache::scene_gpu_field(rs, medium, job.scene_dir, cache.as_ref())
                         .with_context(|| format!("{}: [medium]", job.label))?;
-                let renderer = grin_gpu::GpuRenderer::new(&ctx, rs, field.as_ref().map(|f| &f.0))
-                    .with_context(|| job.label.to_owned())?;
+                let renderer =
+                    grin_gpu::GpuRenderer::new_with(&ctx, rs, field.as_ref().map(|f| f.0.device()))
+                        .with_context(|| job.label.to_owned())?;
                 let mut report = FrameReport::default();
                 if let Some((_, field_warnings, used)) = &field {
                     report.bake_cache = Some(*used);

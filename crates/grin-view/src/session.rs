@@ -620,13 +620,28 @@ impl<'a> Session<'a> {
                 FieldSpec::Expr { t, .. } => Some(*t) == file_t,
                 _ => true,
             };
-            let key = match (&self.cache, own_time) {
+            let cache_key = match (&self.cache, own_time) {
                 (Some(_), true) => Some(BakeCache::key(spec, &self.dir)?),
                 _ => None,
             };
-            let cache = self.cache.as_ref().zip(key.as_deref());
+            let cache = self.cache.as_ref().zip(cache_key.as_deref());
             let (g, w, used) = grin_gpu::cache::gpu_bake_cached(field.as_ref(), cache)?;
-            (g, w, Some(used))
+            match g {
+                grin_gpu::field::GpuGrid::Dense(g) => (g, w, Some(used)),
+                // A sparse grid (a mostly ambient medium no dense grid within the GPU's
+                // cap resolves) is marched as the field itself: the renderer uploads it.
+                grin_gpu::field::GpuGrid::Sparse(sparse) => {
+                    warnings.extend(w);
+                    return Ok(Some(FieldEntry {
+                        key,
+                        field: Arc::new(sparse),
+                        grid: None,
+                        preview: OnceLock::new(),
+                        warnings,
+                        cache: Some(used),
+                    }));
+                }
+            }
         };
         let grid = match interp {
             None => grid,

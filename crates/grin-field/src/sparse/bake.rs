@@ -34,6 +34,9 @@ use crate::field::IndexField;
 
 /// Bricks along the medium's longest axis.
 pub const DEFAULT_TOP_BRICKS: usize = 32;
+/// Most probe bricks along an axis when the brick size is chosen (64^3 probe bricks is
+/// 33 M probes).
+pub const MAX_PROBE_BRICKS: usize = 64;
 /// Most bricks along an axis (a table of 1024^3 entries is 4 GiB).
 pub const MAX_TOP_BRICKS: usize = 1024;
 /// Random points a brick's level search measures its error at.
@@ -141,7 +144,9 @@ pub fn bake_sparse(
             opts.error_budget
         )));
     }
-    let probe_bricks = opts.top_bricks.unwrap_or(DEFAULT_TOP_BRICKS);
+    let probe_bricks = opts
+        .top_bricks
+        .unwrap_or_else(|| probe_grid(source.bounds(), source.feature_size()));
     if !(1..=MAX_TOP_BRICKS).contains(&probe_bricks) {
         return Err(BakeError::Option(format!(
             "{probe_bricks} bricks along the longest axis: must be 1 to {MAX_TOP_BRICKS}"
@@ -446,6 +451,24 @@ pub fn bake_sparse(
         source_evals: evals.load(Ordering::Relaxed),
     };
     Ok((field, report))
+}
+
+/// Probe bricks along the longest axis for a chosen brick size: [`DEFAULT_TOP_BRICKS`],
+/// or up to [`MAX_PROBE_BRICKS`] (a power of two) where the field's finest feature is
+/// narrower than half a brick (eight plumes 9 units wide in a 1000-unit cube: 31-unit
+/// bricks held 156 MB where 16-unit ones held 65).
+fn probe_grid(bounds: crate::bounds::Bounds, feature: Option<f64>) -> usize {
+    let (lo, hi) = bounds.aabb();
+    let longest = (hi - lo).max_element();
+    let Some(fs) = feature.filter(|f| f.is_finite() && *f > 0.0) else {
+        return DEFAULT_TOP_BRICKS;
+    };
+    let wanted = (longest / (2.0 * fs)).min(MAX_PROBE_BRICKS as f64);
+    let mut n = DEFAULT_TOP_BRICKS;
+    while (n as f64) < wanted && n < MAX_PROBE_BRICKS {
+        n *= 2;
+    }
+    n
 }
 
 /// Voxels the bricks of `f` x `f` x `f` probe bricks would hold, each at the level the
