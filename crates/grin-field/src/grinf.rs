@@ -122,25 +122,7 @@ pub fn to_bytes(field: &BakedField) -> Vec<u8> {
     for s in field.voxels().scale() {
         b.extend_from_slice(&s.to_le_bytes());
     }
-    match crate::field::IndexField::bounds(field) {
-        Bounds::Sphere { center, radius } => {
-            u32s(&mut b, &[0, 0]);
-            f64s(&mut b, &[center.x, center.y, center.z, radius, 0.0, 0.0]);
-        }
-        Bounds::Box { min, max } => {
-            u32s(&mut b, &[1, 0]);
-            f64s(&mut b, &[min.x, min.y, min.z, max.x, max.y, max.z]);
-        }
-    }
-    f64s(
-        &mut b,
-        &[
-            prov.max_err_n,
-            prov.rms_err_n,
-            prov.max_err_grad,
-            prov.rms_err_grad,
-        ],
-    );
+    put_bounds_and_errors(&mut b, crate::field::IndexField::bounds(field), prov);
     u32s(&mut b, &[desc.len() as u32, 0]);
     debug_assert_eq!(b.len(), FIXED_HEADER_BYTES);
     b.extend_from_slice(&desc);
@@ -158,6 +140,28 @@ pub fn to_bytes(field: &BakedField) -> Vec<u8> {
     let crc = crc32fast::hash(&b);
     b.extend_from_slice(&crc.to_le_bytes());
     b
+}
+
+/// The header's bounds (kind, reserved word, 6 f64) and measured errors (4 f64), as both
+/// layouts store them.
+pub(crate) fn put_bounds_and_errors(b: &mut Vec<u8>, bounds: Bounds, prov: &BakeProvenance) {
+    let (kind, v) = match bounds {
+        Bounds::Sphere { center, radius } => {
+            (0u32, [center.x, center.y, center.z, radius, 0.0, 0.0])
+        }
+        Bounds::Box { min, max } => (1, [min.x, min.y, min.z, max.x, max.y, max.z]),
+    };
+    b.extend_from_slice(&kind.to_le_bytes());
+    b.extend_from_slice(&0u32.to_le_bytes());
+    let errors = [
+        prov.max_err_n,
+        prov.rms_err_n,
+        prov.max_err_grad,
+        prov.rms_err_grad,
+    ];
+    for x in v.iter().chain(&errors) {
+        b.extend_from_slice(&x.to_le_bytes());
+    }
 }
 
 /// Write `field` to `path` through grin-output: staged, synced and renamed into place, so

@@ -199,18 +199,7 @@ fn bake_one(
         gradient: GradientMode::for_field(&medium.field),
         ..Default::default()
     };
-    let bar = super::styled_bar(1, "{msg:>24} [{bar:40}] {pos}/{len} {elapsed}");
-    let stage = Mutex::new(String::new());
-    let progress = |name: &str, done: u64, total: u64| {
-        if let Ok(mut s) = stage.lock()
-            && *s != name
-        {
-            *s = name.to_string();
-            bar.set_message(name.to_string());
-            bar.set_length(total);
-        }
-        bar.set_position(done);
-    };
+    let (bar, progress) = stage_bar();
     let result = bake::bake(field.as_ref(), &opts, &progress);
     bar.finish_and_clear();
     let (baked, report) =
@@ -346,6 +335,25 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
     })
 }
 
+/// A progress bar for a bake's stages and the callback that drives it (a stage's name,
+/// done, total).
+fn stage_bar() -> (indicatif::ProgressBar, impl Fn(&str, u64, u64) + Sync) {
+    let bar = super::styled_bar(1, "{msg:>24} [{bar:40}] {pos}/{len} {elapsed}");
+    let stage = Mutex::new(String::new());
+    let driven = bar.clone();
+    let progress = move |name: &str, done: u64, total: u64| {
+        if let Ok(mut s) = stage.lock()
+            && *s != name
+        {
+            *s = name.to_string();
+            driven.set_message(name.to_string());
+            driven.set_length(total);
+        }
+        driven.set_position(done);
+    };
+    (bar, progress)
+}
+
 /// `grin bake --sparse`: bake `field` into a sparse .grinf at `output`.
 fn bake_sparse(
     args: &Args,
@@ -366,18 +374,7 @@ fn bake_sparse(
         gradient: GradientMode::for_field(spec),
         ..Default::default()
     };
-    let bar = super::styled_bar(1, "{msg:>24} [{bar:40}] {pos}/{len} {elapsed}");
-    let stage = Mutex::new(String::new());
-    let progress = |name: &str, done: u64, total: u64| {
-        if let Ok(mut s) = stage.lock()
-            && *s != name
-        {
-            *s = name.to_string();
-            bar.set_message(name.to_string());
-            bar.set_length(total);
-        }
-        bar.set_position(done);
-    };
+    let (bar, progress) = stage_bar();
     let result = bake_sparse(field, &opts, &progress);
     bar.finish_and_clear();
     let (sparse, r) = result.with_context(|| format!("{}: bake failed", args.scene.display()))?;

@@ -16,6 +16,9 @@
 //!    grid) stops at half that spacing: finer resolves only its interpolation.
 //! 4. Measure: the whole field's error on random points, as a dense bake's is (most of
 //!    them in active bricks), which decides whether the budget is met.
+//!
+//! Over 600 lines: one concept, the sparse bake's policy (probe, brick size, level search,
+//! refinement, assembly).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;

@@ -97,25 +97,7 @@ pub fn write_to(field: &SparseField, w: &mut dyn std::io::Write) -> std::io::Res
     f64s(&mut b, &[field.ambient_index()]);
     f64s(&mut b, &top.origin.to_array());
     f64s(&mut b, &[top.edge]);
-    match field.bounds() {
-        Bounds::Sphere { center, radius } => {
-            u32s(&mut b, &[0, 0]);
-            f64s(&mut b, &[center.x, center.y, center.z, radius, 0.0, 0.0]);
-        }
-        Bounds::Box { min, max } => {
-            u32s(&mut b, &[1, 0]);
-            f64s(&mut b, &[min.x, min.y, min.z, max.x, max.y, max.z]);
-        }
-    }
-    f64s(
-        &mut b,
-        &[
-            prov.max_err_n,
-            prov.rms_err_n,
-            prov.max_err_grad,
-            prov.rms_err_grad,
-        ],
-    );
+    crate::grinf::put_bounds_and_errors(&mut b, field.bounds(), prov);
     u32s(&mut b, &[desc.len() as u32, 0]);
     debug_assert_eq!(b.len(), FIXED_HEADER_BYTES);
     b.extend_from_slice(&desc);
