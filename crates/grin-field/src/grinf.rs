@@ -254,6 +254,33 @@ pub fn open(path: &Path) -> Result<Grinf, GrinfError> {
     from_bytes(&bytes, &name).map(Grinf::Dense)
 }
 
+/// Both layouts' last checks before parsing: the file is `expected` bytes long and its
+/// trailing CRC-32 is that of everything before it. Returns the stored checksum.
+pub(crate) fn check_size_and_checksum(
+    b: &[u8],
+    path: &str,
+    expected: u64,
+) -> Result<u32, GrinfError> {
+    if expected != b.len() as u64 {
+        return Err(GrinfError::Size {
+            path: path.into(),
+            expected,
+            actual: b.len() as u64,
+        });
+    }
+    let body = b.len() - CRC_BYTES;
+    let stored = u32::from_le_bytes([b[body], b[body + 1], b[body + 2], b[body + 3]]);
+    let computed = crc32fast::hash(&b[..body]);
+    if stored != computed {
+        return Err(GrinfError::Checksum {
+            path: path.into(),
+            stored,
+            computed,
+        });
+    }
+    Ok(stored)
+}
+
 /// Read only the header of a .grinf file (still checks size and checksum).
 pub fn read_header(path: &Path) -> Result<GrinfHeader, GrinfError> {
     let bytes = std::fs::read(path).map_err(|source| GrinfError::Io {
@@ -334,23 +361,7 @@ pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
     let Some(expected) = expected else {
         return Err(header_err(format!("grid {dims:?} is too large")));
     };
-    if expected != b.len() as u64 {
-        return Err(GrinfError::Size {
-            path: path.into(),
-            expected,
-            actual: b.len() as u64,
-        });
-    }
-    let body = b.len() - CRC_BYTES;
-    let stored = u32::from_le_bytes([b[body], b[body + 1], b[body + 2], b[body + 3]]);
-    let computed = crc32fast::hash(&b[..body]);
-    if stored != computed {
-        return Err(GrinfError::Checksum {
-            path: path.into(),
-            stored,
-            computed,
-        });
-    }
+    let stored = check_size_and_checksum(b, path, expected)?;
     let interp = match r.u32() {
         0 => Interp::Trilinear,
         1 => Interp::Tricubic,

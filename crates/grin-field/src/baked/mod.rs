@@ -127,30 +127,7 @@ impl Voxels {
     /// Quantize f32 voxels to i16 with a per-channel scale (delta_n alone, gradient
     /// components sharing one scale so the vector keeps its direction).
     pub fn quantize(v: &[[f32; 4]]) -> Voxels {
-        let mut max = [0.0f32; 2];
-        for x in v {
-            max[0] = max[0].max(x[0].abs());
-            max[1] = max[1].max(x[1].abs()).max(x[2].abs()).max(x[3].abs());
-        }
-        let s = max.map(|m| {
-            if m > 0.0 {
-                m / f32::from(i16::MAX)
-            } else {
-                1.0
-            }
-        });
-        let scale = [s[0], s[1], s[1], s[1]];
-        let data = v
-            .iter()
-            .map(|x| {
-                let q = |c: usize| {
-                    (x[c] / scale[c])
-                        .round()
-                        .clamp(-f32::from(i16::MAX), f32::from(i16::MAX)) as i16
-                };
-                [q(0), q(1), q(2), q(3)]
-            })
-            .collect();
+        let (data, scale) = quantize_i16(v);
         Voxels::I16 { data, scale }
     }
     /// All voxels decoded to f32 (for upload as an rgba32float texture).
@@ -160,6 +137,37 @@ impl Voxels {
             Voxels::I16 { .. } => (0..self.len()).map(|i| self.get(i)).collect(),
         }
     }
+}
+
+/// i16 voxels with a per-channel scale (delta_n alone, gradient components sharing one
+/// scale so the vector keeps its direction): [`Voxels::quantize`]'s, and each sparse
+/// brick's.
+pub(crate) fn quantize_i16(v: &[[f32; 4]]) -> (Vec<[i16; 4]>, [f32; 4]) {
+    let mut max = [0.0f32; 2];
+    for x in v {
+        max[0] = max[0].max(x[0].abs());
+        max[1] = max[1].max(x[1].abs()).max(x[2].abs()).max(x[3].abs());
+    }
+    let s = max.map(|m| {
+        if m > 0.0 {
+            m / f32::from(i16::MAX)
+        } else {
+            1.0
+        }
+    });
+    let scale = [s[0], s[1], s[1], s[1]];
+    let data = v
+        .iter()
+        .map(|x| {
+            let q = |c: usize| {
+                (x[c] / scale[c])
+                    .round()
+                    .clamp(-f32::from(i16::MAX), f32::from(i16::MAX)) as i16
+            };
+            [q(0), q(1), q(2), q(3)]
+        })
+        .collect();
+    (data, scale)
 }
 
 /// The grid's placement: node (i, j, k) sits at world `origin + spacing * (i, j, k)`.

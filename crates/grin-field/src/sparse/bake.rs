@@ -182,11 +182,7 @@ pub fn bake_sparse(
     let probes: Vec<Option<(f64, Option<f64>, f64)>> = (0..count)
         .into_par_iter()
         .map(|idx| {
-            let at = [
-                idx % top.dims[0],
-                (idx / top.dims[0]) % top.dims[1],
-                idx / (top.dims[0] * top.dims[1]),
-            ];
+            let at = top.at(idx);
             let (lo, hi) = top.brick_box(at);
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
             if d.is_multiple_of(1024) || d == count as u64 {
@@ -294,11 +290,7 @@ pub fn bake_sparse(
             if over.load(Ordering::Relaxed) {
                 return Err(BakeError::Option("stopped".into()));
             }
-            let at = [
-                idx % top.dims[0],
-                (idx / top.dims[0]) % top.dims[1],
-                idx / (top.dims[0] * top.dims[1]),
-            ];
+            let at = top.at(idx);
             let b = bake_brick(
                 source, &top, at, idx, &features, 0, level_max, tolerance, storage, opts, &evals,
             )?;
@@ -389,11 +381,7 @@ pub fn bake_sparse(
             .par_iter()
             .map(|&(pos, level)| {
                 let idx = active[pos];
-                let at = [
-                    idx % top.dims[0],
-                    (idx / top.dims[0]) % top.dims[1],
-                    idx / (top.dims[0] * top.dims[1]),
-                ];
+                let at = top.at(idx);
                 bake_brick(
                     source, &top, at, idx, &features, level, level_max, tolerance, storage, opts,
                     &evals,
@@ -497,11 +485,7 @@ fn predicted_voxels(top: &TopGrid, needed: &[(usize, f64)], f: usize) -> u64 {
 /// The index, in the grid of `f`-fold bricks, of probe brick `idx`'s block.
 fn parent_of(top: &TopGrid, idx: usize, f: usize) -> usize {
     let pd = top.dims.map(|d| d.div_ceil(f));
-    let at = [
-        idx % top.dims[0] / f,
-        (idx / top.dims[0]) % top.dims[1] / f,
-        idx / (top.dims[0] * top.dims[1]) / f,
-    ];
+    let at = top.at(idx).map(|a| a / f);
     at[0] + pd[0] * (at[1] + pd[1] * at[2])
 }
 
@@ -717,31 +701,10 @@ fn delta_at(raw: &[[f32; 4]], cells: usize, u: DVec3) -> f64 {
     out
 }
 
-/// i16 voxels of one brick with its own scales (delta_n; the gradient's components
-/// sharing one, so the vector keeps its direction).
+/// i16 voxels of one brick with its own scales (delta_n, and the gradient's).
 fn quantize(raw: &[[f32; 4]]) -> (Vec<[i16; 4]>, [f32; 2]) {
-    let mut max = [0.0f32; 2];
-    for x in raw {
-        max[0] = max[0].max(x[0].abs());
-        max[1] = max[1].max(x[1].abs()).max(x[2].abs()).max(x[3].abs());
-    }
-    let s = max.map(|m| {
-        if m > 0.0 {
-            m / f32::from(i16::MAX)
-        } else {
-            1.0
-        }
-    });
-    let q = |v: f32, s: f32| {
-        (v / s)
-            .round()
-            .clamp(-f32::from(i16::MAX), f32::from(i16::MAX)) as i16
-    };
-    let data = raw
-        .iter()
-        .map(|x| [q(x[0], s[0]), q(x[1], s[1]), q(x[2], s[1]), q(x[3], s[1])])
-        .collect();
-    (data, s)
+    let (data, scale) = crate::baked::quantize_i16(raw);
+    (data, [scale[0], scale[1]])
 }
 
 /// The final error points: most inside active bricks (and the medium), the rest anywhere
@@ -764,11 +727,7 @@ fn error_points(
     while pts.len() < count && tries < 1000 * count {
         tries += 1;
         let idx = active[(rng.next_u64() % active.len() as u64) as usize];
-        let at = [
-            idx % top.dims[0],
-            (idx / top.dims[0]) % top.dims[1],
-            idx / (top.dims[0] * top.dims[1]),
-        ];
+        let at = top.at(idx);
         let (lo, hi) = top.brick_box(at);
         let p = lo + (hi - lo) * DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64());
         if bounds.contains(p) {
@@ -819,11 +778,7 @@ fn assemble(
     let mut offset = 0usize;
     for (i, (&idx, b)) in active.iter().zip(baked.iter()).enumerate() {
         table[idx] = i as u32;
-        let at = [
-            idx % top.dims[0],
-            (idx / top.dims[0]) % top.dims[1],
-            idx / (top.dims[0] * top.dims[1]),
-        ];
+        let at = top.at(idx);
         bricks.push(Brick {
             at: at.map(|a| a as u32),
             level: b.level,

@@ -235,23 +235,8 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
     }
     let expected =
         pool_offset as u64 + voxels * storage.bytes_per_voxel() as u64 + CRC_BYTES as u64;
-    if expected != b.len() as u64 {
-        return Err(GrinfError::Size {
-            path: path.into(),
-            expected,
-            actual: b.len() as u64,
-        });
-    }
+    crate::grinf::check_size_and_checksum(b, path, expected)?;
     let body = b.len() - CRC_BYTES;
-    let stored = u32::from_le_bytes([b[body], b[body + 1], b[body + 2], b[body + 3]]);
-    let computed = crc32fast::hash(&b[..body]);
-    if stored != computed {
-        return Err(GrinfError::Checksum {
-            path: path.into(),
-            stored,
-            computed,
-        });
-    }
     let ambient = r.f64();
     let origin = r.dvec3();
     let edge = r.f64();

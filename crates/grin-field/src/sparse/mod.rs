@@ -118,6 +118,14 @@ impl TopGrid {
     pub fn index(&self, at: [usize; 3]) -> usize {
         at[0] + self.dims[0] * (at[1] + self.dims[1] * at[2])
     }
+    /// The position of brick number `index` (the inverse of [`Self::index`]).
+    pub fn at(&self, index: usize) -> [usize; 3] {
+        [
+            index % self.dims[0],
+            (index / self.dims[0]) % self.dims[1],
+            index / (self.dims[0] * self.dims[1]),
+        ]
+    }
     /// World box of brick `at`.
     pub fn brick_box(&self, at: [usize; 3]) -> (DVec3, DVec3) {
         let lo = self.origin + self.edge * DVec3::new(at[0] as f64, at[1] as f64, at[2] as f64);
