@@ -226,10 +226,10 @@ pub fn run_gpu_point(
     method: Method,
     param: f64,
 ) -> anyhow::Result<Point> {
-    let Some(baked) = &case.baked else {
+    let Some(grid) = &case.grid else {
         anyhow::bail!("case {}: the GPU traces baked fields only", case.name);
     };
-    gpu.set_field(std::sync::Arc::clone(baked))?;
+    gpu.set_field(grid.clone())?;
     let (settings, chosen, pilot_evals) = resolve(case, method, param);
     let (out, seconds) = gpu.trace(&settings, &case.rays, 1)?;
     let results: Vec<RayResult> = out.iter().map(gpu_result).collect();
@@ -618,7 +618,7 @@ pub fn run(
     let gpu_jobs: Vec<(usize, Method, f64)> = if gpu {
         let methods = crate::methods::gpu_methods(quick);
         (0..cases.len())
-            .filter(|&c| cases[c].baked.is_some())
+            .filter(|&c| cases[c].grid.is_some())
             .flat_map(|c| {
                 methods
                     .iter()
@@ -655,7 +655,7 @@ pub fn run(
             Ok(ctx) => {
                 let gpu_start = Instant::now();
                 column.adapter = Some(ctx.adapter_name());
-                let first = cases[gpu_jobs[0].0].baked.clone();
+                let first = cases[gpu_jobs[0].0].grid.clone();
                 let Some(first) = first else {
                     anyhow::bail!("a GPU job without a baked field");
                 };

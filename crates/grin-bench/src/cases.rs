@@ -24,10 +24,13 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
 
+use anyhow::Context;
 use glam::DVec3;
 use grin_field::IndexField;
 use grin_field::bake::{self, BakeOptions};
-use grin_field::baked::{BakedField, Interp, Storage};
+use grin_field::baked::{Interp, Storage};
+use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+use grin_gpu::SharedGrid;
 use grin_scene::MediumSpec;
 
 /// How a ray leaves the medium (what every method is measured on).
@@ -66,8 +69,10 @@ pub struct Case {
     pub order_limit: Option<u32>,
     /// Length scale errors are divided by (the bounds' radius).
     pub scale: f64,
-    /// `field` itself where it is a baked grid: the GPU column traces it.
-    pub baked: Option<Arc<BakedField>>,
+    /// `field` itself where it is a baked grid (dense or sparse): the GPU column traces it.
+    pub grid: Option<SharedGrid>,
+    /// The bake's relative error in n (measured by the bake) where `grid` is one.
+    pub bake_error: Option<f64>,
 }
 
 /// Which cases a run includes.
@@ -134,7 +139,8 @@ pub fn luneburg(count: usize) -> anyhow::Result<Case> {
         smooth: true,
         order_limit: None,
         scale: r,
-        baked: None,
+        grid: None,
+        bake_error: None,
     })
 }
 
@@ -160,7 +166,8 @@ pub fn fish_eye(count: usize) -> anyhow::Result<Case> {
         smooth: true,
         order_limit: None,
         scale: a,
-        baked: None,
+        grid: None,
+        bake_error: None,
     })
 }
 
@@ -241,7 +248,8 @@ pub fn grin_rod(count: usize) -> anyhow::Result<Case> {
         smooth: true,
         order_limit: None,
         scale: DVec3::new(0.5, 0.5, 1.0).length(),
-        baked: None,
+        grid: None,
+        bake_error: None,
     })
 }
 
@@ -321,7 +329,8 @@ fn numeric_case(
         smooth: true,
         order_limit: None,
         scale,
-        baked: None,
+        grid: None,
+        bake_error: None,
     }
 }
 
@@ -414,6 +423,16 @@ pub fn baked(
     interp: Interp,
     storage: Storage,
 ) -> anyhow::Result<Case> {
+    Ok(baked_with_error(base, resolution, interp, storage)?.0)
+}
+
+/// [`baked`], and the bake's measured relative error.
+fn baked_with_error(
+    base: &Case,
+    resolution: usize,
+    interp: Interp,
+    storage: Storage,
+) -> anyhow::Result<(Case, f64)> {
     let opts = BakeOptions {
         resolution: Some(resolution),
         interp,
@@ -421,16 +440,39 @@ pub fn baked(
         error_points: 2000,
         ..BakeOptions::default()
     };
-    let (field, _report) = bake::bake(base.source.as_ref(), &opts, &|_, _, _| {})?;
-    let field = Arc::new(field);
+    let (field, report) = bake::bake(base.source.as_ref(), &opts, &|_, _, _| {})?;
     let (interp_name, storage_name) = (interp.name(), storage.name());
-    Ok(Case {
-        name: format!(
-            "{}-baked{resolution}-{interp_name}-{storage_name}",
-            base.name
-        ),
-        field: Arc::clone(&field) as Arc<dyn IndexField>,
-        baked: Some(field),
+    let name = format!(
+        "{}-baked{resolution}-{interp_name}-{storage_name}",
+        base.name
+    );
+    let grid = SharedGrid::from(Arc::new(field));
+    let error = report.relative_error;
+    Ok((grid_case(base, name, grid, error), error))
+}
+
+/// `base` baked sparsely (`grin bake --sparse`) at relative error `error`: what a dense
+/// bake's rows are compared with at the same error. The reference stays the source's.
+pub fn sparse(base: &Case, error: f64) -> anyhow::Result<Case> {
+    let opts = SparseOptions {
+        error_budget: error,
+        ..SparseOptions::default()
+    };
+    let (field, report) = bake_sparse(base.source.as_ref(), &opts, &|_, _, _| {})
+        .with_context(|| format!("{}: sparse bake at relative error {error:.2e}", base.name))?;
+    let name = format!("{}-sparse-{}", base.name, report.storage.name());
+    let grid = SharedGrid::from(Arc::new(field));
+    Ok(grid_case(base, name, grid, report.relative_error))
+}
+
+/// A case tracing `grid` (baked from `base`'s source to relative error `error`) with
+/// `base`'s rays and reference.
+fn grid_case(base: &Case, name: String, grid: SharedGrid, error: f64) -> Case {
+    Case {
+        name,
+        field: grid.field(),
+        grid: Some(grid),
+        bake_error: Some(error),
         source: base.source.clone(),
         rays: base.rays.clone(),
         pilots: base.pilots.clone(),
@@ -439,7 +481,7 @@ pub fn baked(
         smooth: false,
         order_limit: base.order_limit,
         scale: base.scale,
-    })
+    }
 }
 
 /// The cases `want` names (`grin bench accuracy --case`): the case of that whole name
@@ -467,7 +509,9 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
             let l = luneburg(12)?;
             let p = plume(9)?;
             let lb = baked(&l, 32, Interp::Tricubic, Storage::F32)?;
-            vec![l, p, lb]
+            let (pb, error) = baked_with_error(&p, 32, Interp::Trilinear, Storage::F32)?;
+            let ps = sparse(&p, error)?;
+            vec![l, p, lb, pb, ps]
         }
         Suite::Full => {
             let l = luneburg(48)?;
@@ -504,6 +548,12 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
                 ] {
                     v.push(baked(base, 64, interp, storage)?);
                 }
+            }
+            // Every reference field baked sparsely at the error its 64-node trilinear i16
+            // grid has: the rows to hold against that grid's (`--case -i16` runs both).
+            for base in [&l, &p].into_iter().chain(&others) {
+                let (_, error) = baked_with_error(base, 64, Interp::Trilinear, Storage::I16)?;
+                v.push(sparse(base, error)?);
             }
             v
         }

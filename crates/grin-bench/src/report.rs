@@ -433,11 +433,22 @@ pub fn summary_markdown(run: &AccuracyRun, command: &str) -> String {
             c.rays.len().to_string(),
             kind.to_string(),
             opt(r.numeric_vs_exact, |x| format!("{x:.1e}")),
+            opt(c.bake_error, |x| format!("{x:.2e}")),
+            opt(c.grid.as_ref().map(|g| g.data_bytes() as f64), |b| {
+                format!("{:.2} MB", b / 1e6)
+            }),
         ]
     });
     table(
         &mut s,
-        &["case", "rays", "reference", "numerical vs exact (rad)"],
+        &[
+            "case",
+            "rays",
+            "reference",
+            "numerical vs exact (rad)",
+            "bake's relative error in n",
+            "grid in memory",
+        ],
         references,
     );
     let _ = writeln!(

@@ -12,6 +12,9 @@
 //! ~100 M trilinear samples/s on a 2-core VM. i16-quantized baked files are decoded to f32
 //! on upload.
 
+use std::sync::Arc;
+
+use grin_field::IndexField;
 use grin_field::baked::{BakedField, Interp, Outside};
 use grin_field::sparse::SparseField;
 
@@ -251,6 +254,58 @@ impl GpuGrid {
             GpuGrid::Dense(b) => b,
             GpuGrid::Sparse(s) => s,
         }
+    }
+}
+
+/// A grid shared with its caller, dense or sparse: what a
+/// [`GpuRayTracer`](crate::GpuRayTracer) marches.
+#[derive(Debug, Clone)]
+pub enum SharedGrid {
+    Dense(Arc<BakedField>),
+    Sparse(Arc<SparseField>),
+}
+
+impl SharedGrid {
+    /// The grid to upload.
+    pub fn device(&self) -> DeviceField<'_> {
+        match self {
+            SharedGrid::Dense(b) => DeviceField::Dense(b),
+            SharedGrid::Sparse(s) => DeviceField::Sparse(s),
+        }
+    }
+    /// The grid as a shared field.
+    pub fn field(&self) -> Arc<dyn IndexField> {
+        match self {
+            SharedGrid::Dense(b) => Arc::clone(b) as Arc<dyn IndexField>,
+            SharedGrid::Sparse(s) => Arc::clone(s) as Arc<dyn IndexField>,
+        }
+    }
+    /// Bytes of the grid's voxels (and, sparse, its table and brick records) in memory.
+    pub fn data_bytes(&self) -> usize {
+        match self {
+            SharedGrid::Dense(b) => b.data_bytes(),
+            SharedGrid::Sparse(s) => s.memory_bytes(),
+        }
+    }
+    /// Whether both are the same grid (not a copy).
+    pub fn same(&self, other: &SharedGrid) -> bool {
+        match (self, other) {
+            (SharedGrid::Dense(a), SharedGrid::Dense(b)) => Arc::ptr_eq(a, b),
+            (SharedGrid::Sparse(a), SharedGrid::Sparse(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
+    }
+}
+
+impl From<Arc<BakedField>> for SharedGrid {
+    fn from(f: Arc<BakedField>) -> Self {
+        SharedGrid::Dense(f)
+    }
+}
+
+impl From<Arc<SparseField>> for SharedGrid {
+    fn from(f: Arc<SparseField>) -> Self {
+        SharedGrid::Sparse(f)
     }
 }
 

@@ -6,7 +6,7 @@
 //!
 //! ```ignore
 //! let ctx = GpuContext::new_headless()?;
-//! let mut gpu = GpuRayTracer::new(&ctx, baked)?;               // Arc<BakedField>
+//! let mut gpu = GpuRayTracer::new(&ctx, baked)?;    // Arc<BakedField> or Arc<SparseField>
 //! let (rays_out, seconds) = gpu.trace(&settings, &rays, 1)?;  // Vec<GpuRay>
 //! gpu.set_field(other_baked)?;                                 // pipelines are kept
 //! ```
@@ -22,27 +22,27 @@
 //! too long), and the results are those of one whole march.
 
 use std::collections::HashMap;
-use std::sync::Arc;
 
 use glam::DVec3;
-use grin_field::IndexField;
-use grin_field::baked::BakedField;
 use grin_render::camera::PinholeCamera;
 use grin_render::scene::{RenderScene, SceneMedium};
 use grin_render::settings::TraceSettings;
 use grin_render::sky::SkyModel;
 use grin_scene::RenderSettings;
 
-use crate::gpu_data::{FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_TRICUBIC, FrameParams};
+use crate::field::SharedGrid;
+use crate::gpu_data::{
+    FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC, FrameParams,
+};
 use crate::pack::{copy_uploaded, frame_params};
 use crate::pipelines::pipeline_constants;
 use crate::stages::{self, MarchOut, RayIn, StageKit, StagePipeline};
 use crate::{GpuContext, GpuError};
 
-/// Traces rays through one baked field on the GPU.
+/// Traces rays through one baked field (dense or sparse) on the GPU.
 pub struct GpuRayTracer<'a> {
     kit: StageKit<'a>,
-    field: Arc<BakedField>,
+    field: SharedGrid,
     /// The parameters as the field's upload left them (grid, macro cells, flags).
     uploaded: FrameParams,
     pipelines: HashMap<Vec<u64>, StagePipeline<stages::March>>,
@@ -53,7 +53,7 @@ pub struct GpuRayTracer<'a> {
 impl std::fmt::Debug for GpuRayTracer<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuRayTracer")
-            .field("field", &self.field.geometry().dims)
+            .field("field", &self.field.field().describe())
             .field("pipelines", &self.pipelines.len())
             .field("steps_per_dispatch", &self.steps_per_dispatch)
             .finish_non_exhaustive()
@@ -61,7 +61,7 @@ impl std::fmt::Debug for GpuRayTracer<'_> {
 }
 
 /// A scene of nothing but `field`, marched with `trace` (no jitter).
-fn ray_scene(field: &Arc<BakedField>, trace: &TraceSettings) -> Result<RenderScene, GpuError> {
+fn ray_scene(field: &SharedGrid, trace: &TraceSettings) -> Result<RenderScene, GpuError> {
     let settings = RenderSettings {
         width: 1,
         height: 1,
@@ -76,7 +76,7 @@ fn ray_scene(field: &Arc<BakedField>, trace: &TraceSettings) -> Result<RenderSce
         resolved_estimate_limit: Some(trace.estimate_limit),
         ..RenderSettings::default()
     };
-    let medium = SceneMedium::new(Arc::clone(field) as Arc<dyn IndexField>, &settings)
+    let medium = SceneMedium::new(field.field(), &settings)
         .map_err(|e| GpuError::Unsupported(format!("tracer settings: {e}")))?;
     let camera = PinholeCamera {
         origin: DVec3::ZERO,
@@ -109,12 +109,13 @@ fn ray_scene(field: &Arc<BakedField>, trace: &TraceSettings) -> Result<RenderSce
 
 impl<'a> GpuRayTracer<'a> {
     /// Upload `field` (its own interpolation and storage, as a render would).
-    pub fn new(ctx: &'a GpuContext, field: Arc<BakedField>) -> Result<Self, GpuError> {
+    pub fn new(ctx: &'a GpuContext, field: impl Into<SharedGrid>) -> Result<Self, GpuError> {
+        let field = field.into();
         let scene = ray_scene(
             &field,
             &TraceSettings::from_render(&RenderSettings::default()),
         )?;
-        let kit = StageKit::new(ctx, &scene, field.as_ref().into())?;
+        let kit = StageKit::new(ctx, &scene, field.device())?;
         let uploaded = kit.params;
         Ok(GpuRayTracer {
             kit,
@@ -128,15 +129,16 @@ impl<'a> GpuRayTracer<'a> {
 
     /// Trace through `field` from now on (uploaded unless it is the current one); the
     /// compiled pipelines are kept.
-    pub fn set_field(&mut self, field: Arc<BakedField>) -> Result<(), GpuError> {
-        if Arc::ptr_eq(&field, &self.field) {
+    pub fn set_field(&mut self, field: impl Into<SharedGrid>) -> Result<(), GpuError> {
+        let field = field.into();
+        if field.same(&self.field) {
             return Ok(());
         }
         let scene = ray_scene(
             &field,
             &TraceSettings::from_render(&RenderSettings::default()),
         )?;
-        self.kit.set_scene(&scene, field.as_ref().into())?;
+        self.kit.set_scene(&scene, field.device())?;
         self.uploaded = self.kit.params;
         self.field = field;
         Ok(())
@@ -171,7 +173,7 @@ impl<'a> GpuRayTracer<'a> {
     ) -> Result<(Vec<GpuRay>, f64), GpuError> {
         let mut params = frame_params(&ray_scene(&self.field, settings)?)?;
         copy_uploaded(&mut params, &self.uploaded);
-        params.flags |= self.uploaded.flags & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC);
+        params.flags |= self.uploaded.flags & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE);
         if self.uploaded.flags & FLAG_MACRO_CELLS == 0 {
             params.flags &= !FLAG_MACRO_CELLS;
         }

@@ -329,3 +329,73 @@ fn rays_past_lavapipes_loop_limit_leave_as_their_cpu_twin() {
     assert!(c.status.left(), "{:?}", c.status);
     assert!(gpu.last_dispatches() > 40);
 }
+
+/// A sparse bake (`grin bake --sparse`) traced by the ray table: the same statuses,
+/// exits and evaluations as its CPU f32 twin, as the dense grids above.
+#[test]
+fn gpu_ray_table_marches_sparse_bakes_as_its_cpu_twin() {
+    use grin_field::IndexField;
+    use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+    let Some(ctx) = harness::context("gpu_ray_table_marches_sparse_bakes_as_its_cpu_twin") else {
+        return;
+    };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/plume.toml");
+    let scene = load_scene(&path).unwrap();
+    let source = harness::build_field(&scene, path.parent().unwrap()).unwrap();
+    let opts = SparseOptions {
+        error_budget: 1e-3,
+        ..SparseOptions::default()
+    };
+    let (sparse, report) = bake_sparse(source.as_ref(), &opts, &|_, _, _| {}).unwrap();
+    assert!(report.active_bricks < report.total_bricks, "{report:?}");
+    let sparse = Arc::new(sparse);
+    let mut gpu = GpuRayTracer::new(&ctx, Arc::clone(&sparse)).unwrap();
+    let (c, r) = (sparse.bounds().center(), sparse.bounds().radius());
+    let rays: Vec<(DVec3, DVec3)> = (0..48)
+        .map(|i| {
+            let f = i as f64 / 48.0;
+            let offset = DVec3::new(0.8 * r * (f - 0.5), 0.3 * r * (6.0 * f).sin(), 0.0);
+            (
+                c + offset - DVec3::Z * 3.0 * r,
+                DVec3::new(0.02 * f, 0.0, 1.0),
+            )
+        })
+        .collect();
+    let mut compared = 0;
+    for s in [
+        settings(
+            IntegratorKind::Rk4,
+            StepSpec::Fixed(0.05 * r),
+            ExitMethod::Hermite,
+        ),
+        settings(
+            IntegratorKind::Adaptive,
+            StepSpec::Auto(1e-4),
+            ExitMethod::Hermite,
+        ),
+    ] {
+        let (out, _) = gpu.trace(&s, &rays, 1).unwrap();
+        for ((o, d), g) in rays.iter().zip(&out) {
+            let c = trace_ray::<f32>(sparse.as_ref(), &s, *o, *d);
+            assert_eq!(
+                RayStatus::ALL[g.status as usize],
+                c.status,
+                "{s:?} ray {o} {d}"
+            );
+            if !c.status.left() {
+                continue;
+            }
+            compared += 1;
+            let angle = g.direction.angle_between(c.direction);
+            assert!(
+                angle < 2e-5,
+                "{s:?} ray from {o}: direction {angle} rad apart"
+            );
+            assert!((g.position - c.position).length() < 1e-4 * r.max(1.0));
+            assert!((g.opl - c.opl).abs() < 1e-4 * c.opl.max(1.0));
+            let (ge, ce) = (f64::from(g.evals), c.evals as f64);
+            assert!((ge - ce).abs() <= 0.1 * ce + 8.0, "evals {ge} vs {ce}");
+        }
+    }
+    assert!(compared > 60, "{compared} rays compared");
+}

@@ -92,6 +92,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "rays": c.rays.len(),
                 "exact": c.exact.is_some(),
                 "numeric_vs_exact": r.numeric_vs_exact,
+                "bake_error": c.bake_error,
+                "grid_bytes": c.grid.as_ref().map(|g| g.data_bytes()),
             })).collect::<Vec<_>>(),
             "decades": rows,
             "orders": run.orders,
