@@ -5,7 +5,7 @@
 #
 #   bash scripts/bench_sequence_cache.sh [--grin target/release/grin] [--frames 48] [--size 160x90]
 #
-# Needs Debian's python3-openvdb (/usr/bin/python3) and numpy to write the frames.
+# Needs Debian's python3-openvdb (/usr/bin/python3, module pyopenvdb) and numpy to write the frames.
 set -euo pipefail
 GRIN=target/release/grin
 FRAMES=48
@@ -26,7 +26,7 @@ trap 'rm -rf "$work"' EXIT
 /usr/bin/python3 - "$work" "$FRAMES" <<'PY'
 import sys
 import numpy as np
-import openvdb as vdb
+import pyopenvdb as vdb
 out, frames = sys.argv[1], int(sys.argv[2])
 n = 64
 ax = (np.arange(n) - n / 2 + 0.5) / n

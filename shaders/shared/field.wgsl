@@ -125,7 +125,8 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
 //
 // field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: first one
 // texel per top brick (x fastest), (first voxel / 65536, first voxel % 65536, cells a
-// brick edge, 0) with 0 cells for an empty brick; then every active brick's (cells + 1)^3
+// brick edge, most cells a side among it and its 26 neighbours) with 0 cells for an empty
+// brick; then every active brick's (cells + 1)^3
 // nodes, x fastest. The grid parameters place the top grid: grid_origin its corner,
 // grid_inv_spacing 1 / brick edge, grid_dims bricks + 1.
 
@@ -167,6 +168,21 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let x11 = mix(c011, c111, t.x);
     let v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
     return FieldSample(ambient_index() + v.x, v.yzw, v.x);
+}
+
+// The local step cap (SparseField::step_cap): twice the spacing of the finest brick in
+// and next to the brick holding p (the table texel's w), one brick edge where none is
+// active.
+fn sparse_step_cap(p: vec3<f32>) -> f32 {
+    let g = grid_from_world_point(p);
+    let bricks = params.grid_dims - vec3<u32>(1u);
+    let b = min(vec3<u32>(max(floor(g), vec3<f32>(0.0))), bricks - vec3<u32>(1u));
+    let near = linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z)).w;
+    let edge = 1.0 / params.grid_inv_spacing.x;
+    if near < 1.0 {
+        return edge;
+    }
+    return 2.0 * edge / near;
 }
 
 fn sample_field(p: vec3<f32>) -> FieldSample {

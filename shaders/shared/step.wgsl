@@ -21,7 +21,8 @@ const MAX_REJECTIONS: u32 = 60u;
 // at its start (no reversal of T where n is small).
 const LENGTH_SCALE_STEP_FRACTION: f32 = 0.5;
 // step::FEATURE_STEP_FRACTION of the field's feature size: the GPU's field is a baked
-// grid, whose feature size (BakedField::feature_size) is two spacings.
+// grid, whose feature size (BakedField::feature_size) is two spacings; a sparse bake's is
+// local (SparseField::step_cap, sparse_step_cap).
 const FEATURE_STEP_FRACTION: f32 = 1.0;
 // Shortest jittered first step, as a fraction of the nominal step.
 const MIN_JITTER_FRACTION: f32 = 1e-3;
@@ -164,8 +165,8 @@ fn take_step(ctrl: ptr<function, StepController>, s: RayState, s0: FieldSample) 
     let n0 = s0.n;
     let d0 = s0.grad_n * s0.n;
     var feature = 2.0 / max_element(params.grid_inv_spacing);
-    if params.feature_size > 0.0 {
-        feature = params.feature_size;
+    if (FLAGS & FLAG_SPARSE) != 0u {
+        feature = sparse_step_cap(s.r);
     }
     let cap = min(length_scale_cap(n0, length(s0.grad_n)), FEATURE_STEP_FRACTION * feature);
     var ds: f32;

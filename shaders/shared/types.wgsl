@@ -68,7 +68,7 @@ struct FrameParams {
     // STATUS_DEGRADED.
     accuracy: f32,
     estimate_limit: f32,
-    feature_size: f32,           // a sparse bake's feature size (0: twice the grid spacing)
+    _pad3: f32,
 }
 
 struct GpuObject {

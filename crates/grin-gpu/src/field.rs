@@ -376,15 +376,16 @@ pub fn upload_sparse(
     let base = table.len();
     let texel = |t: usize, brick: &mut usize| -> [f32; 4] {
         if t < base {
+            let near = f32::from(sparse.near_cells_at(t));
             return match bricks.get(table[t] as usize) {
-                None => [0.0; 4],
+                None => [0.0, 0.0, 0.0, near],
                 Some(b) => {
                     let first = base + b.offset;
                     [
                         (first / 65536) as f32,
                         (first % 65536) as f32,
                         b.cells() as f32,
-                        0.0,
+                        near,
                     ]
                 }
             };
@@ -463,8 +464,6 @@ pub fn upload_sparse(
     params.macro_cell_voxels = 1;
     params.macro_threshold = 0.5;
     params.n_uncertainty = grin_field::IndexField::n_uncertainty(sparse) as f32;
-    // The step cap's feature: the finest bricks' (the CPU's IndexField::feature_size).
-    params.feature_size = grin_field::IndexField::feature_size(sparse).unwrap_or(0.0) as f32;
     params.flags |= FLAG_OUTSIDE_AMBIENT | FLAG_SPARSE;
     if !table.contains(&grin_field::sparse::EMPTY) {
         params.flags &= !FLAG_MACRO_CELLS;

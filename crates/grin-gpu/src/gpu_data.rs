@@ -197,9 +197,7 @@ pub struct FrameParams {
     /// (`TraceSettings::accuracy`, `estimate_limit`).
     pub accuracy: f32,
     pub estimate_limit: f32,
-    /// The field's feature size where its grid spacing is not it (a sparse bake's finest
-    /// bricks: twice their spacing); 0: twice the grid spacing.
-    pub feature_size: f32,
+    pub _pad3: f32,
 }
 const _: () = assert!(std::mem::size_of::<FrameParams>() == 24 * 16);
 
@@ -400,7 +398,7 @@ pub(crate) mod tests {
             roundoff_one,
             accuracy,
             estimate_limit,
-            feature_size,
+            _pad3,
         );
         same_layout!(
             RENDER_WGSL,

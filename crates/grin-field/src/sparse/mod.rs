@@ -147,6 +147,9 @@ pub struct SparseField {
     n_range: (f64, f64),
     max_grad: f64,
     macro_grid: MacroGrid,
+    /// Per top-grid brick: the most cells a side of the active bricks among it and its 26
+    /// neighbours (0: none active), the local step cap's feature.
+    near_cells: Vec<u16>,
 }
 
 /// Why a sparse field's parts do not fit together.
@@ -261,7 +264,9 @@ impl SparseField {
                 max_grad: Vec::new(),
                 threshold: 0.5,
             },
+            near_cells: Vec::new(),
         };
+        field.near_cells = field.neighbourhood_cells();
         let (mut lo, mut hi, mut g) = (0.0f64, 0.0f64, 0.0f64);
         for (bi, b) in field.bricks.iter().enumerate() {
             for v in b.offset..b.offset + b.voxel_count() {
@@ -287,6 +292,50 @@ impl SparseField {
             .map(|&e| if e == EMPTY { 0.0 } else { 1.0 })
             .collect();
         Ok(field)
+    }
+
+    /// [`Self::near_cells`] of every top-grid brick, in table order.
+    fn neighbourhood_cells(&self) -> Vec<u16> {
+        let cells_at = |at: [usize; 3]| match self.table[self.top.index(at)] {
+            EMPTY => 0,
+            e => self.bricks[e as usize].cells() as u16,
+        };
+        let dims = self.top.dims;
+        (0..self.table.len())
+            .map(|i| {
+                let at = self.top.at(i);
+                let range = |a: usize| at[a].saturating_sub(1)..=(at[a] + 1).min(dims[a] - 1);
+                let mut most = 0;
+                for z in range(2) {
+                    for y in range(1) {
+                        for x in range(0) {
+                            most = most.max(cells_at([x, y, z]));
+                        }
+                    }
+                }
+                most
+            })
+            .collect()
+    }
+
+    /// The most cells a side of the active bricks in and next to the top-grid brick
+    /// holding `p` (the nearest brick where `p` is beyond the grid; 0 where none is
+    /// active). A step no longer than two of those cells cannot leave that neighbourhood
+    /// (bricks have at least 4 cells a side), so it cannot pass over a finer brick's
+    /// features unseen: the local step cap ([`IndexField::step_cap`]), the GPU's too
+    /// (the table texel's fourth channel).
+    pub fn near_cells(&self, p: DVec3) -> u16 {
+        let g = (p - self.top.origin) / self.top.edge;
+        let at: [usize; 3] = std::array::from_fn(|a| {
+            // Saturating casts: NaN and negatives to 0, past the end to the last brick.
+            (g[a].floor().max(0.0) as usize).min(self.top.dims[a] - 1)
+        });
+        self.near_cells[self.top.index(at)]
+    }
+
+    /// The near-cells of table entry `i` (what the GPU upload stores).
+    pub fn near_cells_at(&self, i: usize) -> u16 {
+        self.near_cells[i]
     }
 
     pub fn top(&self) -> &TopGrid {
@@ -490,9 +539,15 @@ impl IndexField for SparseField {
         let node_dims = self.top.dims.map(|n| n + 1);
         self.macro_grid.span(g, dir / self.top.edge, node_dims)
     }
-    /// Twice the finest spacing: no step passes over a node of the finest bricks unseen.
-    fn feature_size(&self) -> Option<f64> {
-        Some(2.0 * self.finest_spacing())
+    /// Twice the spacing of the finest brick in and next to the brick holding `p`
+    /// ([`SparseField::near_cells`]): a step that long passes over no node of a finer
+    /// brick unseen, and coarse bricks far from fine ones take long steps. One brick edge
+    /// where none is active: the step ends in an empty neighbour at the farthest.
+    fn step_cap(&self, p: DVec3, _reach: f64) -> f64 {
+        match self.near_cells(p) {
+            0 => self.top.edge,
+            cells => 2.0 * self.top.edge / f64::from(cells),
+        }
     }
     fn source_spacing(&self) -> Option<f64> {
         Some(self.finest_spacing())
