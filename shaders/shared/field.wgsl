@@ -136,15 +136,28 @@ fn linear_texel(t: u32) -> vec4<f32> {
     return textureLoad(field_tex, vec3<i32>(i32(t % SPARSE_ROW), i32((t / SPARSE_ROW) % SPARSE_ROW), i32(t / (SPARSE_ROW * SPARSE_ROW))), 0);
 }
 
+// The table texel of the top-grid brick holding grid point g (the nearest brick where g
+// is beyond the grid; SparseField's TopGrid::brick_holding), and that brick.
+struct SparseBrick {
+    at: vec3<u32>,
+    entry: vec4<f32>,
+}
+
+fn sparse_brick(g: vec3<f32>) -> SparseBrick {
+    let bricks = params.grid_dims - vec3<u32>(1u);
+    let b = min(vec3<u32>(max(floor(g), vec3<f32>(0.0))), bricks - vec3<u32>(1u));
+    return SparseBrick(b, linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z)));
+}
+
 fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let g = grid_from_world_point(p);
     let ambient = FieldSample(ambient_index(), vec3<f32>(0.0), 0.0);
     if beyond_grid(g) {
         return ambient;
     }
-    let bricks = params.grid_dims - vec3<u32>(1u);
-    let b = min(vec3<u32>(g), bricks - vec3<u32>(1u));
-    let entry = linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z));
+    let brick = sparse_brick(g);
+    let b = brick.at;
+    let entry = brick.entry;
     if entry.z < 1.0 {
         return ambient;
     }
@@ -174,10 +187,7 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
 // and next to the brick holding p (the table texel's w), one brick edge where none is
 // active.
 fn sparse_step_cap(p: vec3<f32>) -> f32 {
-    let g = grid_from_world_point(p);
-    let bricks = params.grid_dims - vec3<u32>(1u);
-    let b = min(vec3<u32>(max(floor(g), vec3<f32>(0.0))), bricks - vec3<u32>(1u));
-    let near = linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z)).w;
+    let near = sparse_brick(grid_from_world_point(p)).entry.w;
     let edge = 1.0 / params.grid_inv_spacing.x;
     if near < 1.0 {
         return edge;

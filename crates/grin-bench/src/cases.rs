@@ -29,7 +29,8 @@ use glam::DVec3;
 use grin_field::IndexField;
 use grin_field::bake::{self, BakeOptions};
 use grin_field::baked::{Interp, Storage};
-use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+use grin_field::sparse::SparseField;
+use grin_field::sparse::bake::{SparseOptions, SparseReport, bake_sparse};
 use grin_gpu::SharedGrid;
 use grin_scene::MediumSpec;
 
@@ -454,15 +455,25 @@ fn baked_with_error(
 /// `base` baked sparsely (`grin bake --sparse`) at relative error `error`: what a dense
 /// bake's rows are compared with at the same error. The reference stays the source's.
 pub fn sparse(base: &Case, error: f64) -> anyhow::Result<Case> {
+    let (field, report) = sparse_at(base.source.as_ref(), error, &base.name)?;
+    let name = format!("{}-sparse-{}", base.name, report.storage.name());
+    let grid = SharedGrid::from(Arc::new(field));
+    Ok(grid_case(base, name, grid, report.relative_error))
+}
+
+/// `source` (named `name` in an error) baked sparsely at relative error `error`, with the
+/// default options: what the benches hold against a dense grid of that error.
+pub fn sparse_at(
+    source: &dyn IndexField,
+    error: f64,
+    name: &str,
+) -> anyhow::Result<(SparseField, SparseReport)> {
     let opts = SparseOptions {
         error_budget: error,
         ..SparseOptions::default()
     };
-    let (field, report) = bake_sparse(base.source.as_ref(), &opts, &|_, _, _| {})
-        .with_context(|| format!("{}: sparse bake at relative error {error:.2e}", base.name))?;
-    let name = format!("{}-sparse-{}", base.name, report.storage.name());
-    let grid = SharedGrid::from(Arc::new(field));
-    Ok(grid_case(base, name, grid, report.relative_error))
+    bake_sparse(source, &opts, &|_, _, _| {})
+        .with_context(|| format!("{name}: sparse bake at relative error {error:.2e}"))
 }
 
 /// A case tracing `grid` (baked from `base`'s source to relative error `error`) with

@@ -306,34 +306,22 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         for w in field.warnings().into_iter().chain(bake_warning(&bake)) {
             progress.warn(&w);
         }
+        // The render scene marching `grid` in place of the scene's own field.
+        let prepare = |grid: Arc<dyn IndexField>| {
+            anyhow::Ok(
+                pipeline
+                    .prepare(&scene, dir, &name, Some(grid))?
+                    .render_scene,
+            )
+        };
         let baked = Arc::new(baked);
-        let rs = pipeline
-            .prepare(
-                &scene,
-                dir,
-                &name,
-                Some(baked.clone() as Arc<dyn IndexField>),
-            )?
-            .render_scene;
+        let rs = prepare(baked.clone())?;
         prepared.push((label.to_owned(), rs, Some(baked.clone())));
         // The same field sparsely, at the error the dense grid has.
         let error = bake.relative_error.max(1e-6);
-        let opts = grin_field::sparse::bake::SparseOptions {
-            error_budget: error,
-            ..Default::default()
-        };
-        let (sparse, report) =
-            grin_field::sparse::bake::bake_sparse(field.as_ref(), &opts, &|_, _, _| {})
-                .with_context(|| format!("{name}: sparse bake at relative error {error:.2e}"))?;
+        let (sparse, report) = crate::cases::sparse_at(field.as_ref(), error, &name)?;
         let sparse = Arc::new(sparse);
-        let rs = pipeline
-            .prepare(
-                &scene,
-                dir,
-                &name,
-                Some(sparse.clone() as Arc<dyn IndexField>),
-            )?
-            .render_scene;
+        let rs = prepare(sparse.clone())?;
         sparse_prepared.push((format!("{label}{SPARSE}"), rs, None));
         sparse_bakes.push((label, error, report, baked.data_bytes() as u64, sparse));
     }

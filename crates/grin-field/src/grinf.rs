@@ -315,6 +315,30 @@ impl Reader<'_> {
     pub(crate) fn dvec3(&mut self) -> DVec3 {
         DVec3::new(self.f64(), self.f64(), self.f64())
     }
+    /// The bounds as [`put_bounds_and_errors`] wrote them (kind, reserved word, 6 f64),
+    /// with the six stored values; an unknown kind is the message's error.
+    pub(crate) fn bounds(&mut self) -> Result<(Bounds, [f64; 6]), String> {
+        let kind = self.u32();
+        let _reserved = self.u32();
+        let v = [0; 6].map(|_| self.f64());
+        match kind {
+            0 => Ok((
+                Bounds::Sphere {
+                    center: DVec3::new(v[0], v[1], v[2]),
+                    radius: v[3],
+                },
+                v,
+            )),
+            1 => Ok((
+                Bounds::Box {
+                    min: DVec3::new(v[0], v[1], v[2]),
+                    max: DVec3::new(v[3], v[4], v[5]),
+                },
+                v,
+            )),
+            s => Err(format!("unknown bounds code {s}")),
+        }
+    }
 }
 
 /// Parse and validate the header: magic, version, size, checksum, then the fields.
@@ -376,20 +400,7 @@ pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
     let origin = r.dvec3();
     let spacing = r.dvec3();
     let scale = [r.f32(), r.f32(), r.f32(), r.f32()];
-    let kind = r.u32();
-    let _reserved = r.u32();
-    let bv = [r.f64(), r.f64(), r.f64(), r.f64(), r.f64(), r.f64()];
-    let bounds = match kind {
-        0 => Bounds::Sphere {
-            center: DVec3::new(bv[0], bv[1], bv[2]),
-            radius: bv[3],
-        },
-        1 => Bounds::Box {
-            min: DVec3::new(bv[0], bv[1], bv[2]),
-            max: DVec3::new(bv[3], bv[4], bv[5]),
-        },
-        s => return Err(header_err(format!("unknown bounds code {s}"))),
-    };
+    let (bounds, _) = r.bounds().map_err(header_err)?;
     let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = (r.f64(), r.f64(), r.f64(), r.f64());
     let desc_len = r.u32() as usize;
     if FIXED_HEADER_BYTES + desc_len > data_offset || !data_offset.is_multiple_of(DATA_ALIGN) {

@@ -238,6 +238,20 @@ pub struct BakeReport {
 /// Progress callback: (stage, done, total).
 pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
 
+/// The options both bakes share, dense and sparse: a positive error budget, at least one
+/// error point.
+pub(crate) fn check_budget_and_points(budget: f64, points: usize) -> Result<(), BakeError> {
+    if !(budget.is_finite() && budget > 0.0) {
+        return Err(BakeError::Option(format!(
+            "error budget {budget} must be positive"
+        )));
+    }
+    if points == 0 {
+        return Err(BakeError::Option("error_points must be at least 1".into()));
+    }
+    Ok(())
+}
+
 /// Bake `source` per `opts`.
 pub fn bake(
     source: &dyn IndexField,
@@ -245,15 +259,7 @@ pub fn bake(
     progress: Progress<'_>,
 ) -> Result<(BakedField, BakeReport), BakeError> {
     let start = Instant::now();
-    if !(opts.error_budget.is_finite() && opts.error_budget > 0.0) {
-        return Err(BakeError::Option(format!(
-            "error budget {} must be positive",
-            opts.error_budget
-        )));
-    }
-    if opts.error_points == 0 {
-        return Err(BakeError::Option("error_points must be at least 1".into()));
-    }
+    check_budget_and_points(opts.error_budget, opts.error_points)?;
     if let Some(n) = opts.resolution
         && n < 2
     {

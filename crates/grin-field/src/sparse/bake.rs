@@ -141,12 +141,7 @@ pub fn bake_sparse(
     progress: Progress<'_>,
 ) -> Result<(SparseField, SparseReport), BakeError> {
     let start = Instant::now();
-    if !(opts.error_budget.is_finite() && opts.error_budget > 0.0) {
-        return Err(BakeError::Option(format!(
-            "error budget {} must be positive",
-            opts.error_budget
-        )));
-    }
+    crate::bake::check_budget_and_points(opts.error_budget, opts.error_points)?;
     let probe_bricks = opts
         .top_bricks
         .unwrap_or_else(|| probe_grid(source.bounds(), source.feature_size()));
@@ -154,9 +149,6 @@ pub fn bake_sparse(
         return Err(BakeError::Option(format!(
             "{probe_bricks} bricks along the longest axis: must be 1 to {MAX_TOP_BRICKS}"
         )));
-    }
-    if opts.error_points == 0 {
-        return Err(BakeError::Option("error_points must be at least 1".into()));
     }
     let bounds = source.bounds();
     let ambient = source.ambient_index();
@@ -680,13 +672,7 @@ fn curvature_error(
 /// Trilinear delta_n of a brick's raw nodes at cell coordinates `u`.
 fn delta_at(raw: &[[f32; 4]], cells: usize, u: DVec3) -> f64 {
     let m = cells + 1;
-    let mut i = [0usize; 3];
-    let mut t = [0.0f64; 3];
-    for a in 0..3 {
-        let x = u[a].clamp(0.0, cells as f64);
-        i[a] = (x as usize).min(cells - 1);
-        t[a] = x - i[a] as f64;
-    }
+    let (i, t) = super::cell_of(u, cells);
     let mut out = 0.0;
     for dz in 0..2 {
         for dy in 0..2 {

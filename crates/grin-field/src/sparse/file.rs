@@ -22,11 +22,8 @@
 //! A brick's position is where the table names it; its voxels start where the previous
 //! brick's end.
 
-use glam::DVec3;
-
 use super::{Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, cells_of};
 use crate::baked::{BakeProvenance, Storage};
-use crate::bounds::Bounds;
 use crate::field::IndexField;
 use crate::grinf::{CRC_BYTES, DATA_ALIGN, GrinfError, MAGIC, MAX_DESCRIPTION_BYTES, Reader};
 
@@ -240,20 +237,8 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
     let ambient = r.f64();
     let origin = r.dvec3();
     let edge = r.f64();
-    let kind = r.u32();
-    let _reserved = r.u32();
-    let bv = [r.f64(), r.f64(), r.f64(), r.f64(), r.f64(), r.f64()];
-    let bounds = match kind {
-        0 => Bounds::Sphere {
-            center: DVec3::new(bv[0], bv[1], bv[2]),
-            radius: bv[3],
-        },
-        1 => Bounds::Box {
-            min: DVec3::new(bv[0], bv[1], bv[2]),
-            max: DVec3::new(bv[3], bv[4], bv[5]),
-        },
-        s => return Err(header_err(format!("unknown bounds code {s}"))),
-    };
+    let top = TopGrid { origin, edge, dims };
+    let (bounds, bv) = r.bounds().map_err(header_err)?;
     if !bv.iter().all(|v| v.is_finite()) {
         return Err(header_err(format!("bounds {bv:?} are not finite")));
     }
@@ -282,11 +267,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
         if slot.is_some() {
             return Err(header_err(format!("brick {e} appears twice in the table")));
         }
-        *slot = Some([
-            (idx % dims[0]) as u32,
-            ((idx / dims[0]) % dims[1]) as u32,
-            (idx / (dims[0] * dims[1])) as u32,
-        ]);
+        *slot = Some(top.at(idx).map(|a| a as u32));
     }
     let mut bricks = Vec::with_capacity(active);
     let mut offset = 0usize;
@@ -323,7 +304,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
         ),
     };
     SparseField::new(
-        TopGrid { origin, edge, dims },
+        top,
         table,
         bricks,
         pool,

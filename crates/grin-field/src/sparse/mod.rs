@@ -126,11 +126,31 @@ impl TopGrid {
             index / (self.dims[0] * self.dims[1]),
         ]
     }
+    /// The brick holding top-grid point `g` (world point minus origin, over the edge):
+    /// the nearest brick where `g` is beyond the grid (saturating casts: NaN and negatives
+    /// to the first, past the end to the last; the far face belongs to the last brick).
+    pub fn brick_holding(&self, g: DVec3) -> [usize; 3] {
+        std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(self.dims[a] - 1))
+    }
     /// World box of brick `at`.
     pub fn brick_box(&self, at: [usize; 3]) -> (DVec3, DVec3) {
         let lo = self.origin + self.edge * DVec3::new(at[0] as f64, at[1] as f64, at[2] as f64);
         (lo, lo + DVec3::splat(self.edge))
     }
+}
+
+/// The cell of a brick with `cells` cells a side holding cell coordinates `u` (clamped to
+/// the brick), and `u`'s fractions in it: what a trilinear read of the brick blends.
+#[inline]
+pub(crate) fn cell_of(u: DVec3, cells: usize) -> ([usize; 3], [f64; 3]) {
+    let mut i = [0usize; 3];
+    let mut t = [0.0f64; 3];
+    for a in 0..3 {
+        let x = u[a].clamp(0.0, cells as f64);
+        i[a] = (x as usize).min(cells - 1);
+        t[a] = x - i[a] as f64;
+    }
+    (i, t)
 }
 
 /// A sparse, multi-resolution baked field (see the module docs).
@@ -325,11 +345,9 @@ impl SparseField {
     /// features unseen: the local step cap ([`IndexField::step_cap`]), the GPU's too
     /// (the table texel's fourth channel).
     pub fn near_cells(&self, p: DVec3) -> u16 {
-        let g = (p - self.top.origin) / self.top.edge;
-        let at: [usize; 3] = std::array::from_fn(|a| {
-            // Saturating casts: NaN and negatives to 0, past the end to the last brick.
-            (g[a].floor().max(0.0) as usize).min(self.top.dims[a] - 1)
-        });
+        let at = self
+            .top
+            .brick_holding((p - self.top.origin) / self.top.edge);
         self.near_cells[self.top.index(at)]
     }
 
@@ -428,15 +446,12 @@ impl SparseField {
     #[inline]
     fn locate(&self, p: DVec3) -> Option<(&Brick, DVec3)> {
         let g = (p - self.top.origin) / self.top.edge;
-        let mut at = [0usize; 3];
         for a in 0..3 {
-            let d = self.top.dims[a] as f64;
-            if !(g[a] >= 0.0 && g[a] <= d) {
+            if !(g[a] >= 0.0 && g[a] <= self.top.dims[a] as f64) {
                 return None;
             }
-            // g >= 0: truncation is floor; the far face belongs to the last brick.
-            at[a] = (g[a] as usize).min(self.top.dims[a] - 1);
         }
+        let at = self.top.brick_holding(g);
         let e = self.table[self.top.index(at)];
         if e == EMPTY {
             return None;
@@ -453,13 +468,8 @@ impl SparseField {
     fn trilinear(&self, b: &Brick, u: DVec3) -> [f64; 4] {
         let cells = b.cells();
         let m = cells + 1;
-        let mut i = [0usize; 3];
-        let mut t = [0.0f32; 3];
-        for a in 0..3 {
-            let x = u[a].clamp(0.0, cells as f64);
-            i[a] = (x as usize).min(cells - 1);
-            t[a] = (x - i[a] as f64) as f32;
-        }
+        let (i, t) = cell_of(u, cells);
+        let t = t.map(|t| t as f32);
         let base = b.offset + i[0] + m * (i[1] + m * i[2]);
         let offsets = [0, 1, m, m + 1, m * m, m * m + 1, m * m + m, m * m + m + 1];
         let blend = |c: [Vec4; 8]| {
