@@ -315,6 +315,14 @@ impl Reader<'_> {
     pub(crate) fn dvec3(&mut self) -> DVec3 {
         DVec3::new(self.f64(), self.f64(), self.f64())
     }
+    /// A storage code (0 f32, 1 i16); an unknown code is the message's error.
+    pub(crate) fn storage(&mut self) -> Result<Storage, String> {
+        match self.u32() {
+            0 => Ok(Storage::F32),
+            1 => Ok(Storage::I16),
+            s => Err(format!("unknown storage code {s}")),
+        }
+    }
     /// The bounds as [`put_bounds_and_errors`] wrote them (kind, reserved word, 6 f64),
     /// with the six stored values; an unknown kind is the message's error.
     pub(crate) fn bounds(&mut self) -> Result<(Bounds, [f64; 6]), String> {
@@ -373,11 +381,7 @@ pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
     }
     let data_offset = r.u32() as usize;
     let dims = [r.u32() as usize, r.u32() as usize, r.u32() as usize];
-    let storage = match r.u32() {
-        0 => Storage::F32,
-        1 => Storage::I16,
-        s => return Err(header_err(format!("unknown storage code {s}"))),
-    };
+    let storage = r.storage().map_err(header_err)?;
     let voxel_count = dims.iter().try_fold(1u64, |a, &d| a.checked_mul(d as u64));
     let expected = voxel_count
         .and_then(|n| n.checked_mul(storage.bytes_per_voxel() as u64))

@@ -238,6 +238,18 @@ pub struct BakeReport {
 /// Progress callback: (stage, done, total).
 pub type Progress<'a> = &'a (dyn Fn(&str, u64, u64) + Sync);
 
+/// A bake's error in n relative to the range of delta_n seen: infinite where an error
+/// was measured over no range (a feature between the nodes; not met), 0 where neither.
+pub(crate) fn relative_error(max_err_n: f64, range: f64) -> f64 {
+    if range > 0.0 {
+        max_err_n / range
+    } else if max_err_n > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
 /// The options both bakes share, dense and sparse: a positive error budget, at least one
 /// error point.
 pub(crate) fn check_budget_and_points(budget: f64, points: usize) -> Result<(), BakeError> {
@@ -383,13 +395,7 @@ pub fn bake(
         // error with no range seen is not met (a 16^3 bake of a 933^3-voxel cache's eight
         // small plumes reported a range of 0 and "met" with an error of 1.3e-4).
         let range = range.max(errors.max_source_delta_n);
-        let rel = if range > 0.0 {
-            errors.max_err_n / range
-        } else if errors.max_err_n > 0.0 {
-            f64::INFINITY
-        } else {
-            0.0
-        };
+        let rel = relative_error(errors.max_err_n, range);
         trials.push(Trial {
             resolution: res,
             dims: geometry.dims,

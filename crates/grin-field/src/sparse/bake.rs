@@ -332,13 +332,7 @@ pub fn bake_sparse(
         let field = assemble(&top, &active, &mut baked, storage, bounds, ambient, source)?;
         let errors = measure_error_at(source, &field, opts.gradient, &points);
         let range = range.max(errors.max_source_delta_n);
-        let rel = if range > 0.0 {
-            errors.max_err_n / range
-        } else if errors.max_err_n > 0.0 {
-            f64::INFINITY
-        } else {
-            0.0
-        };
+        let rel = crate::bake::relative_error(errors.max_err_n, range);
         if rel <= opts.error_budget || round == REFINE_ROUNDS {
             break (field, errors, range, rel);
         }

@@ -183,11 +183,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
     let table_offset = r.u32() as usize;
     let dims = [r.u32() as usize, r.u32() as usize, r.u32() as usize];
     let active = r.u32() as usize;
-    let storage = match r.u32() {
-        0 => Storage::F32,
-        1 => Storage::I16,
-        s => return Err(header_err(format!("unknown storage code {s}"))),
-    };
+    let storage = r.storage().map_err(header_err)?;
     match r.u32() {
         0 => {}
         s => {
