@@ -358,13 +358,64 @@ fn field_arrays<'py>(
     Ok((out, info.to_string()))
 }
 
-/// Read a `.grinf` file: (arrays, description JSON).
+/// A sparse bake's arrays: every active brick's nodes decoded to float32, one brick after
+/// another (`delta_n` (N,), `grad` (N, 3); brick b's nodes from `brick_offset[b]`, x fastest,
+/// `brick_cells[b] + 1` a side), each brick's top-grid position `brick_at` (B, 3), and the
+/// description (JSON, `"sparse": true`, the top grid's origin, edge and dims).
+fn sparse_arrays<'py>(
+    py: Python<'py>,
+    field: &grin_field::sparse::SparseField,
+) -> PyResult<(Bound<'py, PyDict>, String)> {
+    let bricks = field.bricks();
+    let voxels = field.pool().len();
+    let (mut delta, mut grad) = (Vec::with_capacity(voxels), Vec::with_capacity(3 * voxels));
+    for b in bricks {
+        for v in b.offset..b.offset + b.voxel_count() {
+            let x = field.voxel_f32(b, v);
+            delta.push(x[0]);
+            grad.extend_from_slice(&x[1..]);
+        }
+    }
+    let at: Vec<u32> = bricks.iter().flat_map(|b| b.at).collect();
+    let cells: Vec<u32> = bricks.iter().map(|b| b.cells() as u32).collect();
+    let offset: Vec<u64> = bricks.iter().map(|b| b.offset as u64).collect();
+    let out = PyDict::new(py);
+    out.set_item("delta_n", PyArray1::from_vec(py, delta))?;
+    out.set_item("grad", PyArray1::from_vec(py, grad).reshape([voxels, 3])?)?;
+    out.set_item(
+        "brick_at",
+        PyArray1::from_vec(py, at).reshape([bricks.len(), 3])?,
+    )?;
+    out.set_item("brick_cells", PyArray1::from_vec(py, cells))?;
+    out.set_item("brick_offset", PyArray1::from_vec(py, offset))?;
+    let top = field.top();
+    let (lo, hi) = field.bounds().aabb();
+    let info = serde_json::json!({
+        "sparse": true,
+        "top_origin": top.origin.to_array(),
+        "brick_edge": top.edge,
+        "top_dims": top.dims,
+        "ambient": field.ambient_index(),
+        "interp": "trilinear",
+        "storage": field.storage().name(),
+        "bounds_min": lo.to_array(),
+        "bounds_max": hi.to_array(),
+        "source": field.provenance().source,
+        "max_err_n": field.provenance().max_err_n,
+    });
+    Ok((out, info.to_string()))
+}
+
+/// Read a `.grinf` file, dense or sparse: (arrays, description JSON).
 #[pyfunction]
 fn read_field<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(Bound<'py, PyDict>, String)> {
     let field = py
-        .detach(|| grin_field::grinf::load(&path))
+        .detach(|| grin_field::grinf::open(&path))
         .map_err(|e| err(e.into()))?;
-    field_arrays(py, &field)
+    match field {
+        grin_field::grinf::Grinf::Dense(f) => field_arrays(py, &f),
+        grin_field::grinf::Grinf::Sparse(f) => sparse_arrays(py, &f),
+    }
 }
 
 /// What a bake is asked.

@@ -126,6 +126,53 @@ def test_trace_equals_the_cli_table(tmp_path):
     np.testing.assert_array_equal(got["steps"], col["steps"].astype(np.uint32))
 
 
+def test_read_field_reads_a_sparse_bake_brick_by_brick(tmp_path):
+    # data/scenes/plume.toml: n = ambient - sum a exp(-|r - c|^2 / s^2).
+    path = tmp_path / "plume.grinf"
+    cli("bake", SCENES / "plume.toml", "--sparse", "-o", path)
+    read = grin.read_field(path)
+    assert isinstance(read, grin.SparseField)
+    info = read.info
+    active = len(read.brick_cells)
+    assert 0 < active < int(np.prod(info["top_dims"]))
+    assert read.delta_n.shape == (int(read.brick_offset[-1]) + (int(read.brick_cells[-1]) + 1) ** 3,)
+    plumes = [(6.0e-3, (0.0, 0.0, 3.5), 0.6), (5.0e-3, (-0.4, 0.3, 4.2), 0.4),
+              (4.0e-3, (0.5, 0.2, 5.0), 0.5)]
+    worst, worst_grad, nodes = 0.0, 0.0, 0
+    for origin, spacing, delta, grad in read.bricks():
+        m = delta.shape[0]
+        assert delta.shape == (m, m, m) and grad.shape == (m, m, m, 3)
+        k, j, i = np.meshgrid(*(np.arange(m),) * 3, indexing="ij")
+        x, y, z = (origin[a] + spacing * c for a, c in enumerate((i, j, k)))
+        gauss = [(a, c, s, np.exp(-((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) / s**2))
+                 for a, c, s in plumes]
+        exact = -sum(a * g for a, c, s, g in gauss)
+        # grad n = sum 2 a (r - c) / s^2 exp(...).
+        exact_grad = np.stack([sum(2 * a * (r - c[ax]) / s**2 * g for a, c, s, g in gauss)
+                               for ax, r in enumerate((x, y, z))], axis=-1)
+        # Nodes past the medium's box (bricks are cubes; no ray samples there) are not
+        # the formula's.
+        lo, hi = info["bounds_min"], info["bounds_max"]
+        inside = ((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+                  & (z >= lo[2]) & (z <= hi[2]))
+        if inside.any():
+            worst = max(worst, float(np.abs(delta - exact)[inside].max()))
+            worst_grad = max(worst_grad, float(np.abs(grad - exact_grad)[inside].max()))
+        nodes += delta.size
+    # Every brick's nodes hold the plumes' index (to the file's rounding, within the error
+    # the bake measured between nodes).
+    assert nodes == read.delta_n.size
+    assert worst <= info["max_err_n"], (worst, info["max_err_n"])
+    # The gradient is stored exact at the nodes (i16: to 1/32767 of the brick's largest).
+    largest = float(np.abs(read.grad).max())
+    assert worst_grad <= 1e-4 * largest, (worst_grad, largest)
+    # A truncated sparse file is an error naming it.
+    bad = tmp_path / "cut.grinf"
+    bad.write_bytes(path.read_bytes()[:-100])
+    with pytest.raises(grin.GrinError, match="cut.grinf"):
+        grin.read_field(bad)
+
+
 def test_bake_and_read_field_agree_with_the_profile(tmp_path):
     path = tmp_path / "lune.grinf"
     baked = grin.bake(SCENES / "luneburg.toml", path, resolution=33)

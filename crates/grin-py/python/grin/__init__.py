@@ -20,7 +20,7 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Iterator, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -32,6 +32,7 @@ __all__ = [
     "Scene",
     "Renderer",
     "Field",
+    "SparseField",
     "Render",
     "load_scene",
     "render",
@@ -236,11 +237,60 @@ class Field:
         )
 
 
-def read_field(path: PathLike) -> Field:
+@dataclass(frozen=True)
+class SparseField:
+    """A sparse bake (``grin bake --sparse``): cubic bricks of a top grid, each active one
+    with its own number of cells a side, delta_n = n - ambient and grad n (per metre) at its
+    nodes; the rest of the box is exactly ambient.
+
+    ``delta_n`` (N,) and ``grad`` (N, 3) hold every brick's nodes one brick after another;
+    :meth:`bricks` cuts them into per-brick arrays indexed [k, j, i] (x fastest) with node
+    (i, j, k) at ``origin + spacing * (i, j, k)`` in world metres.
+    """
+
+    delta_n: np.ndarray
+    grad: np.ndarray
+    brick_at: np.ndarray
+    brick_cells: np.ndarray
+    brick_offset: np.ndarray
+    info: dict
+
+    @property
+    def ambient(self) -> float:
+        return self.info["ambient"]
+
+    def bricks(self) -> Iterator[Tuple[np.ndarray, float, np.ndarray, np.ndarray]]:
+        """Each active brick: (origin, spacing, delta_n (m, m, m), grad (m, m, m, 3)),
+        m = cells + 1 nodes a side."""
+        top = np.array(self.info["top_origin"])
+        edge = self.info["brick_edge"]
+        for at, cells, first in zip(self.brick_at, self.brick_cells, self.brick_offset):
+            m = int(cells) + 1
+            end = int(first) + m**3
+            yield (
+                top + edge * at.astype(np.float64),
+                edge / int(cells),
+                self.delta_n[int(first):end].reshape(m, m, m),
+                self.grad[int(first):end].reshape(m, m, m, 3),
+            )
+
+
+def read_field(path: PathLike) -> Union[Field, SparseField]:
     """Read a ``.grinf`` file (written by ``grin bake``, :func:`bake` or
-    :func:`bake_volume`)."""
+    :func:`bake_volume`): a :class:`Field`, or a :class:`SparseField` for a sparse bake
+    (``grin bake --sparse``)."""
     arrays, info = _grin.read_field(os.fspath(path))
-    return Field(arrays["delta_n"], arrays["grad"], json.loads(info))
+    parsed = json.loads(info)
+    if parsed.get("sparse"):
+        return SparseField(
+            arrays["delta_n"],
+            arrays["grad"],
+            arrays["brick_at"],
+            arrays["brick_cells"],
+            arrays["brick_offset"],
+            parsed,
+        )
+    return Field(arrays["delta_n"], arrays["grad"], parsed)
 
 
 def _baked(arrays: Mapping[str, Any], info: str, report: str) -> "Field":
