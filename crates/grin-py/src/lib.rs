@@ -330,8 +330,8 @@ fn field_arrays<'py>(
 ) -> PyResult<(Bound<'py, PyDict>, String)> {
     let [nx, ny, nz] = field.dims();
     let voxels = field.voxels().to_f32();
-    let delta: Vec<f32> = voxels.iter().map(|v| v[0]).collect();
-    let grad: Vec<f32> = voxels.iter().flat_map(|v| [v[1], v[2], v[3]]).collect();
+    let count = voxels.len();
+    let (delta, grad) = channels(voxels, count);
     let out = PyDict::new(py);
     out.set_item(
         "delta_n",
@@ -342,20 +342,52 @@ fn field_arrays<'py>(
         PyArray1::from_vec(py, grad).reshape([nz, ny, nx, 3])?,
     )?;
     let g = field.geometry();
+    let info = description(
+        field,
+        field.interp().name(),
+        field.storage(),
+        field.provenance(),
+        serde_json::json!({
+            "dims": [nx, ny, nz],
+            "origin": g.origin.to_array(),
+            "spacing": g.spacing.to_array(),
+        }),
+    );
+    Ok((out, info))
+}
+
+/// `count` voxels (delta_n, grad n) split into delta_n and grad n (x, y, z a voxel).
+fn channels(voxels: impl IntoIterator<Item = [f32; 4]>, count: usize) -> (Vec<f32>, Vec<f32>) {
+    let (mut delta, mut grad) = (Vec::with_capacity(count), Vec::with_capacity(3 * count));
+    for v in voxels {
+        delta.push(v[0]);
+        grad.extend_from_slice(&v[1..]);
+    }
+    (delta, grad)
+}
+
+/// A baked field's description (JSON): `layout`'s keys and what both layouts have.
+fn description(
+    field: &dyn IndexField,
+    interp: &str,
+    storage: grin_field::baked::Storage,
+    provenance: &grin_field::baked::BakeProvenance,
+    layout: serde_json::Value,
+) -> String {
     let (lo, hi) = field.bounds().aabb();
-    let info = serde_json::json!({
-        "dims": [nx, ny, nz],
-        "origin": g.origin.to_array(),
-        "spacing": g.spacing.to_array(),
+    let mut info = serde_json::json!({
         "ambient": field.ambient_index(),
-        "interp": field.interp().name(),
-        "storage": field.storage().name(),
+        "interp": interp,
+        "storage": storage.name(),
         "bounds_min": lo.to_array(),
         "bounds_max": hi.to_array(),
-        "source": field.provenance().source,
-        "max_err_n": field.provenance().max_err_n,
+        "source": provenance.source,
+        "max_err_n": provenance.max_err_n,
     });
-    Ok((out, info.to_string()))
+    if let (Some(all), serde_json::Value::Object(own)) = (info.as_object_mut(), layout) {
+        all.extend(own);
+    }
+    info.to_string()
 }
 
 /// A sparse bake's arrays: every active brick's nodes decoded to float32, one brick after
@@ -368,14 +400,12 @@ fn sparse_arrays<'py>(
 ) -> PyResult<(Bound<'py, PyDict>, String)> {
     let bricks = field.bricks();
     let voxels = field.pool().len();
-    let (mut delta, mut grad) = (Vec::with_capacity(voxels), Vec::with_capacity(3 * voxels));
-    for b in bricks {
-        for v in b.offset..b.offset + b.voxel_count() {
-            let x = field.voxel_f32(b, v);
-            delta.push(x[0]);
-            grad.extend_from_slice(&x[1..]);
-        }
-    }
+    let (delta, grad) = channels(
+        bricks
+            .iter()
+            .flat_map(|b| (b.offset..b.offset + b.voxel_count()).map(|v| field.voxel_f32(b, v))),
+        voxels,
+    );
     let at: Vec<u32> = bricks.iter().flat_map(|b| b.at).collect();
     let cells: Vec<u32> = bricks.iter().map(|b| b.cells() as u32).collect();
     let offset: Vec<u64> = bricks.iter().map(|b| b.offset as u64).collect();
@@ -389,21 +419,19 @@ fn sparse_arrays<'py>(
     out.set_item("brick_cells", PyArray1::from_vec(py, cells))?;
     out.set_item("brick_offset", PyArray1::from_vec(py, offset))?;
     let top = field.top();
-    let (lo, hi) = field.bounds().aabb();
-    let info = serde_json::json!({
-        "sparse": true,
-        "top_origin": top.origin.to_array(),
-        "brick_edge": top.edge,
-        "top_dims": top.dims,
-        "ambient": field.ambient_index(),
-        "interp": "trilinear",
-        "storage": field.storage().name(),
-        "bounds_min": lo.to_array(),
-        "bounds_max": hi.to_array(),
-        "source": field.provenance().source,
-        "max_err_n": field.provenance().max_err_n,
-    });
-    Ok((out, info.to_string()))
+    let info = description(
+        field,
+        "trilinear",
+        field.storage(),
+        field.provenance(),
+        serde_json::json!({
+            "sparse": true,
+            "top_origin": top.origin.to_array(),
+            "brick_edge": top.edge,
+            "top_dims": top.dims,
+        }),
+    );
+    Ok((out, info))
 }
 
 /// Read a `.grinf` file, dense or sparse: (arrays, description JSON).
