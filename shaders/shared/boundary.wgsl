@@ -117,8 +117,9 @@ fn segment_point(seg: Segment, tau: f32) -> vec3<f32> {
 }
 
 // Smallest tau in [0, h] where the dense output crosses out of the bounds: an
-// 8-point scan, then the Illinois method on the bracket until it is one ulp wide
-// (bisection when the start reads outside, after total reflection).
+// 8-point scan, then the Illinois method on the bracket until it is one ulp wide or a
+// point reads exactly on the surface (bisection when the start reads outside, after
+// total reflection).
 fn first_crossing(seg: Segment) -> f32 {
     var lo = 0.0;
     var f_lo = 0.0;
@@ -155,6 +156,10 @@ fn first_crossing(seg: Segment) -> f32 {
             break;
         }
         let v = bounds_signed_distance(segment_point(seg, m));
+        if v == 0.0 {
+            // On the surface (Segment::first_crossing).
+            return m;
+        }
         if v > 0.0 {
             hi = m;
             f_hi = v;
@@ -209,7 +214,12 @@ fn segment_excursion(seg: Segment, slack: f32) -> Excursion {
     }
     let f0 = bounds_signed_distance(seg.r0);
     let f1 = bounds_signed_distance(seg.r1);
-    if max(f0, f1) + segment_bend(seg, seg.h) + slack < 0.0 {
+    let bend = segment_bend(seg, seg.h);
+    if max(f0, f1) + bend + slack < 0.0 {
+        return Excursion(false, 0.0);
+    }
+    // Segment::starts_inside: an end on the surface, the other deep inside.
+    if f0 <= 0.0 && f1 <= 0.0 && min(f0, f1) + 4.0 * bend + slack < 0.0 {
         return Excursion(false, 0.0);
     }
     var best_k = 1u;

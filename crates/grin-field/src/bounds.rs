@@ -67,6 +67,7 @@ impl Bounds {
     /// Signed distance-like function: negative inside, zero on the surface, positive outside.
     /// Exact distance for the sphere; for the box, exact outside and the (negative) distance
     /// to the nearest face inside.
+    #[inline]
     pub fn signed_distance(&self, p: DVec3) -> f64 {
         self.signed_distance_in::<f64>(p)
     }
@@ -74,6 +75,7 @@ impl Bounds {
     /// [`Self::signed_distance`] computed in precision `R`, as the GPU kernel computes it
     /// in f32 (`bounds_signed_distance`): the f32 trace's exit search then stops where
     /// the kernel's does.
+    #[inline]
     pub fn signed_distance_in<R: Real>(&self, p: R::V3) -> f64 {
         match *self {
             Bounds::Sphere { center, radius } => {
@@ -98,11 +100,13 @@ impl Bounds {
         }
     }
 
+    #[inline]
     pub fn contains(&self, p: DVec3) -> bool {
         self.signed_distance(p) <= 0.0
     }
 
     /// Outward unit normal of the surface nearest to `p`.
+    #[inline]
     pub fn normal(&self, p: DVec3) -> DVec3 {
         match *self {
             Bounds::Sphere { center, .. } => (p - center).normalize(),

@@ -123,6 +123,7 @@ pub struct Segment {
 
 impl Segment {
     /// Position at t = tau in [0, h].
+    #[inline]
     pub fn point(&self, tau: f64) -> DVec3 {
         if self.h == 0.0 {
             return self.r0;
@@ -141,9 +142,10 @@ impl Segment {
     /// given f(r1) > 0: scanned on [`HERMITE_SCAN`] sub-intervals, then refined on the
     /// bracket by the Illinois method (regula falsi that halves the value kept at a
     /// stuck end: superlinear, fewer evaluations than bisection's ~50 in f64) until the
-    /// bracket is one ulp wide. (Also stopping once |f| fell below the exit tolerance
-    /// changed the f32 GPU twin's paths, +5% mean steps on the grin-rod scene, cause not
-    /// pinned down; without that stop both twins match as before.)
+    /// bracket is one ulp wide, or at a point that reads exactly on the surface. (Also
+    /// stopping once |f| fell below the exit tolerance changed the f32 GPU twin's paths,
+    /// +5% mean steps on the grin-rod scene, cause not pinned down; without that stop
+    /// both twins match.)
     pub fn first_crossing(&self, f: impl Fn(DVec3) -> f64) -> f64 {
         let (mut lo, mut f_lo) = (0.0, f64::NAN);
         let (mut hi, mut f_hi) = (self.h, f64::NAN);
@@ -175,6 +177,11 @@ impl Segment {
                 break;
             }
             let v = f(self.point(m));
+            if v == 0.0 {
+                // On the surface: the bracket's end at m would stay at 0 (the secant
+                // then falls back to halving for the last ~50 bits).
+                return m;
+            }
             if v > 0.0 {
                 (hi, f_hi) = (m, v);
                 if stuck > 0 {
@@ -223,6 +230,17 @@ impl Segment {
         a0.max(a1) / 8.0 * (len / h) * (len / h)
     }
 
+    /// Whether the segment with both ends inside (`f0`, `f1` <= 0) stays inside by at
+    /// least `slack` times the fraction of the way from its nearer end to the surface:
+    /// along the chord the distance is at most (1 - u) f0 + u f1 (convex), and the cubic
+    /// is at most M h^2 u (1 - u) / 2 <= 4 [`Self::bend`]`(h)` u off it (its deviation
+    /// from the chord vanishes at both ends, with second derivative r''), so with the
+    /// deeper end at least 4 bend + slack inside, every point but the end on the surface
+    /// is inside.
+    pub fn starts_inside(&self, f0: f64, f1: f64, slack: f64) -> bool {
+        f0 <= 0.0 && f1 <= 0.0 && f0.min(f1) + 4.0 * self.bend(self.h) + slack < 0.0
+    }
+
     /// For a step whose both ends are inside (`f <= 0`): the parameter where its cubic
     /// goes farthest outside (`f > 0`) if it leaves and comes back between the ends (a
     /// turning point just past a face, a grazing orbit), else `None`. Scans
@@ -235,13 +253,17 @@ impl Segment {
     /// `slack`: where the full search would have found nothing, without its 8 + 40
     /// evaluations (a ray running along the surface needs none; the GPU twin, whose loop
     /// iterations lavapipe caps per invocation, runs the same test).
+    ///
+    /// A step that starts (or ends) on the surface, as the first step after entering
+    /// does, is proven inside by [`Self::starts_inside`] instead: the bound above is
+    /// then never below the end on the surface.
     pub fn excursion(&self, f: impl Fn(DVec3) -> f64, slack: f64) -> Option<f64> {
         if self.h <= 0.0 {
             return None;
         }
         let proven_inside = |fmax: f64, len: f64| fmax + self.bend(len) + slack < 0.0;
         let (f0, f1) = (f(self.r0), f(self.r1));
-        if proven_inside(f0.max(f1), self.h) {
+        if proven_inside(f0.max(f1), self.h) || self.starts_inside(f0, f1, slack) {
             return None;
         }
         let n = HERMITE_SCAN;
@@ -390,6 +412,97 @@ mod tests {
         calls.set(0);
         assert_eq!(along.excursion(counted, f64::INFINITY), None);
         assert!(calls.get() > 40, "{} evaluations", calls.get());
+    }
+
+    /// A step that starts on the surface heading in (the first step after entering) is
+    /// proven inside at once by the chord and its bend (2 distance evaluations, not the
+    /// full search's ~50), and the proof never hides an excursion: over arcs that start
+    /// on a unit sphere and bulge out of it by up to 0.02 R or stay inside, the search
+    /// with the proof finds what the full search finds.
+    #[test]
+    fn a_step_from_the_surface_inwards_is_proven_inside_at_once() {
+        let sphere = Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius: 1.0,
+        };
+        let sd = |p: DVec3| sphere.signed_distance(p);
+        let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&sphere);
+        let calls = std::cell::Cell::new(0);
+        let counted = |p: DVec3| {
+            calls.set(calls.get() + 1);
+            sd(p)
+        };
+        // Straight in along -x from the surface point (1, 0, 0).
+        let inwards = Segment {
+            r0: DVec3::new(1.0, 0.0, 0.0),
+            t0: DVec3::new(-1.0, 0.001, 0.0),
+            r1: DVec3::new(0.7, 0.0003, 0.0),
+            t1: DVec3::new(-1.0, 0.001, 0.0),
+            h: 0.3,
+        };
+        assert!(sd(inwards.r0).abs() < 1e-15 && sd(inwards.r1) < -0.2);
+        assert!(inwards.starts_inside(sd(inwards.r0), sd(inwards.r1), slack));
+        assert_eq!(inwards.excursion(counted, slack), None);
+        assert_eq!(calls.get(), 2);
+        calls.set(0);
+        assert_eq!(inwards.excursion(counted, f64::INFINITY), None);
+        assert!(calls.get() > 40, "{} evaluations", calls.get());
+
+        // Arcs of radius rho tangent to (or crossing) the sphere near their start.
+        let (mut compared, mut found, mut proven) = (0, 0, 0);
+        for i in 0..400 {
+            let x = f64::from(i) / 400.0;
+            let rho = 0.2 + 0.6 * (x * 37.0).fract();
+            let phi = 0.1 + 1.0 * (x * 11.0).fract();
+            let tilt = -0.3 + 0.6 * (x * 7.0).fract();
+            // An arc starting at (1, 0, 0) on the surface, its centre inside.
+            let start = DVec3::X;
+            let center = start - rho * DVec3::new(tilt.cos(), tilt.sin(), 0.0);
+            let a0 = tilt;
+            let seg = arc(center, rho, a0, phi);
+            let seg = Segment { r0: start, ..seg };
+            if sd(seg.r0) > 0.0 || sd(seg.r1) > 0.0 {
+                continue;
+            }
+            let full = seg.excursion(sd, f64::INFINITY);
+            assert_eq!(seg.excursion(sd, slack), full, "{seg:?}");
+            compared += 1;
+            found += usize::from(full.is_some());
+            proven += usize::from(seg.starts_inside(sd(seg.r0), sd(seg.r1), slack));
+        }
+        assert!(
+            compared > 200 && found > 20 && proven > 50,
+            "{compared} compared, {found} found, {proven} proven at once"
+        );
+    }
+
+    /// The exit search ends at a point that reads exactly on the surface instead of
+    /// halving the rest of the bracket (a chord across a face: the secant lands on the
+    /// face): a handful of distance evaluations, the crossing to 1e-15.
+    #[test]
+    fn the_exit_search_stops_on_the_surface() {
+        let slab = Bounds::Box {
+            min: DVec3::new(-2.0, -2.0, 0.0),
+            max: DVec3::new(2.0, 2.0, 10.0),
+        };
+        for z0 in [9.8123, 9.9317, 9.7071, 9.6001] {
+            let (tz, h) = (1.6, 0.4 / 1.6);
+            let seg = Segment {
+                r0: DVec3::new(0.3, 0.1, z0),
+                t0: DVec3::new(0.01, 0.02, tz),
+                r1: DVec3::new(0.3025, 0.105, z0 + 0.4),
+                t1: DVec3::new(0.01, 0.02, tz),
+                h,
+            };
+            let calls = std::cell::Cell::new(0);
+            let tau = seg.first_crossing(|p| {
+                calls.set(calls.get() + 1);
+                slab.signed_distance(p)
+            });
+            let exact = (10.0 - z0) / tz;
+            assert!((tau - exact).abs() < 1e-15, "z0 {z0}: {tau} vs {exact}");
+            assert!(calls.get() <= 12, "z0 {z0}: {} evaluations", calls.get());
+        }
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! Ray packets: the plain steps inside the medium of [`LANES`] rays at once, in lane
-//! vectors the compiler turns into SIMD instructions (f64 lanes, no target-specific code).
+//! vectors the compiler turns into SIMD instructions (f64 lanes; the one piece of
+//! target-specific code compiles the same step for AVX2, chosen at run time).
 //!
 //! A ray enters the medium, leaves it, flies straight, meets a surface or anything else
 //! out of the ordinary one ray at a time, in the scalar tracer ([`March::advance`]); a
@@ -169,6 +170,7 @@ fn two_sum(a: V, b: V) -> (V, V) {
 }
 
 /// The signed distance to the bounds, per lane (Bounds::signed_distance's arithmetic).
+#[inline(always)]
 fn signed_distance(bounds: &Bounds, p: V) -> L {
     match *bounds {
         Bounds::Sphere { center, radius } => {
@@ -317,6 +319,7 @@ fn sample(field: &dyn IndexField, p: V) -> (L, V) {
 
 /// The outward unit normal of the bounds nearest each lane's point (Bounds::normal's
 /// arithmetic).
+#[inline(always)]
 fn normal(bounds: &Bounds, p: V) -> V {
     match *bounds {
         Bounds::Sphere { center, .. } => {
@@ -373,6 +376,15 @@ pub fn trace_packets_counted(
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
 ) -> (Vec<RayResult>, u64) {
+    trace_packets_with(field, settings, rays, packet_step(false))
+}
+
+fn trace_packets_with(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    rays: &[(DVec3, DVec3)],
+    march_packet: PacketStep,
+) -> (Vec<RayResult>, u64) {
     let mut packet_steps = 0u64;
     let mut out: Vec<Option<RayResult>> = vec![None; rays.len()];
     let mut queue = 0..rays.len();
@@ -422,11 +434,48 @@ fn unreachable_result() -> RayResult {
     }
 }
 
+/// The packet step a trace uses: [`march_packet_in`] as compiled for the CPU's widest
+/// lane vectors (AVX2 on x86-64 CPUs that have it: one 256-bit register per lane vector),
+/// else as compiled for the target. The same IEEE operations in the same order either
+/// way (no fused multiply-add), so the results do not depend on which.
+type PacketStep =
+    fn(&dyn IndexField, &TraceSettings, &mut [Option<(usize, March<f64>)>; LANES]) -> [u32; LANES];
+
+fn packet_step(portable: bool) -> PacketStep {
+    #[cfg(target_arch = "x86_64")]
+    if !portable && std::arch::is_x86_feature_detected!("avx2") {
+        return march_packet_avx2;
+    }
+    march_packet_in
+}
+
+/// [`march_packet_in`] compiled for AVX2; called only where the CPU has it.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+fn march_packet_avx2(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    lanes: &mut [Option<(usize, March<f64>)>; LANES],
+) -> [u32; LANES] {
+    #[target_feature(enable = "avx2")]
+    fn compiled(
+        field: &dyn IndexField,
+        settings: &TraceSettings,
+        lanes: &mut [Option<(usize, March<f64>)>; LANES],
+    ) -> [u32; LANES] {
+        march_packet_in(field, settings, lanes)
+    }
+    debug_assert!(std::arch::is_x86_feature_detected!("avx2"));
+    // SAFETY: `packet_step` hands this function out only on CPUs with AVX2.
+    unsafe { compiled(field, settings, lanes) }
+}
+
 /// Plain steps of the occupied lanes while they all can take them (up to
 /// [`STEPS_PER_GATHER`]); returns the steps each lane took.
 // The lane loops index several lane arrays at once.
 #[allow(clippy::needless_range_loop)]
-fn march_packet(
+#[inline(always)]
+fn march_packet_in(
     field: &dyn IndexField,
     settings: &TraceSettings,
     lanes: &mut [Option<(usize, March<f64>)>; LANES],
@@ -660,7 +709,8 @@ mod tests {
             .collect()
     }
 
-    /// A table traced in packets is the table traced ray by ray, bit for bit, on a box
+    /// A table traced in packets (with the CPU's widest lane vectors and with the
+    /// target's own) is the table traced ray by ray, bit for bit, on a box
     /// and a sphere, with the field's step caps, rays that miss and graze, the bisection
     /// exit and a step cap that ends rays at `max_steps`.
     #[test]
@@ -740,48 +790,52 @@ mod tests {
         ];
         for (k, (field, center, spread, s)) in cases.iter().enumerate() {
             let table = rays(*center, *spread, 301);
-            let (packed, in_packets) = trace_packets_counted(*field, s, &table);
-            let mut steps = 0;
-            for (i, &(o, d)) in table.iter().enumerate() {
-                let want = trace_ray::<f64>(*field, s, o, d);
-                let got = packed[i];
-                steps += u64::from(got.steps);
-                assert_eq!(got.status, want.status, "case {k} ray {i}");
-                let bits = |r: &RayResult| {
-                    [
-                        r.position.x,
-                        r.position.y,
-                        r.position.z,
-                        r.direction.x,
-                        r.direction.y,
-                        r.direction.z,
-                        r.opl,
-                        r.length,
-                        r.swept.x,
-                        r.swept.y,
-                        r.swept.z,
-                        r.transmittance,
-                        r.error_estimate,
-                        r.crossing_uncertainty,
-                    ]
-                    .map(f64::to_bits)
-                };
-                assert_eq!(
-                    bits(&got),
-                    bits(&want),
-                    "case {k} ray {i}: {got:?} vs {want:?}"
-                );
-                assert_eq!(
-                    (got.steps, got.evals),
-                    (want.steps, want.evals),
-                    "case {k} ray {i}"
+            // The widest lane vectors the CPU has, and the target's own.
+            for portable in [false, true] {
+                let (packed, in_packets) =
+                    trace_packets_with(*field, s, &table, packet_step(portable));
+                let mut steps = 0;
+                for (i, &(o, d)) in table.iter().enumerate() {
+                    let want = trace_ray::<f64>(*field, s, o, d);
+                    let got = packed[i];
+                    steps += u64::from(got.steps);
+                    assert_eq!(got.status, want.status, "case {k} ray {i} ({portable})");
+                    let bits = |r: &RayResult| {
+                        [
+                            r.position.x,
+                            r.position.y,
+                            r.position.z,
+                            r.direction.x,
+                            r.direction.y,
+                            r.direction.z,
+                            r.opl,
+                            r.length,
+                            r.swept.x,
+                            r.swept.y,
+                            r.swept.z,
+                            r.transmittance,
+                            r.error_estimate,
+                            r.crossing_uncertainty,
+                        ]
+                        .map(f64::to_bits)
+                    };
+                    assert_eq!(
+                        bits(&got),
+                        bits(&want),
+                        "case {k} ray {i}: {got:?} vs {want:?}"
+                    );
+                    assert_eq!(
+                        (got.steps, got.evals),
+                        (want.steps, want.evals),
+                        "case {k} ray {i}"
+                    );
+                }
+                eprintln!("case {k}: {in_packets} of {steps} steps in packets");
+                assert!(
+                    in_packets * 2 > steps,
+                    "case {k}: {in_packets} of {steps} steps in packets"
                 );
             }
-            eprintln!("case {k}: {in_packets} of {steps} steps in packets");
-            assert!(
-                in_packets * 2 > steps,
-                "case {k}: {in_packets} of {steps} steps in packets"
-            );
         }
     }
 }
