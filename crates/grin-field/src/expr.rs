@@ -583,6 +583,9 @@ impl IndexField for ExprField {
     fn step_cap(&self, p: DVec3, reach: f64) -> f64 {
         self.feature_map().step_cap(p, reach)
     }
+    fn has_local_step_limits(&self) -> bool {
+        self.feature_map().has_caps()
+    }
     fn feature_points(&self) -> Vec<DVec3> {
         self.feature_map().points().to_vec()
     }

@@ -145,6 +145,11 @@ impl FeatureMap {
         }
     }
 
+    /// Whether [`Self::step_cap`] is finite anywhere (the map found a feature).
+    pub fn has_caps(&self) -> bool {
+        self.nodes[0].children != 0
+    }
+
     /// The longest step from `p` that puts a stage in every box it can reach: half the
     /// smallest leaf within `reach` of `p` (infinite where the whole field is resolved at
     /// the root).
@@ -308,6 +313,7 @@ mod tests {
         };
         let map = FeatureMap::build(&bump, &unit());
         assert_eq!(map.unresolved(), 0, "{} boxes", map.boxes());
+        assert!(map.has_caps());
         eprintln!("bump map: {} boxes, finest {}", map.boxes(), map.finest());
         assert!(map.finest() <= 0.02, "finest {}", map.finest());
         // A step that could reach the bump is shorter than its width.
@@ -347,6 +353,7 @@ mod tests {
         }
         let map = FeatureMap::build(&Linear, &unit());
         assert_eq!(map.boxes(), 1);
+        assert!(!map.has_caps());
         assert_eq!(map.step_cap(DVec3::ZERO, 1.0), f64::INFINITY);
     }
 }

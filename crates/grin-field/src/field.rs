@@ -99,6 +99,13 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         f64::INFINITY
     }
 
+    /// Whether [`Self::homogeneous_span`] or [`Self::step_cap`] can give anything but
+    /// their defaults (`None`, infinity) anywhere: `false` lets a tracer skip asking them
+    /// at every step. `true` unless the field knows it has neither.
+    fn has_local_step_limits(&self) -> bool {
+        true
+    }
+
     /// Points where the field has its finest features (crate::features), for a bake's
     /// error search: random points can miss a feature 1/100 of the bounds wide.
     fn feature_points(&self) -> Vec<DVec3> {

@@ -300,6 +300,9 @@ impl IndexField for NoiseField {
         )
         .to_lowercase()
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

@@ -502,6 +502,8 @@ fn march_packet_in(
     let feature_cap = L(feature_cap);
     // The signed distance of each lane's point (carried from the step that got there).
     let mut sd0 = signed_distance(&bounds, s.r);
+    // Whether the field's macro cells and local caps need asking at every step.
+    let local_limits = field.has_local_step_limits();
     for _ in 0..STEPS_PER_GATHER {
         // Which lanes the scalar tracer would give a plain step now, and its length
         // (StepController::take for a fixed step after the first).
@@ -521,7 +523,8 @@ fn march_packet_in(
             }
             let p = s.r.lane(i);
             let t = s.t.lane(i);
-            if settings.macro_cells
+            if local_limits
+                && settings.macro_cells
                 && field
                     .homogeneous_span(p, t.normalize_or_zero())
                     .is_some_and(|span| span > min_flight[i])
@@ -530,8 +533,10 @@ fn march_packet_in(
             }
             let mut cap =
                 StepController::length_scale_cap(n0, s.g0.lane(i).length()).min(feature_cap.0[i]);
-            let reach = ds.0[i].min(cap);
-            cap = cap.min(field.step_cap(p, reach));
+            if local_limits {
+                let reach = ds.0[i].min(cap);
+                cap = cap.min(field.step_cap(p, reach));
+            }
             let hi = ds.0[i].min(cap) / n0;
             // Not within a step of the surface: the step can neither leave nor graze it
             // (the test after the step decides; this one saves a step that would fail).
@@ -750,6 +755,8 @@ mod tests {
             0.0,
         )
         .expect("bump");
+        // The packets skip asking the rod for local caps, not the bump.
+        assert!(!rod.has_local_step_limits() && bump.has_local_step_limits());
         let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 6] = [
             (
                 &rod,

@@ -132,6 +132,9 @@ impl IndexField for Eaton {
     fn describe(&self) -> String {
         format!("eaton R={} core={}", self.radius, self.core)
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

@@ -135,6 +135,9 @@ impl IndexField for ExponentialAtmosphere {
             axis_name(self.axis)
         )
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

@@ -138,6 +138,9 @@ impl IndexField for GrinRod {
             axis_name(self.axis)
         )
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

@@ -108,6 +108,9 @@ impl IndexField for LinearN2 {
             axis_name(self.axis)
         )
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

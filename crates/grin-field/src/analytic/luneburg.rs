@@ -99,6 +99,9 @@ impl IndexField for Luneburg {
     fn describe(&self) -> String {
         format!("luneburg R={}", self.radius)
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

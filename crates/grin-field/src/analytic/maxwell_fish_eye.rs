@@ -83,6 +83,9 @@ impl IndexField for MaxwellFishEye {
     fn describe(&self) -> String {
         format!("maxwell-fish-eye n0={} a={}", self.n0, self.a)
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

@@ -105,6 +105,9 @@ impl IndexField for Plume {
     fn describe(&self) -> String {
         format!("plume ({} blobs)", self.blobs.len())
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
     /// The narrowest blob's width s.
     fn feature_size(&self) -> Option<f64> {
         self.blobs.iter().map(|b| b.s).reduce(f64::min)

@@ -50,6 +50,9 @@ impl IndexField for Uniform {
     fn describe(&self) -> String {
         format!("uniform n={}", self.n)
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

@@ -309,4 +309,7 @@ impl IndexField for VdbField {
         }
         s
     }
+    fn has_local_step_limits(&self) -> bool {
+        false
+    }
 }
