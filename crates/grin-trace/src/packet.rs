@@ -359,6 +359,36 @@ fn normal(bounds: &Bounds, p: V) -> V {
     }
 }
 
+/// A lane mask: all bits set in the chosen lanes (a blend, where a branch per lane
+/// would keep the lane vectors out of registers).
+#[derive(Debug, Clone, Copy)]
+struct Mask([u64; LANES]);
+
+impl Mask {
+    #[inline(always)]
+    fn of(lanes: [bool; LANES]) -> Mask {
+        Mask(array::from_fn(|i| u64::from(lanes[i]).wrapping_neg()))
+    }
+
+    /// `a` in the chosen lanes, `b` in the others.
+    #[inline(always)]
+    fn select(self, a: L, b: L) -> L {
+        L(array::from_fn(|i| {
+            let m = self.0[i];
+            f64::from_bits((a.0[i].to_bits() & m) | (b.0[i].to_bits() & !m))
+        }))
+    }
+
+    #[inline(always)]
+    fn select_v(self, a: V, b: V) -> V {
+        V {
+            x: self.select(a.x, b.x),
+            y: self.select(a.y, b.y),
+            z: self.select(a.z, b.z),
+        }
+    }
+}
+
 /// Trace `rays` (origin, direction) with `settings`, for which [`packets_apply`] holds:
 /// the same results as `trace_ray::<f64>` ray by ray.
 pub fn trace_packets(
@@ -507,46 +537,49 @@ fn march_packet_in(
     for _ in 0..STEPS_PER_GATHER {
         // Which lanes the scalar tracer would give a plain step now, and its length
         // (StepController::take for a fixed step after the first).
-        let mut active = [false; LANES];
-        let mut h = L::splat(0.0);
-        let mut t_len = L::splat(0.0);
-        for i in 0..LANES {
+        let tl = s.t.length();
+        let g_len = s.g0.length();
+        let mut cap = L(array::from_fn(|i| {
+            StepController::length_scale_cap(s.n0.0[i], g_len.0[i])
+        }))
+        .zip(feature_cap, f64::min);
+        let mut active: [bool; LANES] = array::from_fn(|i| {
             let n0 = s.n0.0[i];
-            if !(occupied[i]
+            occupied[i]
                 && s.r.finite(i)
                 && s.t.finite(i)
                 && n0.is_finite()
                 && n0 > 0.0
-                && s.steps[i] < settings.max_steps)
-            {
-                continue;
-            }
-            let p = s.r.lane(i);
-            let t = s.t.lane(i);
-            if local_limits
-                && settings.macro_cells
-                && field
-                    .homogeneous_span(p, t.normalize_or_zero())
-                    .is_some_and(|span| span > min_flight[i])
-            {
-                continue;
-            }
-            let mut cap =
-                StepController::length_scale_cap(n0, s.g0.lane(i).length()).min(feature_cap.0[i]);
-            if local_limits {
-                let reach = ds.0[i].min(cap);
-                cap = cap.min(field.step_cap(p, reach));
-            }
-            let hi = ds.0[i].min(cap) / n0;
-            // Not within a step of the surface: the step can neither leave nor graze it
-            // (the test after the step decides; this one saves a step that would fail).
-            let tl = t.length();
-            if hi > 0.0 && sd0.0[i] < -1.5 * hi * tl {
-                h.0[i] = hi;
-                t_len.0[i] = tl;
-                active[i] = true;
+                && s.steps[i] < settings.max_steps
+        });
+        if local_limits {
+            for i in 0..LANES {
+                if !active[i] {
+                    continue;
+                }
+                let p = s.r.lane(i);
+                if settings.macro_cells
+                    && field
+                        .homogeneous_span(p, s.t.lane(i).normalize_or_zero())
+                        .is_some_and(|span| span > min_flight[i])
+                {
+                    active[i] = false;
+                    continue;
+                }
+                let reach = ds.0[i].min(cap.0[i]);
+                cap.0[i] = cap.0[i].min(field.step_cap(p, reach));
             }
         }
+        let hi = ds.zip(cap, f64::min) / s.n0;
+        // Not within a step of the surface: the step can neither leave nor graze it
+        // (the test after the step decides; this one saves a step that would fail).
+        let clear = L::splat(-1.5) * hi * tl;
+        for i in 0..LANES {
+            active[i] &= hi.0[i] > 0.0 && sd0.0[i] < clear.0[i];
+        }
+        let m = Mask::of(active);
+        let h = m.select(hi, L::splat(0.0));
+        let t_len = m.select(tl, L::splat(0.0));
         if !active.iter().any(|&a| a) {
             break;
         }
@@ -624,29 +657,35 @@ fn march_packet_in(
         let kappa = -d1_end.dot(normals) / (n1 * n1);
         let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
         let evals_per_step = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4));
+        // The new state of the lanes that stepped.
+        let m = Mask::of(active);
+        s.r = m.select_v(nr, s.r);
+        s.t = m.select_v(nt, s.t);
+        s.comp_r = m.select_v(lost_r, s.comp_r);
+        s.comp_t = m.select_v(lost_t, s.comp_t);
+        s.length = m.select(s.length + length, s.length);
+        s.opl = m.select(s.opl + opl, s.opl);
+        s.swept = m.select_v(s.swept + swept, s.swept);
+        s.last_local = m.select_v(local, s.last_local);
+        s.last_r = m.select(local_r, s.last_r);
+        s.bend = m.select(s.bend + bend_inc, s.bend);
+        let counted = Mask::of(array::from_fn(|i| {
+            active[i] && local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite()
+        }));
+        s.pos = counted.select(pos_new, s.pos);
+        s.vsum = counted.select_v(vsum_new, s.vsum);
+        s.sum = counted.select(sum_new, s.sum);
+        sd0 = m.select(sd_new, sd0);
+        s.n0 = m.select(n1, s.n0);
+        s.g0 = m.select_v(g1, s.g0);
         for i in 0..LANES {
             if !active[i] {
                 continue;
             }
             // The step's own 3 and the end sample.
             s.evals[i] += evals_per_step;
-            s.r.set(i, nr.lane(i));
-            s.t.set(i, nt.lane(i));
-            s.comp_r.set(i, lost_r.lane(i));
-            s.comp_t.set(i, lost_t.lane(i));
-            s.length.0[i] += length.0[i];
-            s.opl.0[i] += opl.0[i];
-            s.swept.set(i, s.swept.lane(i) + swept.lane(i));
             if turned.0[i] <= 0.0 {
                 s.near_miss[i] = true;
-            }
-            s.last_local.set(i, local.lane(i));
-            s.last_r.0[i] = local_r.0[i];
-            s.bend.0[i] += bend_inc.0[i];
-            if local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite() {
-                s.pos.0[i] = pos_new.0[i];
-                s.vsum.set(i, vsum_new.lane(i));
-                s.sum.0[i] = sum_new.0[i];
             }
             let n = n1.0[i];
             if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
@@ -658,9 +697,6 @@ fn march_packet_in(
                 s.near_miss[i] = true;
             }
             s.steps[i] += 1;
-            sd0.0[i] = sd_new.0[i];
-            s.n0.0[i] = n1.0[i];
-            s.g0.set(i, g1.lane(i));
             took[i] += 1;
         }
         if (0..LANES).any(|i| occupied[i] && !active[i]) {
