@@ -357,18 +357,41 @@ mod tests {
         }
     }
 
+    /// The unit sphere and the excursion search's slack on it.
+    fn unit_sphere() -> (Bounds, f64) {
+        let sphere = Bounds::Sphere {
+            center: DVec3::ZERO,
+            radius: 1.0,
+        };
+        (
+            sphere,
+            EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&sphere),
+        )
+    }
+
+    /// For a segment with both ends inside, the full excursion search's result, checked
+    /// to be the search's with its early stops; `None` where an end is outside.
+    fn full_search_agrees(
+        seg: &Segment,
+        sd: impl Fn(DVec3) -> f64 + Copy,
+        slack: f64,
+    ) -> Option<Option<f64>> {
+        if sd(seg.r0) > 0.0 || sd(seg.r1) > 0.0 {
+            return None;
+        }
+        let full = seg.excursion(sd, f64::INFINITY);
+        assert_eq!(seg.excursion(sd, slack), full, "{seg:?}");
+        Some(full)
+    }
+
     /// The search's early stop gives the full search's answer: over arcs that bulge out
     /// of a unit sphere by -0.02 .. 0.02 R between ends inside it, and straight chords,
     /// the result with the stop equals the one with it disabled (infinite slack); a step
     /// running along the surface 1e-4 inside costs 2 distance evaluations, not 50.
     #[test]
     fn the_excursion_search_stops_early_only_where_it_would_find_nothing() {
-        let sphere = Bounds::Sphere {
-            center: DVec3::ZERO,
-            radius: 1.0,
-        };
+        let (sphere, slack) = unit_sphere();
         let sd = |p: DVec3| sphere.signed_distance(p);
-        let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&sphere);
         let mut compared = 0;
         let mut found = 0;
         for i in 0..400 {
@@ -387,11 +410,9 @@ mod tests {
                 h,
             };
             for seg in [chord, bent] {
-                if sd(seg.r0) > 0.0 || sd(seg.r1) > 0.0 {
+                let Some(full) = full_search_agrees(&seg, sd, slack) else {
                     continue;
-                }
-                let full = seg.excursion(sd, f64::INFINITY);
-                assert_eq!(seg.excursion(sd, slack), full, "{seg:?}");
+                };
                 compared += 1;
                 found += usize::from(full.is_some());
             }
@@ -421,12 +442,8 @@ mod tests {
     /// with the proof finds what the full search finds.
     #[test]
     fn a_step_from_the_surface_inwards_is_proven_inside_at_once() {
-        let sphere = Bounds::Sphere {
-            center: DVec3::ZERO,
-            radius: 1.0,
-        };
+        let (sphere, slack) = unit_sphere();
         let sd = |p: DVec3| sphere.signed_distance(p);
-        let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&sphere);
         let calls = std::cell::Cell::new(0);
         let counted = |p: DVec3| {
             calls.set(calls.get() + 1);
@@ -461,11 +478,9 @@ mod tests {
             let a0 = tilt;
             let seg = arc(center, rho, a0, phi);
             let seg = Segment { r0: start, ..seg };
-            if sd(seg.r0) > 0.0 || sd(seg.r1) > 0.0 {
+            let Some(full) = full_search_agrees(&seg, sd, slack) else {
                 continue;
-            }
-            let full = seg.excursion(sd, f64::INFINITY);
-            assert_eq!(seg.excursion(sd, slack), full, "{seg:?}");
+            };
             compared += 1;
             found += usize::from(full.is_some());
             proven += usize::from(seg.starts_inside(sd(seg.r0), sd(seg.r1), slack));

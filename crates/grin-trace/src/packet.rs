@@ -718,6 +718,7 @@ mod tests {
     use grin_scene::{ExitMethod, PlumeBlob};
 
     use super::*;
+    use crate::table::result_values;
     use crate::trace::trace_ray;
 
     fn settings(ds: f64, max_steps: u32, exit: ExitMethod) -> TraceSettings {
@@ -844,23 +845,11 @@ mod tests {
                     steps += u64::from(got.steps);
                     assert_eq!(got.status, want.status, "case {k} ray {i} ({portable})");
                     let bits = |r: &RayResult| {
-                        [
-                            r.position.x,
-                            r.position.y,
-                            r.position.z,
-                            r.direction.x,
-                            r.direction.y,
-                            r.direction.z,
-                            r.opl,
-                            r.length,
-                            r.swept.x,
-                            r.swept.y,
-                            r.swept.z,
-                            r.transmittance,
-                            r.error_estimate,
-                            r.crossing_uncertainty,
-                        ]
-                        .map(f64::to_bits)
+                        let [px, py, pz, dx, dy, dz, opl, length] = result_values(r);
+                        let (s, t) = (r.swept, r.transmittance);
+                        let (e, c) = (r.error_estimate, r.crossing_uncertainty);
+                        [px, py, pz, dx, dy, dz, opl, length, s.x, s.y, s.z, t, e, c]
+                            .map(f64::to_bits)
                     };
                     assert_eq!(
                         bits(&got),

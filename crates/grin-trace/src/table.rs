@@ -440,7 +440,8 @@ impl TableSummary {
     }
 }
 
-fn result_values(r: &RayResult) -> [f64; 8] {
+/// A result's position, direction, optical path and length (the table's columns 1-8).
+pub(crate) fn result_values(r: &RayResult) -> [f64; 8] {
     [
         r.position.x,
         r.position.y,
