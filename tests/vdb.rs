@@ -38,6 +38,20 @@ fn run_openvdb_python(dir: &Path, script: &str, arg: &Path) {
     assert_ok(&made);
 }
 
+/// `dir/file`: one float grid `name` of voxel size `voxel`, its voxels set by the
+/// OpenVDB python `lines` (on the grid `g`), written with [`run_openvdb_python`].
+fn float_grid_file(dir: &Path, file: &str, name: &str, voxel: f64, lines: &[&str]) -> PathBuf {
+    let path = dir.join(file);
+    let body = lines.join("\n");
+    let script = format!(
+        "g = vdb.FloatGrid()\ng.name = \"{name}\"\n{body}\n\
+         g.transform = vdb.createLinearTransform(voxelSize={voxel})\n\
+         vdb.write(sys.argv[1], grids=[g])\n"
+    );
+    run_openvdb_python(dir, &script, &path);
+    path
+}
+
 /// The command failed with one clear stderr line containing `needle`, and wrote nothing.
 fn fails_cleanly(out: &Output, needle: &str, output_file: Option<&Path>) {
     let stderr = assert_failed(out);
@@ -1129,21 +1143,16 @@ fn the_default_bake_of_the_fire_example_meets_its_budget() {
 /// the python lines `fill` set in the zero array `a`, mapped by n = 1 + 1e-4 value:
 /// `dir/NAME.vdb` and the scene reading it.
 fn density_cube(dir: &Path, name: &str, fill: &str) -> PathBuf {
-    let file = dir.join(format!("{name}.vdb"));
-    run_openvdb_python(
+    let file = float_grid_file(
         dir,
-        &format!(
-            r#"
-g = vdb.FloatGrid()
-g.name = "density"
-a = np.zeros((4, 4, 4), dtype=np.float32)
-{fill}
-g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)
-g.transform = vdb.createLinearTransform(voxelSize=0.05)
-vdb.write(sys.argv[1], grids=[g])
-"#
-        ),
-        &file,
+        &format!("{name}.vdb"),
+        "density",
+        0.05,
+        &[
+            "a = np.zeros((4, 4, 4), dtype=np.float32)",
+            fill,
+            "g.copyFromArray(a, ijk=(-2, 8, -2), tolerance=0)",
+        ],
     );
     vdb_scene(dir, &file, "density", "{ linear = { k = 1e-4 } }", "", 1.0)
 }
@@ -1196,18 +1205,15 @@ fn temperature_in_box(lo: f64, hi: f64, max_bytes: u64) -> VdbFieldParams {
 #[test]
 fn a_cache_active_over_its_whole_domain_is_read_where_the_data_is() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let file = dir.path().join("domain.vdb");
-    run_openvdb_python(
+    let file = float_grid_file(
         dir.path(),
-        r#"
-g = vdb.FloatGrid()
-g.name = "temperature"
-g.fill((0, 0, 0), (199, 199, 199), 0.0, active=True)
-g.copyFromArray(np.ones((10, 10, 10), dtype=np.float32), ijk=(90, 100, 80), tolerance=0)
-g.transform = vdb.createLinearTransform(voxelSize=0.01)
-vdb.write(sys.argv[1], grids=[g])
-"#,
-        &file,
+        "domain.vdb",
+        "temperature",
+        0.01,
+        &[
+            "g.fill((0, 0, 0), (199, 199, 199), 0.0, active=True)",
+            "g.copyFromArray(np.ones((10, 10, 10), dtype=np.float32), ijk=(90, 100, 80), tolerance=0)",
+        ],
     );
     let vdb = vdb_sys::VdbFile::open(&file).expect("open");
     let info = vdb.grid("temperature").expect("grid");
@@ -1232,18 +1238,15 @@ vdb.write(sys.argv[1], grids=[g])
 #[test]
 fn a_sparse_cache_is_kept_in_bricks_not_as_its_dense_box() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let file = dir.path().join("two.vdb");
-    run_openvdb_python(
+    let file = float_grid_file(
         dir.path(),
-        r#"
-g = vdb.FloatGrid()
-g.name = "temperature"
-g.copyFromArray(np.ones((6, 6, 6), dtype=np.float32), ijk=(0, 0, 0), tolerance=0)
-g.copyFromArray(2.0 * np.ones((6, 6, 6), dtype=np.float32), ijk=(300, 300, 300), tolerance=0)
-g.transform = vdb.createLinearTransform(voxelSize=0.01)
-vdb.write(sys.argv[1], grids=[g])
-"#,
-        &file,
+        "two.vdb",
+        "temperature",
+        0.01,
+        &[
+            "g.copyFromArray(np.ones((6, 6, 6), dtype=np.float32), ijk=(0, 0, 0), tolerance=0)",
+            "g.copyFromArray(2.0 * np.ones((6, 6, 6), dtype=np.float32), ijk=(300, 300, 300), tolerance=0)",
+        ],
     );
     let params = temperature_in_box(-0.1, 3.2, 32 << 20);
     let t = std::time::Instant::now();
@@ -1272,19 +1275,16 @@ vdb.write(sys.argv[1], grids=[g])
 #[test]
 fn info_locates_the_data_of_a_large_cache() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let file = dir.path().join("large.vdb");
-    run_openvdb_python(
+    let file = float_grid_file(
         dir.path(),
-        r#"
-g = vdb.FloatGrid()
-g.name = "temperature"
-g.fill((0, 0, 0), (699, 699, 699), 0.0, active=True)
-g.copyFromArray(np.ones((4, 5, 6), dtype=np.float32), ijk=(20, 30, 40), tolerance=0)
-g.copyFromArray(np.ones((3, 3, 3), dtype=np.float32), ijk=(650, 640, 630), tolerance=0)
-g.transform = vdb.createLinearTransform(voxelSize=0.02)
-vdb.write(sys.argv[1], grids=[g])
-"#,
-        &file,
+        "large.vdb",
+        "temperature",
+        0.02,
+        &[
+            "g.fill((0, 0, 0), (699, 699, 699), 0.0, active=True)",
+            "g.copyFromArray(np.ones((4, 5, 6), dtype=np.float32), ijk=(20, 30, 40), tolerance=0)",
+            "g.copyFromArray(np.ones((3, 3, 3), dtype=np.float32), ijk=(650, 640, 630), tolerance=0)",
+        ],
     );
     let out = run(&["info", file.to_str().expect("utf8"), "--json"]);
     let v = json(&out);
