@@ -12,7 +12,7 @@
 //! never an error. Written through grin-output (no partial file is ever visible) after each
 //! compile that grew the cache.
 //!
-//! `wgpu::Device::create_pipeline_cache` is the one `unsafe` call outside vdb-sys: its
+//! `wgpu::Device::create_pipeline_cache` is grin-gpu's one `unsafe` call: its
 //! contract (the data came from `get_data`) cannot be checked by the type system, only by
 //! the checksum above.
 
