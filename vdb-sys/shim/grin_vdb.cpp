@@ -519,6 +519,52 @@ int grin_vdb_writer_add_grid(GrinVdbWriter* writer, const char* name, int32_t co
     });
 }
 
+int grin_vdb_writer_add_box(GrinVdbWriter* writer, const int32_t origin[3],
+                            const uint64_t dims[3], const float* data, size_t data_len,
+                            float tolerance, char* err, size_t err_len) {
+    if (writer == nullptr || origin == nullptr || dims == nullptr || data == nullptr ||
+        writer->grids.empty()) {
+        set_err(err, err_len, "bad argument to grin_vdb_writer_add_box (no grid added yet?)");
+        return GRIN_VDB_ERR_ARG;
+    }
+    int32_t bmax[3];
+    for (int i = 0; i < 3; ++i) {
+        if (dims[i] == 0 || dims[i] > static_cast<uint64_t>(INT32_MAX) ||
+            static_cast<int64_t>(origin[i]) + static_cast<int64_t>(dims[i]) - 1 > INT32_MAX) {
+            set_err(err, err_len, "box dimensions out of range");
+            return GRIN_VDB_ERR_ARG;
+        }
+        bmax[i] = static_cast<int32_t>(origin[i] + static_cast<int64_t>(dims[i]) - 1);
+    }
+    const uint64_t n = box_voxels(origin, bmax);
+    openvdb::GridBase::Ptr base = writer->grids.back();
+    return guarded(err, err_len, [&]() {
+        const openvdb::CoordBBox box = make_box(origin, bmax);
+        // copyFromDense keeps the grid's voxels outside the box.
+        if (auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base)) {
+            if (n == 0 || n != data_len) {
+                set_err(err, err_len, "data length does not match the box dimensions");
+                return static_cast<int>(GRIN_VDB_ERR_ARG);
+            }
+            openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(
+                box, const_cast<float*>(data));
+            openvdb::tools::copyFromDense(dense, *grid, tolerance);
+        } else if (auto grid = openvdb::gridPtrCast<openvdb::Vec3SGrid>(base)) {
+            if (n == 0 || 3 * n != data_len) {
+                set_err(err, err_len, "data length does not match the box dimensions");
+                return static_cast<int>(GRIN_VDB_ERR_ARG);
+            }
+            openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutXYZ> dense(
+                box, reinterpret_cast<openvdb::Vec3s*>(const_cast<float*>(data)));
+            openvdb::tools::copyFromDense(dense, *grid, openvdb::Vec3s(tolerance));
+        } else {
+            set_err(err, err_len, "the last grid added is neither float nor vec3s");
+            return static_cast<int>(GRIN_VDB_ERR_ARG);
+        }
+        return static_cast<int>(GRIN_VDB_OK);
+    });
+}
+
 int grin_vdb_writer_add_file_meta(GrinVdbWriter* writer, const char* key, const char* value,
                                   char* err, size_t err_len) {
     if (writer == nullptr || key == nullptr || value == nullptr) {

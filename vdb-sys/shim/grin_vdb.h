@@ -108,6 +108,11 @@ int grin_vdb_writer_add_grid(GrinVdbWriter* writer, const char* name, int32_t co
                              size_t n_meta, const char* const* num_keys,
                              const double* num_values, size_t n_num, char* err,
                              size_t err_len);
+/* Copy one more dense box into the grid added last (its other voxels kept): a sparse
+ * grid written box by box. data as for grin_vdb_writer_add_grid. */
+int grin_vdb_writer_add_box(GrinVdbWriter* writer, const int32_t origin[3],
+                            const uint64_t dims[3], const float* data, size_t data_len,
+                            float tolerance, char* err, size_t err_len);
 int grin_vdb_writer_add_file_meta(GrinVdbWriter* writer, const char* key, const char* value,
                                   char* err, size_t err_len);
 int grin_vdb_writer_write(GrinVdbWriter* writer, const char* path, char* err, size_t err_len);

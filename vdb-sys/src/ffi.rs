@@ -394,6 +394,16 @@ shim! {
         err: *mut c_char,
         err_len: usize,
     ) -> i32 => unsafe { unloaded(err, err_len) };
+    fn grin_vdb_writer_add_box(
+        writer: *mut GrinVdbWriter,
+        origin: *const i32,
+        dims: *const u64,
+        data: *const f32,
+        data_len: usize,
+        tolerance: f32,
+        err: *mut c_char,
+        err_len: usize,
+    ) -> i32 => unsafe { unloaded(err, err_len) };
     fn grin_vdb_writer_add_file_meta(
         writer: *mut GrinVdbWriter,
         key: *const c_char,

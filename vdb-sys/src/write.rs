@@ -162,6 +162,75 @@ impl VdbWriter {
         self.add(name, 3, grid.bbox, grid.world_from_index, &flat, opts)
     }
 
+    /// Add a float grid written box by box (a sparse grid: only the boxes' voxels, each
+    /// box's values dense with x fastest; later boxes overwrite earlier ones where they
+    /// overlap).
+    pub fn add_float_boxes(
+        &mut self,
+        name: &str,
+        world_from_index: Transform,
+        boxes: impl IntoIterator<Item = (IndexBox, Vec<f32>)>,
+        opts: &WriteOptions,
+    ) -> Result<(), VdbError> {
+        self.add_boxes(name, 1, world_from_index, boxes.into_iter(), opts)
+    }
+
+    /// [`Self::add_float_boxes`] for a vec3s grid (covariant, as gradients are).
+    pub fn add_vec3_boxes(
+        &mut self,
+        name: &str,
+        world_from_index: Transform,
+        boxes: impl IntoIterator<Item = (IndexBox, Vec<[f32; 3]>)>,
+        opts: &WriteOptions,
+    ) -> Result<(), VdbError> {
+        let flat = boxes
+            .into_iter()
+            .map(|(b, v)| (b, v.iter().flat_map(|c| c.iter().copied()).collect()));
+        self.add_boxes(name, 3, world_from_index, flat, opts)
+    }
+
+    fn add_boxes(
+        &mut self,
+        name: &str,
+        components: i32,
+        world_from_index: Transform,
+        mut boxes: impl Iterator<Item = (IndexBox, Vec<f32>)>,
+        opts: &WriteOptions,
+    ) -> Result<(), VdbError> {
+        let Some((first, data)) = boxes.next() else {
+            return Err(VdbError::Write {
+                path: String::new(),
+                message: format!("grid `{name}`: no boxes to write"),
+            });
+        };
+        self.add(name, components, first, world_from_index, &data, opts)?;
+        for (bbox, data) in boxes {
+            let dims = bbox.dims();
+            let mut err = [0 as c_char; ERR_LEN];
+            // SAFETY: every pointer refers to a live local of the stated length; the shim
+            // checks `data.len()` against `dims` and the last grid's kind.
+            let status = unsafe {
+                ffi::grin_vdb_writer_add_box(
+                    self.raw.as_ptr(),
+                    bbox.min.as_ptr(),
+                    dims.as_ptr(),
+                    data.as_ptr(),
+                    data.len(),
+                    opts.tolerance,
+                    err.as_mut_ptr(),
+                    ERR_LEN,
+                )
+            };
+            if status != ffi::GRIN_VDB_OK {
+                return Err(VdbError::Write {
+                    path: String::new(),
+                    message: format!("grid `{name}`: {}", err_text(&err)),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Add a string entry to the file metadata.
     pub fn add_file_meta(&mut self, key: &str, value: &str) -> Result<(), VdbError> {
         let (k, v) = (

@@ -11,6 +11,7 @@ use vdb_sys::{
 
 use crate::baked::BakedField;
 use crate::field::IndexField;
+use crate::sparse::SparseField;
 
 /// The grids an exported file holds, in order.
 pub const EXPORT_GRIDS: [&str; 2] = ["delta_n", "grad_n"];
@@ -20,6 +21,10 @@ pub const EXPORT_GRIDS: [&str; 2] = ["delta_n", "grad_n"];
 pub enum ExportError {
     #[error("{path}: grid {dims:?} is too large for OpenVDB")]
     TooLarge { path: String, dims: [usize; 3] },
+    #[error(
+        "{path}: the sparse bake has no bricks (the index is ambient everywhere): nothing to export"
+    )]
+    Empty { path: String },
     #[error(transparent)]
     Vdb(#[from] VdbError),
     #[error(transparent)]
@@ -108,12 +113,142 @@ pub fn export_vdb(
         },
         &vec_opts,
     )?;
+    let grids = [
+        (EXPORT_GRIDS[0].to_owned(), false),
+        (EXPORT_GRIDS[1].to_owned(), true),
+    ];
+    write_verified(writer, input, output, &grids)
+}
+
+/// The grids of a sparse bake's export: per brick resolution present, `delta_n_<m>` and
+/// `grad_n_<m>` for the bricks of `m` cells a side, coarsest first.
+pub fn sparse_export_grids(field: &SparseField) -> Vec<(usize, String, String)> {
+    let mut cells: Vec<usize> = field.bricks().iter().map(|b| b.cells()).collect();
+    cells.sort_unstable();
+    cells.dedup();
+    cells
+        .into_iter()
+        .map(|m| (m, format!("delta_n_{m}"), format!("grad_n_{m}")))
+        .collect()
+}
+
+/// Write a sparse bake to `output` as OpenVDB grids, one pair per brick resolution
+/// ([`sparse_export_grids`]): each grid holds the stored nodes of the bricks of that
+/// resolution, brick by brick (nothing is resampled, no dense box is ever made), index
+/// (i, j, k) at top origin + spacing (i, j, k). Empty space is the background
+/// (delta_n 0, the ambient index). `half` stores 16-bit floats.
+pub fn export_sparse_vdb(
+    field: &SparseField,
+    input: &Path,
+    output: &Path,
+    half: bool,
+) -> Result<(), ExportError> {
+    let levels = sparse_export_grids(field);
+    if levels.is_empty() {
+        return Err(ExportError::Empty {
+            path: input.display().to_string(),
+        });
+    }
+    let top = *field.top();
+    let o = top.origin;
+    let base_meta = vec![
+        (
+            "n_ambient".to_owned(),
+            MetaValue::Number(field.ambient_index()),
+        ),
+        (
+            "grin_source".to_owned(),
+            MetaValue::Text(field.provenance().source.clone()),
+        ),
+        (
+            "grin_storage".to_owned(),
+            MetaValue::Text(field.storage().name().to_owned()),
+        ),
+        ("grin_brick_edge".to_owned(), MetaValue::Number(top.edge)),
+    ];
+    let mut writer = VdbWriter::new()?;
+    let mut grids = Vec::new();
+    for (cells, delta_name, grad_name) in levels {
+        let s = top.edge / cells as f64;
+        let world_from_index = Transform {
+            world_from_index: [[s, 0.0, 0.0, o.x], [0.0, s, 0.0, o.y], [0.0, 0.0, s, o.z]],
+        };
+        let mut meta = base_meta.clone();
+        meta.push((
+            "grin_brick_cells".to_owned(),
+            MetaValue::Number(cells as f64),
+        ));
+        let opts = WriteOptions {
+            half_float: half,
+            metadata: meta,
+            ..WriteOptions::default()
+        };
+        let bricks = || field.bricks().iter().filter(move |b| b.cells() == cells);
+        let too_large = || ExportError::TooLarge {
+            path: input.display().to_string(),
+            dims: top.dims.map(|d| d * cells),
+        };
+        let mut boxes = Vec::new();
+        for b in bricks() {
+            boxes.push(brick_box(b).ok_or_else(too_large)?);
+        }
+        let node = |b: &crate::sparse::Brick, v: usize| field.voxel_f32(b, b.offset + v);
+        writer.add_float_boxes(
+            &delta_name,
+            world_from_index,
+            bricks()
+                .zip(&boxes)
+                .map(|(b, &bbox)| (bbox, (0..b.voxel_count()).map(|v| node(b, v)[0]).collect())),
+            &opts,
+        )?;
+        writer.add_vec3_boxes(
+            &grad_name,
+            world_from_index,
+            bricks().zip(&boxes).map(|(b, &bbox)| {
+                let grad = (0..b.voxel_count())
+                    .map(|v| {
+                        let x = node(b, v);
+                        [x[1], x[2], x[3]]
+                    })
+                    .collect();
+                (bbox, grad)
+            }),
+            &opts,
+        )?;
+        grids.push((delta_name, false));
+        grids.push((grad_name, true));
+    }
+    write_verified(writer, input, output, &grids)
+}
+
+/// The index box of brick `b`'s nodes in the grid of its resolution (`None` past i32).
+fn brick_box(b: &crate::sparse::Brick) -> Option<IndexBox> {
+    let m = b.cells();
+    let min = b.at.map(|a| i32::try_from(a as usize * m).ok());
+    let [Some(x), Some(y), Some(z)] = min else {
+        return None;
+    };
+    let m = i32::try_from(m).ok()?;
+    Some(IndexBox {
+        min: [x, y, z],
+        max: [x.checked_add(m)?, y.checked_add(m)?, z.checked_add(m)?],
+    })
+}
+
+/// Add the file metadata, write `writer`'s grids to a staged file, read it back
+/// (`grids`: each name and whether it is vec3) and put it in place of `output`.
+fn write_verified(
+    mut writer: VdbWriter,
+    input: &Path,
+    output: &Path,
+    grids: &[(String, bool)],
+) -> Result<(), ExportError> {
     writer.add_file_meta("creator", "grin export")?;
     writer.add_file_meta("grin_input", &input.display().to_string())?;
     let staged = grin_output::stage_with(output, |tmp| {
         writer
             .write(tmp)
-            .and_then(|()| verify(tmp))
+            .and_then(|()| verify(tmp, grids))
             .map_err(|e| rename_path(e, output))
     })
     .map_err(|e| match e {
@@ -124,10 +259,11 @@ pub fn export_vdb(
     Ok(())
 }
 
-/// Read the written file back: both grids present and of the right kind.
-fn verify(path: &Path) -> Result<(), VdbError> {
+/// Read the written file back: every grid present and of the right kind.
+fn verify(path: &Path, grids: &[(String, bool)]) -> Result<(), VdbError> {
     let file = VdbFile::open(path)?;
-    for (name, vec3) in [(EXPORT_GRIDS[0], false), (EXPORT_GRIDS[1], true)] {
+    for (name, vec3) in grids {
+        let (name, vec3) = (name.as_str(), *vec3);
         let grid = file.grid(name)?;
         if grid.kind.is_vec3() != vec3 {
             return Err(VdbError::Open {

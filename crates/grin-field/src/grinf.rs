@@ -52,7 +52,7 @@ pub enum GrinfError {
         computed: u32,
     },
     #[error(
-        "{path}: a sparse .grinf (version 2), where only a dense grid is read here (renders and traces on both backends, `grin info` and Python's `grin.read_field` read it; `grin export` does not yet)"
+        "{path}: a sparse .grinf (version 2), where only a dense grid is read here (renders and traces on both backends; `grin info`, `grin export` and Python's `grin.read_field` read it)"
     )]
     Sparse { path: String },
     #[error("{path}: bad header: {message}")]

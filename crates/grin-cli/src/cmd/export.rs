@@ -1,5 +1,6 @@
 //! `grin export field.grinf -o out.vdb`: a baked field as OpenVDB grids `delta_n` (float)
-//! and `grad_n` (vec3, covariant) so it can be inspected in Houdini or Blender.
+//! and `grad_n` (vec3, covariant) so it can be inspected in Houdini or Blender; a sparse
+//! bake as one such pair per brick resolution (`delta_n_<m>`, `grad_n_<m>`).
 
 use std::path::PathBuf;
 
@@ -22,7 +23,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let field = grin_field::grinf::load(&args.input)?;
+    let field = match grin_field::grinf::open(&args.input)? {
+        grin_field::grinf::Grinf::Dense(field) => field,
+        grin_field::grinf::Grinf::Sparse(field) => return run_sparse(&args, &field),
+    };
     let geometry = *field.geometry();
     let (dims, s, o) = (geometry.dims, geometry.spacing, geometry.origin);
     grin_field::export::export_vdb(&field, &args.input, &args.output, args.half)?;
@@ -57,6 +61,75 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 s.x,
                 s.y,
                 s.z,
+                size
+            ),
+        );
+    }
+    Ok(())
+}
+
+/// A sparse bake: a pair of grids per brick resolution (`delta_n_<m>`, `grad_n_<m>`).
+fn run_sparse(args: &Args, field: &grin_field::sparse::SparseField) -> anyhow::Result<()> {
+    grin_field::export::export_sparse_vdb(field, &args.input, &args.output, args.half)?;
+    let size = std::fs::metadata(&args.output)
+        .map(|m| m.len())
+        .unwrap_or(0);
+    let to_stream = crate::is_stream(&args.output);
+    let edge = field.top().edge;
+    let levels: Vec<(usize, String, String, usize)> =
+        grin_field::export::sparse_export_grids(field)
+            .into_iter()
+            .map(|(m, d, g)| {
+                let bricks = field.bricks().iter().filter(|b| b.cells() == m).count();
+                (m, d, g, bricks)
+            })
+            .collect();
+    if args.json {
+        let grids: Vec<&str> = levels
+            .iter()
+            .flat_map(|(_, d, g, _)| [d.as_str(), g.as_str()])
+            .collect();
+        let per_level: Vec<serde_json::Value> = levels
+            .iter()
+            .map(|(m, d, g, bricks)| {
+                serde_json::json!({
+                    "cells": m,
+                    "voxel_size": edge / *m as f64,
+                    "bricks": bricks,
+                    "grids": [d, g],
+                })
+            })
+            .collect();
+        let summary = serde_json::json!({
+            "input": args.input.display().to_string(),
+            "output": args.output.display().to_string(),
+            "layout": "sparse",
+            "grids": grids,
+            "levels": per_level,
+            "origin": field.top().origin.to_array(),
+            "n_ambient": field.ambient_index(),
+            "half_float": args.half,
+            "bytes": size,
+        });
+        crate::report(to_stream, summary);
+    } else {
+        let shown: Vec<String> = levels
+            .iter()
+            .map(|(m, _, _, bricks)| {
+                let s = if *bricks == 1 { "" } else { "s" };
+                format!(
+                    "{bricks} brick{s} of {m}^3 cells (voxel {:.4})",
+                    edge / *m as f64
+                )
+            })
+            .collect();
+        crate::report(
+            to_stream,
+            format_args!(
+                "exported {} -> {}: sparse, grids delta_n_<m> and grad_n_<m> for {} ({} bytes)",
+                args.input.display(),
+                args.output.display(),
+                shown.join(", "),
                 size
             ),
         );
