@@ -270,6 +270,19 @@ void copy_box(const GridT& grid, const openvdb::CoordBBox& box, OutT* out) {
     }
 }
 
+// The last index of a box of `dims` voxels from `origin`, in bmax; false where a side is
+// empty or the box passes INT32_MAX.
+bool box_max(const int32_t origin[3], const uint64_t dims[3], int32_t bmax[3]) {
+    for (int i = 0; i < 3; ++i) {
+        if (dims[i] == 0 || dims[i] > static_cast<uint64_t>(INT32_MAX) ||
+            static_cast<int64_t>(origin[i]) + static_cast<int64_t>(dims[i]) - 1 > INT32_MAX) {
+            return false;
+        }
+        bmax[i] = static_cast<int32_t>(origin[i] + static_cast<int64_t>(dims[i]) - 1);
+    }
+    return true;
+}
+
 }  // namespace
 
 struct GrinVdbFile {
@@ -464,13 +477,9 @@ int grin_vdb_writer_add_grid(GrinVdbWriter* writer, const char* name, int32_t co
         return GRIN_VDB_ERR_ARG;
     }
     int32_t bmax[3];
-    for (int i = 0; i < 3; ++i) {
-        if (dims[i] == 0 || dims[i] > static_cast<uint64_t>(INT32_MAX) ||
-            static_cast<int64_t>(origin[i]) + static_cast<int64_t>(dims[i]) - 1 > INT32_MAX) {
-            set_err(err, err_len, "grid dimensions out of range");
-            return GRIN_VDB_ERR_ARG;
-        }
-        bmax[i] = static_cast<int32_t>(origin[i] + static_cast<int64_t>(dims[i]) - 1);
+    if (!box_max(origin, dims, bmax)) {
+        set_err(err, err_len, "grid dimensions out of range");
+        return GRIN_VDB_ERR_ARG;
     }
     const uint64_t n = box_voxels(origin, bmax);
     if (n == 0 || n * static_cast<uint64_t>(components) != data_len) {
@@ -528,13 +537,9 @@ int grin_vdb_writer_add_box(GrinVdbWriter* writer, const int32_t origin[3],
         return GRIN_VDB_ERR_ARG;
     }
     int32_t bmax[3];
-    for (int i = 0; i < 3; ++i) {
-        if (dims[i] == 0 || dims[i] > static_cast<uint64_t>(INT32_MAX) ||
-            static_cast<int64_t>(origin[i]) + static_cast<int64_t>(dims[i]) - 1 > INT32_MAX) {
-            set_err(err, err_len, "box dimensions out of range");
-            return GRIN_VDB_ERR_ARG;
-        }
-        bmax[i] = static_cast<int32_t>(origin[i] + static_cast<int64_t>(dims[i]) - 1);
+    if (!box_max(origin, dims, bmax)) {
+        set_err(err, err_len, "box dimensions out of range");
+        return GRIN_VDB_ERR_ARG;
     }
     const uint64_t n = box_voxels(origin, bmax);
     openvdb::GridBase::Ptr base = writer->grids.back();

@@ -48,6 +48,17 @@ impl Drop for VdbWriter {
     }
 }
 
+/// The shim's status of a call adding to grid `name`, as a result.
+fn grid_status(status: i32, name: &str, err: &[c_char]) -> Result<(), VdbError> {
+    if status == ffi::GRIN_VDB_OK {
+        return Ok(());
+    }
+    Err(VdbError::Write {
+        path: String::new(),
+        message: format!("grid `{name}`: {}", err_text(err)),
+    })
+}
+
 fn cstring(s: &str, what: &str) -> Result<CString, VdbError> {
     CString::new(s).map_err(|_| VdbError::Write {
         path: String::new(),
@@ -125,13 +136,7 @@ impl VdbWriter {
                 ERR_LEN,
             )
         };
-        if status != ffi::GRIN_VDB_OK {
-            return Err(VdbError::Write {
-                path: String::new(),
-                message: format!("grid `{name}`: {}", err_text(&err)),
-            });
-        }
-        Ok(())
+        grid_status(status, name, &err)
     }
 
     /// Add a float grid from a dense array.
@@ -221,12 +226,7 @@ impl VdbWriter {
                     ERR_LEN,
                 )
             };
-            if status != ffi::GRIN_VDB_OK {
-                return Err(VdbError::Write {
-                    path: String::new(),
-                    message: format!("grid `{name}`: {}", err_text(&err)),
-                });
-            }
+            grid_status(status, name, &err)?;
         }
         Ok(())
     }

@@ -66,24 +66,11 @@ pub fn export_vdb(
         ],
     };
     let (delta_n, grad_n) = channels(field);
-    let meta = vec![
-        (
-            "n_ambient".to_owned(),
-            MetaValue::Number(field.ambient_index()),
-        ),
-        (
-            "grin_source".to_owned(),
-            MetaValue::Text(field.provenance().source.clone()),
-        ),
-        (
-            "grin_storage".to_owned(),
-            MetaValue::Text(field.storage().name().to_owned()),
-        ),
-        (
-            "grin_interp".to_owned(),
-            MetaValue::Text(field.interp().name().to_owned()),
-        ),
-    ];
+    let mut meta = provenance_meta(field.ambient_index(), field.provenance(), field.storage());
+    meta.push((
+        "grin_interp".to_owned(),
+        MetaValue::Text(field.interp().name().to_owned()),
+    ));
     let scalar_opts = WriteOptions {
         half_float: half,
         metadata: meta.clone(),
@@ -151,21 +138,8 @@ pub fn export_sparse_vdb(
     }
     let top = *field.top();
     let o = top.origin;
-    let base_meta = vec![
-        (
-            "n_ambient".to_owned(),
-            MetaValue::Number(field.ambient_index()),
-        ),
-        (
-            "grin_source".to_owned(),
-            MetaValue::Text(field.provenance().source.clone()),
-        ),
-        (
-            "grin_storage".to_owned(),
-            MetaValue::Text(field.storage().name().to_owned()),
-        ),
-        ("grin_brick_edge".to_owned(), MetaValue::Number(top.edge)),
-    ];
+    let mut base_meta = provenance_meta(field.ambient_index(), field.provenance(), field.storage());
+    base_meta.push(("grin_brick_edge".to_owned(), MetaValue::Number(top.edge)));
     let mut writer = VdbWriter::new()?;
     let mut grids = Vec::new();
     for (cells, delta_name, grad_name) in levels {
@@ -219,6 +193,25 @@ pub fn export_sparse_vdb(
         grids.push((grad_name, true));
     }
     write_verified(writer, input, output, &grids)
+}
+
+/// Every exported grid's metadata: the ambient index, the bake's source and storage.
+fn provenance_meta(
+    ambient: f64,
+    provenance: &crate::baked::BakeProvenance,
+    storage: crate::baked::Storage,
+) -> Vec<(String, MetaValue)> {
+    vec![
+        ("n_ambient".to_owned(), MetaValue::Number(ambient)),
+        (
+            "grin_source".to_owned(),
+            MetaValue::Text(provenance.source.clone()),
+        ),
+        (
+            "grin_storage".to_owned(),
+            MetaValue::Text(storage.name().to_owned()),
+        ),
+    ]
 }
 
 /// The index box of brick `b`'s nodes in the grid of its resolution (`None` past i32).
