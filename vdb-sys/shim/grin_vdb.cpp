@@ -283,6 +283,24 @@ bool box_max(const int32_t origin[3], const uint64_t dims[3], int32_t bmax[3]) {
     return true;
 }
 
+// Copy the dense box `box` of `data` (x fastest; 3 floats a voxel for a vec3s grid) into
+// `grid`, a float or vec3s grid made by the writer; the grid's voxels outside the box are
+// kept (copyFromDense starts from the existing leaves). Values within `tolerance` of the
+// background become inactive.
+void copy_box(openvdb::GridBase& grid, const openvdb::CoordBBox& box, const float* data,
+              float tolerance) {
+    // copyFromDense only reads the buffer.
+    if (auto* g = dynamic_cast<openvdb::FloatGrid*>(&grid)) {
+        openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(box,
+                                                                      const_cast<float*>(data));
+        openvdb::tools::copyFromDense(dense, *g, tolerance);
+    } else if (auto* g = dynamic_cast<openvdb::Vec3SGrid*>(&grid)) {
+        openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutXYZ> dense(
+            box, reinterpret_cast<openvdb::Vec3s*>(const_cast<float*>(data)));
+        openvdb::tools::copyFromDense(dense, *g, openvdb::Vec3s(tolerance));
+    }
+}
+
 }  // namespace
 
 struct GrinVdbFile {
@@ -487,7 +505,6 @@ int grin_vdb_writer_add_grid(GrinVdbWriter* writer, const char* name, int32_t co
         return GRIN_VDB_ERR_ARG;
     }
     return guarded(err, err_len, [&]() {
-        const openvdb::CoordBBox box = make_box(origin, bmax);
         openvdb::Mat4d m = openvdb::Mat4d::identity();
         for (int r = 0; r < 3; ++r) {
             for (int c = 0; c < 3; ++c) m(c, r) = world_from_index[r * 4 + c];
@@ -497,21 +514,15 @@ int grin_vdb_writer_add_grid(GrinVdbWriter* writer, const char* name, int32_t co
         openvdb::GridBase::Ptr base;
         if (components == 1) {
             auto grid = openvdb::FloatGrid::create(background);
-            // copyFromDense only reads the buffer.
-            openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(
-                box, const_cast<float*>(data));
-            openvdb::tools::copyFromDense(dense, *grid, tolerance);
             grid->setGridClass(openvdb::GRID_FOG_VOLUME);
             base = grid;
         } else {
             auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(background));
-            openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutXYZ> dense(
-                box, reinterpret_cast<openvdb::Vec3s*>(const_cast<float*>(data)));
-            openvdb::tools::copyFromDense(dense, *grid, openvdb::Vec3s(tolerance));
             // grad n is a gradient: covariant under the transform.
             grid->setVectorType(openvdb::VEC_COVARIANT);
             base = grid;
         }
+        copy_box(*base, make_box(origin, bmax), data, tolerance);
         base->setName(name);
         base->setTransform(xf);
         base->setSaveFloatAsHalf(save_as_half != 0);
@@ -542,30 +553,14 @@ int grin_vdb_writer_add_box(GrinVdbWriter* writer, const int32_t origin[3],
         return GRIN_VDB_ERR_ARG;
     }
     const uint64_t n = box_voxels(origin, bmax);
-    openvdb::GridBase::Ptr base = writer->grids.back();
+    openvdb::GridBase& base = *writer->grids.back();
+    const uint64_t components = base.isType<openvdb::Vec3SGrid>() ? 3 : 1;
+    if (n == 0 || n * components != data_len) {
+        set_err(err, err_len, "data length does not match the box dimensions");
+        return GRIN_VDB_ERR_ARG;
+    }
     return guarded(err, err_len, [&]() {
-        const openvdb::CoordBBox box = make_box(origin, bmax);
-        // copyFromDense keeps the grid's voxels outside the box.
-        if (auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base)) {
-            if (n == 0 || n != data_len) {
-                set_err(err, err_len, "data length does not match the box dimensions");
-                return static_cast<int>(GRIN_VDB_ERR_ARG);
-            }
-            openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(
-                box, const_cast<float*>(data));
-            openvdb::tools::copyFromDense(dense, *grid, tolerance);
-        } else if (auto grid = openvdb::gridPtrCast<openvdb::Vec3SGrid>(base)) {
-            if (n == 0 || 3 * n != data_len) {
-                set_err(err, err_len, "data length does not match the box dimensions");
-                return static_cast<int>(GRIN_VDB_ERR_ARG);
-            }
-            openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutXYZ> dense(
-                box, reinterpret_cast<openvdb::Vec3s*>(const_cast<float*>(data)));
-            openvdb::tools::copyFromDense(dense, *grid, openvdb::Vec3s(tolerance));
-        } else {
-            set_err(err, err_len, "the last grid added is neither float nor vec3s");
-            return static_cast<int>(GRIN_VDB_ERR_ARG);
-        }
+        copy_box(base, make_box(origin, bmax), data, tolerance);
         return static_cast<int>(GRIN_VDB_OK);
     });
 }

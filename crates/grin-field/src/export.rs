@@ -107,15 +107,31 @@ pub fn export_vdb(
     write_verified(writer, input, output, &grids)
 }
 
-/// The grids of a sparse bake's export: per brick resolution present, `delta_n_<m>` and
-/// `grad_n_<m>` for the bricks of `m` cells a side, coarsest first.
-pub fn sparse_export_grids(field: &SparseField) -> Vec<(usize, String, String)> {
-    let mut cells: Vec<usize> = field.bricks().iter().map(|b| b.cells()).collect();
-    cells.sort_unstable();
-    cells.dedup();
-    cells
-        .into_iter()
-        .map(|m| (m, format!("delta_n_{m}"), format!("grad_n_{m}")))
+/// One brick resolution of a sparse bake's export: `cells` a brick side, its bricks, and
+/// its two grids' names (`delta_n_<cells>`, `grad_n_<cells>`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SparseGrids {
+    pub cells: usize,
+    pub bricks: usize,
+    pub delta_n: String,
+    pub grad_n: String,
+}
+
+/// The grids of a sparse bake's export, one pair per brick resolution present, coarsest
+/// first.
+pub fn sparse_export_grids(field: &SparseField) -> Vec<SparseGrids> {
+    (0..=crate::sparse::MAX_LEVEL)
+        .zip(field.level_counts())
+        .filter(|&(_, bricks)| bricks > 0)
+        .map(|(level, bricks)| {
+            let cells = crate::sparse::cells_of(level);
+            SparseGrids {
+                cells,
+                bricks,
+                delta_n: format!("delta_n_{cells}"),
+                grad_n: format!("grad_n_{cells}"),
+            }
+        })
         .collect()
 }
 
@@ -142,7 +158,13 @@ pub fn export_sparse_vdb(
     base_meta.push(("grin_brick_edge".to_owned(), MetaValue::Number(top.edge)));
     let mut writer = VdbWriter::new()?;
     let mut grids = Vec::new();
-    for (cells, delta_name, grad_name) in levels {
+    for SparseGrids {
+        cells,
+        delta_n: delta_name,
+        grad_n: grad_name,
+        ..
+    } in levels
+    {
         let s = top.edge / cells as f64;
         let world_from_index = Transform {
             world_from_index: [[s, 0.0, 0.0, o.x], [0.0, s, 0.0, o.y], [0.0, 0.0, s, o.z]],

@@ -76,27 +76,20 @@ fn run_sparse(args: &Args, field: &grin_field::sparse::SparseField) -> anyhow::R
         .unwrap_or(0);
     let to_stream = crate::is_stream(&args.output);
     let edge = field.top().edge;
-    let levels: Vec<(usize, String, String, usize)> =
-        grin_field::export::sparse_export_grids(field)
-            .into_iter()
-            .map(|(m, d, g)| {
-                let bricks = field.bricks().iter().filter(|b| b.cells() == m).count();
-                (m, d, g, bricks)
-            })
-            .collect();
+    let levels = grin_field::export::sparse_export_grids(field);
     if args.json {
         let grids: Vec<&str> = levels
             .iter()
-            .flat_map(|(_, d, g, _)| [d.as_str(), g.as_str()])
+            .flat_map(|l| [l.delta_n.as_str(), l.grad_n.as_str()])
             .collect();
         let per_level: Vec<serde_json::Value> = levels
             .iter()
-            .map(|(m, d, g, bricks)| {
+            .map(|l| {
                 serde_json::json!({
-                    "cells": m,
-                    "voxel_size": edge / *m as f64,
-                    "bricks": bricks,
-                    "grids": [d, g],
+                    "cells": l.cells,
+                    "voxel_size": edge / l.cells as f64,
+                    "bricks": l.bricks,
+                    "grids": [l.delta_n, l.grad_n],
                 })
             })
             .collect();
@@ -115,11 +108,13 @@ fn run_sparse(args: &Args, field: &grin_field::sparse::SparseField) -> anyhow::R
     } else {
         let shown: Vec<String> = levels
             .iter()
-            .map(|(m, _, _, bricks)| {
-                let s = if *bricks == 1 { "" } else { "s" };
+            .map(|l| {
+                let s = if l.bricks == 1 { "" } else { "s" };
                 format!(
-                    "{bricks} brick{s} of {m}^3 cells (voxel {:.4})",
-                    edge / *m as f64
+                    "{} brick{s} of {}^3 cells (voxel {:.4})",
+                    l.bricks,
+                    l.cells,
+                    edge / l.cells as f64
                 )
             })
             .collect();
