@@ -332,30 +332,23 @@ fn same_medium(grid: &GpuGrid, field: &dyn IndexField) -> bool {
         && (baked.ambient_index() - field.ambient_index()).abs() <= 1e-12 * field.ambient_index()
 }
 
-/// The grid the GPU marches for `scene`, whose medium is the scene file's `medium`
-/// (files resolved against `scene_dir`): `None` when there is no medium or the field is a
-/// baked file the renderer marches as it is; else the cached or new bake of the field
+/// The grid the GPU marches for `field`, the medium `spec` of a scene file (files
+/// resolved against `scene_dir`): `None` when the field is a baked file (dense or sparse)
+/// the renderer marches as it is; else the cached or new bake of the field
 /// ([`gpu_bake_cached`]), through `cache` when given. Pass the grid to
 /// [`crate::GpuRenderer::new`].
-pub fn scene_gpu_field(
-    scene: &grin_render::scene::RenderScene,
-    medium: Option<&MediumSpec>,
+pub fn medium_gpu_grid(
+    field: &dyn IndexField,
+    spec: &MediumSpec,
     scene_dir: &Path,
     cache: Option<&BakeCache>,
 ) -> Result<Option<(GpuGrid, Vec<String>, CacheUse)>, GpuError> {
-    let (Some(m), Some(spec)) = (&scene.medium, medium) else {
-        return Ok(None);
-    };
-    if m.field.as_baked().is_some() {
-        return Ok(None);
-    }
-    // A sparse bake is uploaded as it is (crate::field::upload_sparse).
-    if m.field.as_sparse().is_some() {
+    if field.as_baked().is_some() || field.as_sparse().is_some() {
         return Ok(None);
     }
     let key = cache.map(|_| BakeCache::key(spec, scene_dir)).transpose()?;
     let cache = cache.zip(key.as_deref());
-    gpu_bake_cached(m.field.as_ref(), cache).map(Some)
+    gpu_bake_cached(field, cache).map(Some)
 }
 
 #[cfg(test)]

@@ -3,9 +3,10 @@
 //! the renderer of either backend, to the output's named channels (the EXR's) and
 //! previews with a report of how it went. `grin render` writes what [`Renderer::render`]
 //! returns to files; the Python package hands the same channels out as arrays.
-//! [`build_field`] and [`Renderer::prepare`] (the render description and `auto`'s
-//! choice) are its first steps on their own: `grin bench speed` renders its own bake of
-//! the field, prepared the same way.
+//! [`build_field`] and [`prepare_scene`] (the render description and `auto`'s choice)
+//! are its first steps on their own: `grin bench speed` renders its own bake of the
+//! field, prepared the same way, and `grin view`'s session prepares each scene it shows
+//! through them, keeping what they make between frames.
 
 pub mod dataset;
 pub mod optics;
@@ -232,7 +233,73 @@ pub fn build_field(
         .with_context(|| format!("{label}: [medium]"))
 }
 
-/// A scene ready for a backend to render: [`Renderer::prepare`]'s result.
+/// `scene` (read from `scene_dir`; `label` names it in errors) ready to render: its
+/// [`RenderScene`] on `field` (the medium's, from [`build_field`], or a bake of it),
+/// with `step = { auto = ... }` resolved by [`resolve_auto`]. `on_gpu`: the GPU marcher
+/// renders it (its pilots trace in f32), else the CPU tracer (f64).
+pub fn prepare_scene(
+    scene: &Scene,
+    scene_dir: &Path,
+    label: &str,
+    field: Option<Arc<dyn IndexField>>,
+    on_gpu: bool,
+) -> anyhow::Result<Prepared> {
+    let mut rs = RenderScene::new(scene, scene_dir, field).with_context(|| label.to_owned())?;
+    let (auto, auto_note) = resolve_auto(&mut rs, scene, on_gpu);
+    Ok(Prepared {
+        render_scene: rs,
+        auto,
+        auto_note,
+    })
+}
+
+/// Resolve `rs`'s `step = { auto = ... }` (from its own render settings, so a scene
+/// re-aimed after an earlier choice starts afresh) by pilot rays in the backend's
+/// precision (f32 for the GPU, but f64 for an OPD in waves), for an `[optics]` output of
+/// `scene` to the accuracy it asks in its own unit: the choice, and why no pilots ran
+/// where none could (a render too small for them). Nothing for other steps.
+pub fn resolve_auto(
+    rs: &mut RenderScene,
+    scene: &Scene,
+    on_gpu: bool,
+) -> (Option<grin_trace::auto::AutoChoice>, Option<String>) {
+    if let Some(m) = &mut rs.medium {
+        m.trace = grin_render::settings::TraceSettings::from_render(&rs.settings);
+    }
+    if !matches!(rs.settings.step, grin_scene::StepSpec::Auto(_)) {
+        return (None, None);
+    }
+    let metric = output_metric(scene, rs);
+    // The GPU's pilots trace in f32 as it does, but for an OPD in waves: a CPU f32
+    // trace holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre),
+    // where the GPU sums n - n_amb, so its OPD is as good as f64's.
+    let waves = matches!(metric, Some((grin_trace::auto::Metric::Waves { .. }, _)));
+    // The shadowgraph's pilots are its beam's rays: resolved on a scene whose camera
+    // is the beam's, then applied to this one.
+    let beam_camera = match &metric {
+        Some((grin_trace::auto::Metric::Screen(beam), _)) => Some(beam.camera()),
+        _ => None,
+    };
+    let mut pilot_rs = beam_camera.map(|cam| {
+        let mut p = rs.clone();
+        p.camera = cam;
+        (p.settings.width, p.settings.height) = (cam.width, cam.height);
+        p
+    });
+    let target = pilot_rs.as_mut().unwrap_or(rs);
+    let auto = if on_gpu && !waves {
+        grin_trace::auto::resolve_scene_in::<f32>(target, metric)
+    } else {
+        grin_trace::auto::resolve_scene_in::<f64>(target, metric)
+    };
+    if let (Some(_), Some(a)) = (&pilot_rs, &auto) {
+        grin_trace::auto::apply(rs, &a.settings);
+    }
+    let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(rs));
+    (auto, auto_note)
+}
+
+/// A scene ready for a backend to render: [`prepare_scene`]'s result.
 #[derive(Debug, Clone)]
 pub struct Prepared {
     /// The render description, with `auto`'s choice applied.
@@ -326,10 +393,7 @@ impl Renderer {
     }
 
     /// `scene` (read from `scene_dir`; `label` names it in errors) as this renderer's
-    /// backend renders it: its [`RenderScene`] on `field` (the medium's, from
-    /// [`build_field`], or a bake of it), with `step = { auto = ... }` resolved by pilot
-    /// rays in the backend's precision (f32 for the GPU, but f64 for an OPD in waves),
-    /// for an `[optics]` output to the accuracy it asks in its own unit.
+    /// backend renders it: [`prepare_scene`] with pilots in the backend's precision.
     pub fn prepare(
         &self,
         scene: &Scene,
@@ -337,38 +401,8 @@ impl Renderer {
         label: &str,
         field: Option<Arc<dyn IndexField>>,
     ) -> anyhow::Result<Prepared> {
-        let mut rs = RenderScene::new(scene, scene_dir, field).with_context(|| label.to_owned())?;
-        let metric = output_metric(scene, &rs);
-        // The GPU's pilots trace in f32 as it does, but for an OPD in waves: a CPU f32
-        // trace holds n itself in f32 (1e-7 of ~1.0003: a fifth of a wave over a metre),
-        // where the GPU sums n - n_amb, so its OPD is as good as f64's.
-        let waves = matches!(metric, Some((grin_trace::auto::Metric::Waves { .. }, _)));
-        // The shadowgraph's pilots are its beam's rays: resolved on a scene whose camera
-        // is the beam's, then applied to this one.
-        let beam_camera = match &metric {
-            Some((grin_trace::auto::Metric::Screen(beam), _)) => Some(beam.camera()),
-            _ => None,
-        };
-        let mut pilot_rs = beam_camera.map(|cam| {
-            let mut p = rs.clone();
-            p.camera = cam;
-            (p.settings.width, p.settings.height) = (cam.width, cam.height);
-            p
-        });
-        let target = pilot_rs.as_mut().unwrap_or(&mut rs);
-        let auto = match self.chosen().0 {
-            Backend::Gpu if !waves => grin_trace::auto::resolve_scene_in::<f32>(target, metric),
-            _ => grin_trace::auto::resolve_scene_in::<f64>(target, metric),
-        };
-        if let (Some(_), Some(a)) = (&pilot_rs, &auto) {
-            grin_trace::auto::apply(&mut rs, &a.settings);
-        }
-        let auto_note = grin_trace::auto::render_pilot_note(pilot_rs.as_ref().unwrap_or(&rs));
-        Ok(Prepared {
-            render_scene: rs,
-            auto,
-            auto_note,
-        })
+        let on_gpu = self.chosen().0 == Backend::Gpu;
+        prepare_scene(scene, scene_dir, label, field, on_gpu)
     }
 
     /// Render `scene` (read from `scene_dir`; `label` names it in errors, usually its
@@ -667,9 +701,16 @@ impl Renderer {
                     warnings.list.push(w);
                 }
                 let cache = self.bake_cache();
-                let field =
-                    grin_gpu::cache::scene_gpu_field(rs, medium, job.scene_dir, cache.as_ref())
-                        .with_context(|| format!("{}: [medium]", job.label))?;
+                let field = match (&rs.medium, medium) {
+                    (Some(m), Some(spec)) => grin_gpu::cache::medium_gpu_grid(
+                        m.field.as_ref(),
+                        spec,
+                        job.scene_dir,
+                        cache.as_ref(),
+                    )
+                    .with_context(|| format!("{}: [medium]", job.label))?,
+                    _ => None,
+                };
                 let renderer =
                     grin_gpu::GpuRenderer::new_with(&ctx, rs, field.as_ref().map(|f| f.0.device()))
                         .with_context(|| job.label.to_owned())?;

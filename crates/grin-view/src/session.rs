@@ -27,6 +27,7 @@ use anyhow::Context;
 use grin_field::IndexField;
 use grin_field::baked::{BakedField, Interp};
 use grin_gpu::cache::{BakeCache, CacheUse};
+use grin_gpu::field::GpuGrid;
 use grin_gpu::view::DisplayTexture;
 use grin_gpu::{GpuContext, GpuRenderer, ViewImage};
 use grin_render::camera::PinholeCamera;
@@ -154,26 +155,25 @@ struct Gpu<'a> {
     auto: Option<(String, TraceSettings)>,
 }
 
-/// Resolve an `auto` step of `scene` by pilot rays (f32, as the GPU traces), or reuse
-/// `cached` when the step, integrator and pilot count asked are the same.
-fn resolve_auto(scene: &mut RenderScene, cached: &mut Option<(String, TraceSettings)>) {
-    if !matches!(scene.settings.step, grin_scene::StepSpec::Auto(_)) {
-        return;
-    }
+/// Resolve `scene`'s `auto` step (`applied`: the scene file as viewed) as `grin render
+/// --backend gpu` does ([`grin_pipeline::resolve_auto`]), or reuse `cached` when the step,
+/// integrator and pilot count asked are the same (only the camera or the image moved).
+fn resolve_auto(
+    scene: &mut RenderScene,
+    applied: &Scene,
+    cached: &mut Option<(String, TraceSettings)>,
+) {
     let s = &scene.settings;
     let key = json(&(s.step, s.integrator, s.pilot_rays));
-    if let Some((k, t)) = cached.as_ref()
+    if matches!(s.step, grin_scene::StepSpec::Auto(_))
+        && let Some((k, t)) = cached.as_ref()
         && *k == key
     {
         grin_trace::auto::apply(scene, t);
         return;
     }
-    if let Some(m) = &mut scene.medium {
-        m.trace = TraceSettings::from_render(&scene.settings);
-    }
-    if let Some(c) = grin_trace::auto::resolve_scene::<f32>(scene) {
-        *cached = Some((key, c.settings));
-    }
+    let (choice, _) = grin_pipeline::resolve_auto(scene, applied, true);
+    *cached = choice.map(|c| (key, c.settings));
 }
 
 /// The viewer's scene on the GPU.
@@ -425,7 +425,7 @@ impl<'a> Session<'a> {
             }
             g.scene.camera = camera;
             g.scene.settings = applied.render.clone();
-            resolve_auto(&mut g.scene, &mut g.auto);
+            resolve_auto(&mut g.scene, &applied, &mut g.auto);
             if !g.renderer.retarget(&g.scene, first_sample, spp_total)? {
                 // Other pipelines (integrator, step policy, flags) or a bigger image.
                 let mut renderer = GpuRenderer::new(self.ctx, &g.scene, g.grid.as_deref())?;
@@ -440,12 +440,15 @@ impl<'a> Session<'a> {
                 Some(e) => (Some(e.field.clone()), e.grid.clone()),
                 None => (None, None),
             };
-            let mut scene = RenderScene::new(&applied, &self.dir, field)
-                .with_context(|| self.path.display().to_string())?;
+            let label = self.path.display().to_string();
+            let prepared = grin_pipeline::prepare_scene(&applied, &self.dir, &label, field, true)?;
+            let mut scene = prepared.render_scene;
             // A background plate stays where the scene file's camera sees it.
             scene.pin_plate_to(&self.scene.camera);
-            let mut auto = None;
-            resolve_auto(&mut scene, &mut auto);
+            let auto = prepared.auto.map(|c| {
+                let s = &scene.settings;
+                (json(&(s.step, s.integrator, s.pilot_rays)), c.settings)
+            });
             let mut renderer = GpuRenderer::new(self.ctx, &scene, grid.as_deref())?;
             renderer.retarget(&scene, first_sample, spp_total)?;
             self.warnings.extend(renderer.warnings().iter().cloned());
@@ -581,36 +584,27 @@ impl<'a> Session<'a> {
         playing: bool,
         interp: Option<Interpolation>,
     ) -> anyhow::Result<Option<FieldEntry>> {
-        let Some(spec) = &applied.medium else {
+        let label = self.path.display().to_string();
+        let (Some(spec), Some(field)) = (
+            &applied.medium,
+            grin_pipeline::build_field(applied, &self.dir, &label)?,
+        ) else {
             return Ok(None);
         };
         let key = json(&(&applied.medium, interp, playing));
-        let field = grin_field::build_field(spec, &self.dir)
-            .with_context(|| format!("{}: [medium]", self.path.display()))?;
         // The field's own warnings (a VDB grid its bounds cut, an unproven positivity)
         // come first in the panel, then the bake's.
         let mut warnings = field.warnings();
-        if field.as_baked().is_some() || field.as_sparse().is_some() {
-            return Ok(Some(FieldEntry {
-                key,
-                field,
-                grid: None,
-                preview: OnceLock::new(),
-                warnings,
-                cache: None,
-            }));
-        }
-        let (grid, bake_warnings, cache) = if playing {
+        let file = field.as_baked().is_some() || field.as_sparse().is_some();
+        let (grid, cache) = if playing && !file {
             let (g, report) =
                 grin_gpu::field::bake_for_gpu_with_report(field.as_ref(), PLAYBACK_BAKE_RESOLUTION)
-                    .map_err(|e| {
-                        anyhow::anyhow!("{}: baking the field: {e}", self.path.display())
-                    })?;
-            let mut w: Vec<String> = grin_gpu::field::bake_warning(&report).into_iter().collect();
-            w.push(format!(
+                    .map_err(|e| anyhow::anyhow!("{label}: baking the field: {e}"))?;
+            warnings.extend(grin_gpu::field::bake_warning(&report));
+            warnings.push(format!(
                 "playing: the field is baked at {PLAYBACK_BAKE_RESOLUTION} nodes per axis; pause for the full bake"
             ));
-            (g, w, None)
+            (Some(GpuGrid::Dense(g)), None)
         } else {
             // The disk cache holds the scene file's own field (its own t); time steps of
             // an animation are baked in memory only.
@@ -620,40 +614,34 @@ impl<'a> Session<'a> {
                 FieldSpec::Expr { t, .. } => Some(*t) == file_t,
                 _ => true,
             };
-            let cache_key = match (&self.cache, own_time) {
-                (Some(_), true) => Some(BakeCache::key(spec, &self.dir)?),
-                _ => None,
-            };
-            let cache = self.cache.as_ref().zip(cache_key.as_deref());
-            let (g, w, used) = grin_gpu::cache::gpu_bake_cached(field.as_ref(), cache)?;
-            match g {
-                grin_gpu::field::GpuGrid::Dense(g) => (g, w, Some(used)),
-                // A sparse grid (a mostly ambient medium no dense grid within the GPU's
-                // cap resolves) is marched as the field itself: the renderer uploads it.
-                grin_gpu::field::GpuGrid::Sparse(sparse) => {
+            let cache = self.cache.as_ref().filter(|_| own_time);
+            match grin_gpu::cache::medium_gpu_grid(field.as_ref(), spec, &self.dir, cache)? {
+                Some((g, w, used)) => {
                     warnings.extend(w);
-                    return Ok(Some(FieldEntry {
-                        key,
-                        field: Arc::new(sparse),
-                        grid: None,
-                        preview: OnceLock::new(),
-                        warnings,
-                        cache: Some(used),
-                    }));
+                    (Some(g), Some(used))
                 }
+                // A baked file, marched as it is.
+                None => (None, None),
             }
         };
-        let grid = match interp {
-            None => grid,
-            Some(Interpolation::Trilinear) => grid.with_interp(Interp::Trilinear),
-            Some(Interpolation::Tricubic) => grid.with_interp(Interp::Tricubic),
+        let (field, grid) = match grid {
+            None => (field, None),
+            // A sparse grid (a mostly ambient medium no dense grid within the GPU's cap
+            // resolves) is marched as the field itself: the renderer uploads it.
+            Some(GpuGrid::Sparse(sparse)) => (Arc::new(sparse) as Arc<dyn IndexField>, None),
+            Some(GpuGrid::Dense(grid)) => {
+                let grid = match interp {
+                    None => grid,
+                    Some(Interpolation::Trilinear) => grid.with_interp(Interp::Trilinear),
+                    Some(Interpolation::Tricubic) => grid.with_interp(Interp::Tricubic),
+                };
+                (field, Some(Arc::new(grid)))
+            }
         };
-        let grid = Arc::new(grid);
-        warnings.extend(bake_warnings);
         Ok(Some(FieldEntry {
             key,
             field,
-            grid: Some(grid),
+            grid,
             preview: OnceLock::new(),
             warnings,
             cache,

@@ -501,3 +501,57 @@ spp = 1
         s.warnings
     );
 }
+
+/// The viewer resolves `step = { auto }` as `grin render --backend gpu` does: the same
+/// pilots in the same precision, held to an `[optics]` output's accuracy in its own unit
+/// (here pixels of displacement), so both trace the frame with the same integrator and
+/// step.
+#[test]
+fn the_auto_step_is_the_one_grin_render_chooses() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (w, h) = (64, 32);
+    let auto = SCENE
+        .replace(
+            "width = 48\nheight = 32",
+            &format!("width = {w}\nheight = {h}"),
+        )
+        .replace("integrator = \"rk4\"\nstep = { fixed = 0.02 }\n", "");
+    let optics = "\n[optics]\nmode = \"displacement\"\nplane = { point = [0.0, 0.0, 1.5], \
+                  normal = [0.0, 0.0, -1.0] }\naccuracy = 0.00001\n";
+    let with_optics = scene_file(dir.path(), &format!("{auto}{optics}"));
+    let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
+    let mut s = Session::new(&ctx, &with_optics, None).expect("session");
+    let v = ViewSettings::from_scene(s.scene());
+    let viewed = render_only(&mut s, &v, w, h).method;
+
+    // grin render's choice for the same view of the same file, and for the file without
+    // its [optics] table (the exit direction to 1e-4 rad, what the viewer chose before).
+    let chosen = |scene: &grin_scene::Scene| {
+        let applied = v.apply(scene, w, h);
+        let field = grin_pipeline::build_field(&applied, dir.path(), "scene").expect("field");
+        let renderer = grin_pipeline::Renderer::new(grin_pipeline::Backend::Gpu, false);
+        let p = renderer
+            .prepare(&applied, dir.path(), "scene", field)
+            .expect("prepared");
+        let unit = p.auto.as_ref().expect("pilots ran").unit;
+        (
+            grin_view::session::method_name(&p.render_scene.settings),
+            unit,
+        )
+    };
+    let scene = s.scene().clone();
+    let (rendered, unit) = chosen(&scene);
+    assert_eq!(unit, "px");
+    assert_eq!(
+        viewed, rendered,
+        "the viewer traces what grin render traces"
+    );
+    let mut bare = scene;
+    bare.optics = None;
+    let (radians, unit) = chosen(&bare);
+    assert_eq!(unit, "rad");
+    assert_ne!(
+        rendered, radians,
+        "the [optics] accuracy changes the choice (else this test shows nothing)"
+    );
+}
