@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use glam::DVec3;
-use grin_field::{Bounds, FieldSample, IndexField};
+use grin_field::{Bounds, IndexField};
 use grin_scene::{BoundsSpec, FieldSpec, MediumSpec, Scene, StepSpec, parse_scene};
 
 use super::materials::refract_dir;
@@ -17,36 +17,9 @@ use super::{RenderScene, render_cpu};
 use crate::trace::RayStatus;
 use grin_render::image::Frame;
 
-/// n = `n` inside the bounds: the test's own field, independent of grin-field's profiles.
-#[derive(Debug)]
-struct ConstantField {
-    bounds: Bounds,
-    n: f64,
-    ambient: f64,
-}
-
-impl IndexField for ConstantField {
-    fn sample(&self, _p: DVec3) -> FieldSample<f64> {
-        FieldSample {
-            n: self.n,
-            grad_n: DVec3::ZERO,
-        }
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
-    }
-    fn n_range(&self) -> (f64, f64) {
-        (self.n, self.n)
-    }
-    fn max_grad_n(&self) -> f64 {
-        0.0
-    }
-    fn describe(&self) -> String {
-        format!("constant n={}", self.n)
-    }
+/// n = `n` inside `bounds`, 1 outside.
+fn constant(bounds: Bounds, n: f64) -> Arc<dyn IndexField> {
+    Arc::new(grin_field::analytic::Uniform::new(bounds, 1.0, n).expect("n > 0"))
 }
 
 const PAPER_LIKE: &str = r#"
@@ -128,11 +101,7 @@ fn uniform_medium_at_ambient_index_is_invisible() {
             ambient_index: 1.0.into(),
             field: FieldSpec::Uniform { n: 1.0 },
         });
-        let field: Arc<dyn IndexField> = Arc::new(ConstantField {
-            bounds,
-            n: 1.0,
-            ambient: 1.0,
-        });
+        let field: Arc<dyn IndexField> = constant(bounds, 1.0);
         let with = render(&with_medium, Some(field));
         let d = max_beauty_diff(&with, &without);
         // Identical up to the f64 rounding of the stepped straight line (then f32 output).
@@ -179,14 +148,13 @@ fn constant_n_ball_matches_snell() {
         ambient_index: 1.0.into(),
         field: FieldSpec::Uniform { n },
     });
-    let field: Arc<dyn IndexField> = Arc::new(ConstantField {
-        bounds: Bounds::Sphere {
+    let field: Arc<dyn IndexField> = constant(
+        Bounds::Sphere {
             center: c,
             radius: r,
         },
         n,
-        ambient: 1.0,
-    });
+    );
     let rs = RenderScene::new(&s, Path::new("."), Some(field)).expect("scene");
     let frame = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("render");
     let mut checked = 0;
@@ -285,11 +253,7 @@ fn step_cap_gives_max_steps_status_and_bad_settings_are_rejected() {
         center: DVec3::new(0.0, 0.5, 0.0),
         radius: 0.6,
     };
-    let field: Arc<dyn IndexField> = Arc::new(ConstantField {
-        bounds,
-        n: 1.2,
-        ambient: 1.0,
-    });
+    let field: Arc<dyn IndexField> = constant(bounds, 1.2);
     let f = render(&s, Some(field.clone()));
     let capped = f.pixels.iter().filter(|p| p.status == 3.0).count();
     assert!(capped > 20);
@@ -344,14 +308,13 @@ width = 3
 height = 3
 "#;
     let n = 1.5;
-    let field: Arc<dyn IndexField> = Arc::new(ConstantField {
-        bounds: Bounds::Sphere {
+    let field: Arc<dyn IndexField> = constant(
+        Bounds::Sphere {
             center: DVec3::new(0.0, 1.5, 0.0),
             radius: 0.5,
         },
         n,
-        ambient: 1.0,
-    });
+    );
     let mut s = scene(text);
     let straight = render(&s, Some(field.clone())).pixels[4].rgb[0];
     s.render.bend_shadow_rays = true;
@@ -379,11 +342,7 @@ fn jitter_moves_steps_but_not_the_refracted_rays() {
         center: DVec3::new(0.0, 0.5, 0.0),
         radius: 0.6,
     };
-    let field: Arc<dyn IndexField> = Arc::new(ConstantField {
-        bounds,
-        n: 1.2,
-        ambient: 1.0,
-    });
+    let field: Arc<dyn IndexField> = constant(bounds, 1.2);
     s.render.jitter = false;
     let plain = render(&s, Some(field.clone()));
     s.render.jitter = true;
