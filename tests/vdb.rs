@@ -1,6 +1,8 @@
 //! End-to-end tests of the VDB pipeline: `grin info file.vdb`, `grin bake` of a
 //! `kind = "vdb"` scene (and its clear refusals of bad input), and a ray traced through a
 //! VDB-sourced field against the analytic field the VDB sampled.
+//!
+//! Over 600 lines: one concept, the VDB pipeline end to end, through the binary.
 
 mod common;
 use common::rng::Rng;

@@ -1,6 +1,9 @@
 //! What `grin bench accuracy` writes: accuracy.csv (every run), orders.csv, summary.md
 //! (the method to use per error decade, the paper's method beside it, measured orders)
 //! and one chart per case and precision (SVG and PNG), all committed together.
+//!
+//! Over 600 lines: one concept, the sweep's files, made from one set of runs and committed
+//! together.
 
 use std::fmt::Write as _;
 use std::path::Path;

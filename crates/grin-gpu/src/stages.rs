@@ -5,6 +5,8 @@
 //! and a result struct of its own ([`Stage`]), with the frame parameters and field
 //! texture the renderer would use for the same scene. A test instrument (tests/stages.rs
 //! holds each stage against its CPU twin): it compiles one small pipeline per call.
+//!
+//! Over 600 lines: one concept, one runner and one I/O struct per stage, each beside the next.
 
 use bytemuck::{Pod, Zeroable};
 use grin_render::scene::RenderScene;

@@ -29,6 +29,9 @@
 //!   exactly when its JSON exists. A run skips complete samples (a retried or resumed job
 //!   redoes only what is missing); `manifest.jsonl` holds every sample's JSON, a line each,
 //!   in index order.
+//!
+//! Over 600 lines: one concept, a sample of any kind: the kinds share the medium, camera,
+//! background and files.
 
 use std::path::{Path, PathBuf};
 

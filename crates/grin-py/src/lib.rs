@@ -3,6 +3,9 @@
 //! channels are the EXR's, bit for bit; ray arrays trace through the same plan as
 //! `grin trace`; fields bake and read as `grin bake` writes them. The GIL is released
 //! while grin works; errors are `grin.GrinError` with grin's own message.
+//!
+//! Over 600 lines: one concept, the module's bindings, each a thin call into grin-pipeline
+//! or grin-field.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

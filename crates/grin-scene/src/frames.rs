@@ -1,5 +1,7 @@
 //! Frame sequences: frame tokens in file paths (`fluid_####.vdb`, `fluid_%04d.vdb`,
 //! `fluid_$F4.vdb`) and the scene of one frame ([`Scene::at_frame`]).
+//!
+//! Over 600 lines: one concept, frame tokens and the scene of one frame; half of it is their tests.
 
 use crate::{FieldSpec, Scene};
 

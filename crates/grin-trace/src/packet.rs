@@ -11,6 +11,9 @@
 //! length by the cubic Hermite rule, the ray's own error estimate, the near-miss check),
 //! so a table traced in packets is bit for bit the table traced ray by ray (tested). A
 //! ray that leaves a packet hands its lane to the next ray of the queue.
+//!
+//! Over 600 lines: one concept, the packet march: lanes, the step in them and the rays handed in
+//! and out.
 
 use std::array;
 use std::ops::{Add, Div, Mul, Neg, Sub};
