@@ -31,7 +31,7 @@ use grin_field::bake::{self, BakeOptions};
 use grin_field::baked::{Interp, Storage};
 use grin_field::sparse::SparseField;
 use grin_field::sparse::bake::{SparseOptions, SparseReport, bake_sparse};
-use grin_gpu::SharedGrid;
+use grin_gpu::GpuGrid;
 use grin_scene::MediumSpec;
 
 /// How a ray leaves the medium (what every method is measured on).
@@ -71,7 +71,7 @@ pub struct Case {
     /// Length scale errors are divided by (the bounds' radius).
     pub scale: f64,
     /// `field` itself where it is a baked grid (dense or sparse): the GPU column traces it.
-    pub grid: Option<SharedGrid>,
+    pub grid: Option<GpuGrid>,
     /// The bake's relative error in n (measured by the bake) where `grid` is one.
     pub bake_error: Option<f64>,
 }
@@ -447,7 +447,7 @@ fn baked_with_error(
         "{}-baked{resolution}-{interp_name}-{storage_name}",
         base.name
     );
-    let grid = SharedGrid::from(Arc::new(field));
+    let grid = GpuGrid::from(Arc::new(field));
     let error = report.relative_error;
     Ok((grid_case(base, name, grid, error), error))
 }
@@ -457,7 +457,7 @@ fn baked_with_error(
 pub fn sparse(base: &Case, error: f64) -> anyhow::Result<Case> {
     let (field, report) = sparse_at(base.source.as_ref(), error, &base.name)?;
     let name = format!("{}-sparse-{}", base.name, report.storage.name());
-    let grid = SharedGrid::from(Arc::new(field));
+    let grid = GpuGrid::from(Arc::new(field));
     Ok(grid_case(base, name, grid, report.relative_error))
 }
 
@@ -478,7 +478,7 @@ pub fn sparse_at(
 
 /// A case tracing `grid` (baked from `base`'s source to relative error `error`) with
 /// `base`'s rays and reference.
-fn grid_case(base: &Case, name: String, grid: SharedGrid, error: f64) -> Case {
+fn grid_case(base: &Case, name: String, grid: GpuGrid, error: f64) -> Case {
     Case {
         name,
         field: grid.field(),

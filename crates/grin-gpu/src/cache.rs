@@ -18,6 +18,7 @@
 //! again and replaces the entry, with a warning saying why.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use grin_field::IndexField;
 use grin_scene::{FieldSpec, MediumSpec};
@@ -164,14 +165,14 @@ impl BakeCache {
         }
         // Either layout; each parser checks the checksum and every count itself.
         let baked = if version == grin_field::sparse::file::VERSION {
-            GpuGrid::Sparse(
+            GpuGrid::Sparse(Arc::new(
                 grin_field::sparse::file::from_bytes(&bytes, &name)
                     .map_err(|e| bad(e.to_string()))?,
-            )
+            ))
         } else {
-            GpuGrid::Dense(
+            GpuGrid::Dense(Arc::new(
                 grin_field::grinf::from_bytes(&bytes, &name).map_err(|e| bad(e.to_string()))?,
-            )
+            ))
         };
         // Touch for least-recently-used eviction.
         let _ = std::fs::File::options()
@@ -275,11 +276,11 @@ pub fn bake_for_gpu_grid(field: &dyn IndexField) -> Result<(GpuGrid, Vec<String>
             && (sparse.pool().len() + sparse.table().len()) as u64 * FIELD_TEXEL_BYTES
                 <= grin_field::bake::device::GPU_BAKE_MAX_BYTES
         {
-            return Ok((GpuGrid::Sparse(sparse), Vec::new()));
+            return Ok((GpuGrid::Sparse(Arc::new(sparse)), Vec::new()));
         }
     }
     Ok((
-        GpuGrid::Dense(baked),
+        GpuGrid::Dense(Arc::new(baked)),
         bake_warning(&report).into_iter().collect(),
     ))
 }
@@ -374,11 +375,11 @@ mod tests {
             error_points: 50,
             ..Default::default()
         };
-        GpuGrid::Dense(
+        GpuGrid::Dense(Arc::new(
             bake(field, &opts, &|_: &str, _: u64, _: u64| {})
                 .expect("bake")
                 .0,
-        )
+        ))
     }
 
     /// Two writers storing different bakes under one key while a reader reads it: every

@@ -232,12 +232,14 @@ impl<'a> From<&'a SparseField> for DeviceField<'a> {
     }
 }
 
-/// A grid baked for the GPU: one dense box, or (where a dense grid within the GPU's cap
-/// misses the error budget and a sparse bake meets it) a sparse one.
+/// A grid for the GPU, shared with its caller: one dense box, or (where a dense grid within
+/// the GPU's cap misses the error budget and a sparse bake meets it) a sparse one. What a
+/// GPU bake gives (the bake cache's entries) and what a
+/// [`GpuRayTracer`](crate::GpuRayTracer) marches.
 #[derive(Debug, Clone)]
 pub enum GpuGrid {
-    Dense(BakedField),
-    Sparse(SparseField),
+    Dense(Arc<BakedField>),
+    Sparse(Arc<SparseField>),
 }
 
 impl GpuGrid {
@@ -248,64 +250,39 @@ impl GpuGrid {
             GpuGrid::Sparse(s) => DeviceField::Sparse(s),
         }
     }
-    /// The grid as a field.
-    pub fn field(&self) -> &dyn grin_field::IndexField {
-        match self {
-            GpuGrid::Dense(b) => b,
-            GpuGrid::Sparse(s) => s,
-        }
-    }
-}
-
-/// A grid shared with its caller, dense or sparse: what a
-/// [`GpuRayTracer`](crate::GpuRayTracer) marches.
-#[derive(Debug, Clone)]
-pub enum SharedGrid {
-    Dense(Arc<BakedField>),
-    Sparse(Arc<SparseField>),
-}
-
-impl SharedGrid {
-    /// The grid to upload.
-    pub fn device(&self) -> DeviceField<'_> {
-        match self {
-            SharedGrid::Dense(b) => DeviceField::Dense(b),
-            SharedGrid::Sparse(s) => DeviceField::Sparse(s),
-        }
-    }
     /// The grid as a shared field.
     pub fn field(&self) -> Arc<dyn IndexField> {
         match self {
-            SharedGrid::Dense(b) => Arc::clone(b) as Arc<dyn IndexField>,
-            SharedGrid::Sparse(s) => Arc::clone(s) as Arc<dyn IndexField>,
+            GpuGrid::Dense(b) => Arc::clone(b) as Arc<dyn IndexField>,
+            GpuGrid::Sparse(s) => Arc::clone(s) as Arc<dyn IndexField>,
         }
     }
     /// Bytes of the grid's voxels (and, sparse, its table and brick records) in memory.
     pub fn data_bytes(&self) -> usize {
         match self {
-            SharedGrid::Dense(b) => b.data_bytes(),
-            SharedGrid::Sparse(s) => s.memory_bytes(),
+            GpuGrid::Dense(b) => b.data_bytes(),
+            GpuGrid::Sparse(s) => s.memory_bytes(),
         }
     }
     /// Whether both are the same grid (not a copy).
-    pub fn same(&self, other: &SharedGrid) -> bool {
+    pub fn same(&self, other: &GpuGrid) -> bool {
         match (self, other) {
-            (SharedGrid::Dense(a), SharedGrid::Dense(b)) => Arc::ptr_eq(a, b),
-            (SharedGrid::Sparse(a), SharedGrid::Sparse(b)) => Arc::ptr_eq(a, b),
+            (GpuGrid::Dense(a), GpuGrid::Dense(b)) => Arc::ptr_eq(a, b),
+            (GpuGrid::Sparse(a), GpuGrid::Sparse(b)) => Arc::ptr_eq(a, b),
             _ => false,
         }
     }
 }
 
-impl From<Arc<BakedField>> for SharedGrid {
+impl From<Arc<BakedField>> for GpuGrid {
     fn from(f: Arc<BakedField>) -> Self {
-        SharedGrid::Dense(f)
+        GpuGrid::Dense(f)
     }
 }
 
-impl From<Arc<SparseField>> for SharedGrid {
+impl From<Arc<SparseField>> for GpuGrid {
     fn from(f: Arc<SparseField>) -> Self {
-        SharedGrid::Sparse(f)
+        GpuGrid::Sparse(f)
     }
 }
 

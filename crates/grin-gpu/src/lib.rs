@@ -40,7 +40,7 @@ pub mod view;
 
 pub use device::{GpuContext, describe_adapter};
 pub use error::GpuError;
-pub use field::SharedGrid;
+pub use field::GpuGrid;
 pub use march::GpuRayTracer;
 pub use render::GpuRenderer;
 pub use view::ViewImage;

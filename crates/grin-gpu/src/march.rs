@@ -30,7 +30,7 @@ use grin_render::settings::TraceSettings;
 use grin_render::sky::SkyModel;
 use grin_scene::RenderSettings;
 
-use crate::field::SharedGrid;
+use crate::field::GpuGrid;
 use crate::gpu_data::{
     FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC, FrameParams,
 };
@@ -42,7 +42,7 @@ use crate::{GpuContext, GpuError};
 /// Traces rays through one baked field (dense or sparse) on the GPU.
 pub struct GpuRayTracer<'a> {
     kit: StageKit<'a>,
-    field: SharedGrid,
+    field: GpuGrid,
     /// The parameters as the field's upload left them (grid, macro cells, flags).
     uploaded: FrameParams,
     pipelines: HashMap<Vec<u64>, StagePipeline<stages::March>>,
@@ -61,7 +61,7 @@ impl std::fmt::Debug for GpuRayTracer<'_> {
 }
 
 /// A scene of nothing but `field`, marched with `trace` (no jitter).
-fn ray_scene(field: &SharedGrid, trace: &TraceSettings) -> Result<RenderScene, GpuError> {
+fn ray_scene(field: &GpuGrid, trace: &TraceSettings) -> Result<RenderScene, GpuError> {
     let settings = RenderSettings {
         width: 1,
         height: 1,
@@ -109,7 +109,7 @@ fn ray_scene(field: &SharedGrid, trace: &TraceSettings) -> Result<RenderScene, G
 
 impl<'a> GpuRayTracer<'a> {
     /// Upload `field` (its own interpolation and storage, as a render would).
-    pub fn new(ctx: &'a GpuContext, field: impl Into<SharedGrid>) -> Result<Self, GpuError> {
+    pub fn new(ctx: &'a GpuContext, field: impl Into<GpuGrid>) -> Result<Self, GpuError> {
         let field = field.into();
         let scene = ray_scene(
             &field,
@@ -129,7 +129,7 @@ impl<'a> GpuRayTracer<'a> {
 
     /// Trace through `field` from now on (uploaded unless it is the current one); the
     /// compiled pipelines are kept.
-    pub fn set_field(&mut self, field: impl Into<SharedGrid>) -> Result<(), GpuError> {
+    pub fn set_field(&mut self, field: impl Into<GpuGrid>) -> Result<(), GpuError> {
         let field = field.into();
         if field.same(&self.field) {
             return Ok(());

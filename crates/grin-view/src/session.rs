@@ -604,7 +604,7 @@ impl<'a> Session<'a> {
             warnings.push(format!(
                 "playing: the field is baked at {PLAYBACK_BAKE_RESOLUTION} nodes per axis; pause for the full bake"
             ));
-            (Some(GpuGrid::Dense(g)), None)
+            (Some(GpuGrid::Dense(Arc::new(g))), None)
         } else {
             // The disk cache holds the scene file's own field (its own t); time steps of
             // an animation are baked in memory only.
@@ -628,14 +628,18 @@ impl<'a> Session<'a> {
             None => (field, None),
             // A sparse grid (a mostly ambient medium no dense grid within the GPU's cap
             // resolves) is marched as the field itself: the renderer uploads it.
-            Some(GpuGrid::Sparse(sparse)) => (Arc::new(sparse) as Arc<dyn IndexField>, None),
+            Some(GpuGrid::Sparse(sparse)) => (sparse as Arc<dyn IndexField>, None),
             Some(GpuGrid::Dense(grid)) => {
                 let grid = match interp {
                     None => grid,
-                    Some(Interpolation::Trilinear) => grid.with_interp(Interp::Trilinear),
-                    Some(Interpolation::Tricubic) => grid.with_interp(Interp::Tricubic),
+                    Some(Interpolation::Trilinear) => {
+                        Arc::new(Arc::unwrap_or_clone(grid).with_interp(Interp::Trilinear))
+                    }
+                    Some(Interpolation::Tricubic) => {
+                        Arc::new(Arc::unwrap_or_clone(grid).with_interp(Interp::Tricubic))
+                    }
                 };
-                (field, Some(Arc::new(grid)))
+                (field, Some(grid))
             }
         };
         Ok(Some(FieldEntry {
