@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use crate::gpu_data::*;
+use crate::pipelines::bind_entries;
 use crate::render::{GpuRenderer, WORKGROUP};
 use crate::{GpuError, shaders};
 
@@ -51,20 +52,11 @@ impl GpuRenderer<'_> {
                 let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("bench bindings"),
                     layout: &pipeline.get_bind_group_layout(0),
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: params_buffer.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::TextureView(&field_view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 6,
-                            resource: self.out_buffer.as_entire_binding(),
-                        },
-                    ],
+                    entries: &bind_entries([
+                        (0, params_buffer.as_entire_binding()),
+                        (3, wgpu::BindingResource::TextureView(&field_view)),
+                        (6, self.out_buffer.as_entire_binding()),
+                    ]),
                 });
                 (pipeline, bind_group, params_buffer)
             })?;

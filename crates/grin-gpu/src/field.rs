@@ -44,6 +44,14 @@ pub struct FieldTextures {
     pub dims: [u32; 3],
 }
 
+impl FieldTextures {
+    /// Views of the field and the macro-cell textures, to bind.
+    pub fn views(&self) -> (wgpu::TextureView, wgpu::TextureView) {
+        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+        (view(&self.field), view(&self.macro_cells))
+    }
+}
+
 /// Whether `baked` fits the device as it is: its node counts within
 /// `max_texture_dimension_3d` and its f32 texels within `max_buffer_size`. `Err` says
 /// what is over which limit.

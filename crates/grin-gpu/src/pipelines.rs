@@ -3,8 +3,6 @@
 
 use crate::gpu_data::*;
 
-/// The render kernels' bindings (shaders/shared/bindings.wgsl), one layout for both
-/// passes.
 /// A compute-stage storage buffer binding (`read_only` or read-write).
 pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
@@ -19,6 +17,15 @@ pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLay
     }
 }
 
+/// Bind group entries, each `(binding, resource)`.
+pub(crate) fn bind_entries<'a, const N: usize>(
+    entries: [(u32, wgpu::BindingResource<'a>); N],
+) -> [wgpu::BindGroupEntry<'a>; N] {
+    entries.map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
+}
+
+/// The render kernels' bindings (shaders/shared/bindings.wgsl), one layout for both
+/// passes.
 pub(crate) fn render_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
     let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
         binding,

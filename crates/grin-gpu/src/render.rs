@@ -17,7 +17,7 @@ use crate::field::{
 };
 use crate::gpu_data::*;
 use crate::pack::{copy_uploaded, env_texels, env_texture, frame_params, scene_arrays};
-use crate::pipelines::{pipeline_constants, render_layout_entries};
+use crate::pipelines::{bind_entries, pipeline_constants, render_layout_entries};
 use crate::view::{ViewImage, ViewStats};
 use crate::{GpuContext, GpuError, specialize};
 
@@ -387,54 +387,22 @@ impl<'a> GpuRenderer<'a> {
                 usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            let field_view = field
-                .field
-                .create_view(&wgpu::TextureViewDescriptor::default());
-            let macro_view = field
-                .macro_cells
-                .create_view(&wgpu::TextureViewDescriptor::default());
+            let (field_view, macro_view) = field.views();
             let env_view = env_tex.create_view(&wgpu::TextureViewDescriptor::default());
             let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("render bindings"),
                 layout: &bind_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: params_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: objects_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: lights_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: wgpu::BindingResource::TextureView(&field_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: wgpu::BindingResource::TextureView(&macro_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: wgpu::BindingResource::TextureView(&env_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 6,
-                        resource: out_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 7,
-                        resource: deferred.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 8,
-                        resource: deferred_count.as_entire_binding(),
-                    },
-                ],
+                entries: &bind_entries([
+                    (0, params_buffer.as_entire_binding()),
+                    (1, objects_buffer.as_entire_binding()),
+                    (2, lights_buffer.as_entire_binding()),
+                    (3, wgpu::BindingResource::TextureView(&field_view)),
+                    (4, wgpu::BindingResource::TextureView(&macro_view)),
+                    (5, wgpu::BindingResource::TextureView(&env_view)),
+                    (6, out_buffer.as_entire_binding()),
+                    (7, deferred.as_entire_binding()),
+                    (8, deferred_count.as_entire_binding()),
+                ]),
             });
             GpuRenderer {
                 ctx,

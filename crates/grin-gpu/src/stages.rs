@@ -17,7 +17,7 @@ use std::time::Instant;
 use crate::field::{DeviceField, FieldTextures, upload};
 use crate::gpu_data::{FrameParams, PASS_ALL};
 use crate::pack::{env_texels, env_texture, frame_params, scene_arrays};
-use crate::pipelines::{pipeline_constants, render_layout_entries};
+use crate::pipelines::{bind_entries, pipeline_constants, render_layout_entries};
 use crate::render::{output_buffers, read_buffer};
 use crate::{GpuContext, GpuError, specialize};
 
@@ -448,12 +448,7 @@ impl<'a> StageKit<'a> {
         let frame = ctx.scoped("uploading a scene for the marcher stages", || {
             use wgpu::util::DeviceExt;
             let device = &ctx.device;
-            let field_view = field
-                .field
-                .create_view(&wgpu::TextureViewDescriptor::default());
-            let macro_view = field
-                .macro_cells
-                .create_view(&wgpu::TextureViewDescriptor::default());
+            let (field_view, macro_view) = field.views();
             let objects_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("stage objects"),
                 contents: bytemuck::cast_slice(&objects),
@@ -464,28 +459,13 @@ impl<'a> StageKit<'a> {
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("stage frame bindings"),
                 layout: &self.frame_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: self.params_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: objects_buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: wgpu::BindingResource::TextureView(&field_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: wgpu::BindingResource::TextureView(&macro_view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: wgpu::BindingResource::TextureView(&env_view),
-                    },
-                ],
+                entries: &bind_entries([
+                    (0, self.params_buffer.as_entire_binding()),
+                    (1, objects_buffer.as_entire_binding()),
+                    (3, wgpu::BindingResource::TextureView(&field_view)),
+                    (4, wgpu::BindingResource::TextureView(&macro_view)),
+                    (5, wgpu::BindingResource::TextureView(&env_view)),
+                ]),
             });
             FrameBinding {
                 group,
@@ -626,26 +606,21 @@ impl<'a> StageKit<'a> {
             })?;
         let io_group = ctx.scoped("binding a marcher stage", || {
             let spare = self.spare.as_entire_binding();
-            let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+            let carry = carry
+                .as_ref()
+                .map_or(spare.clone(), |b| b.as_entire_binding());
+            let control = control
+                .as_ref()
+                .map_or(spare.clone(), |(b, _)| b.as_entire_binding());
             ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("stage io"),
                 layout: &self.io_layout,
-                entries: &[
-                    entry(0, in_buffer.as_entire_binding()),
-                    entry(1, out_buffer.as_entire_binding()),
-                    entry(
-                        2,
-                        carry
-                            .as_ref()
-                            .map_or(spare.clone(), |b| b.as_entire_binding()),
-                    ),
-                    entry(
-                        3,
-                        control
-                            .as_ref()
-                            .map_or(spare.clone(), |(b, _)| b.as_entire_binding()),
-                    ),
-                ],
+                entries: &bind_entries([
+                    (0, in_buffer.as_entire_binding()),
+                    (1, out_buffer.as_entire_binding()),
+                    (2, carry),
+                    (3, control),
+                ]),
             })
         })?;
         // Buffer uploads queued above run before the kernel: finish them first.

@@ -17,6 +17,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use grin_render::image::Frame;
 
 use crate::gpu_data::PixelOut;
+use crate::pipelines::bind_entries;
 use crate::render::read_buffer;
 use crate::{GpuContext, GpuError, shaders};
 
@@ -343,32 +344,14 @@ impl ViewImage {
         ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("view bindings"),
             layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: band.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: self.accum.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: self.stats.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::TextureView(&self.storage_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: self.shaded.as_entire_binding(),
-                },
-            ],
+            entries: &bind_entries([
+                (0, params.as_entire_binding()),
+                (1, band.as_entire_binding()),
+                (2, self.accum.as_entire_binding()),
+                (3, self.stats.as_entire_binding()),
+                (4, wgpu::BindingResource::TextureView(&self.storage_view)),
+                (5, self.shaded.as_entire_binding()),
+            ]),
         })
     }
 

@@ -43,8 +43,16 @@ pub struct Animation {
     pub fps: f64,
 }
 
-fn default_fps() -> f64 {
-    24.0
+/// `fn name() -> T { value }` for each `name: T = value;`: the functions serde's
+/// `default = "name"` calls.
+macro_rules! defaults {
+    ($($(#[$doc:meta])* $name:ident: $t:ty = $v:expr;)*) => {
+        $($(#[$doc])* fn $name() -> $t { $v })*
+    };
+}
+
+defaults! {
+    default_fps: f64 = 24.0;
 }
 
 /// The camera: a pinhole with a vertical field of view, or a lens described as a
@@ -129,11 +137,9 @@ impl Default for Sensor {
     }
 }
 
-fn default_up() -> [f64; 3] {
-    [0.0, 1.0, 0.0]
-}
-fn default_fov() -> f64 {
-    40.0
+defaults! {
+    default_up: [f64; 3] = [0.0, 1.0, 0.0];
+    default_fov: f64 = 40.0;
 }
 
 /// A scene object: a shape and its material.
@@ -324,14 +330,10 @@ pub enum FieldSpec {
     },
 }
 
-fn default_axis_y() -> Axis {
-    Axis::Y
-}
-fn default_axis_z() -> Axis {
-    Axis::Z
-}
-fn default_eaton_core() -> f64 {
-    0.02
+defaults! {
+    default_axis_y: Axis = Axis::Y;
+    default_axis_z: Axis = Axis::Z;
+    default_eaton_core: f64 = 0.02;
 }
 
 /// A coordinate axis.
@@ -383,23 +385,13 @@ pub struct NoiseSpec {
     pub t: f64,
 }
 
-fn default_noise_type() -> NoiseType {
-    NoiseType::Fbm
-}
-fn default_octaves() -> u32 {
-    4
-}
-fn default_frequency() -> f64 {
-    3.0
-}
-fn default_lacunarity() -> f64 {
-    2.0
-}
-fn default_persistence() -> f64 {
-    0.5
-}
-fn default_envelope() -> f64 {
-    0.25
+defaults! {
+    default_noise_type: NoiseType = NoiseType::Fbm;
+    default_octaves: u32 = 4;
+    default_frequency: f64 = 3.0;
+    default_lacunarity: f64 = 2.0;
+    default_persistence: f64 = 0.5;
+    default_envelope: f64 = 0.25;
 }
 
 /// Which noise.
@@ -448,8 +440,8 @@ pub enum UpAxis {
     Z,
 }
 
-fn default_units() -> f64 {
-    1.0
+defaults! {
+    default_units: f64 = 1.0;
 }
 
 /// How a VDB grid value becomes n.
@@ -479,23 +471,15 @@ pub enum VdbMap {
     },
 }
 
-fn default_t_amb() -> f64 {
-    293.15
-}
-fn default_scale_k() -> f64 {
-    300.0
-}
-/// Standard atmosphere, Pa (docs/physics.md, Air).
-fn default_pressure() -> f64 {
-    101_325.0
-}
-/// Gladstone-Dale constant of air in the visible, m^3/kg (docs/physics.md, Air).
-fn default_k_gd() -> f64 {
-    2.26e-4
-}
-/// Specific gas constant of dry air, J/(kg K).
-fn default_r_specific() -> f64 {
-    287.05
+defaults! {
+    default_t_amb: f64 = 293.15;
+    default_scale_k: f64 = 300.0;
+    /// Standard atmosphere, Pa (docs/physics.md, Air).
+    default_pressure: f64 = 101_325.0;
+    /// Gladstone-Dale constant of air in the visible, m^3/kg (docs/physics.md, Air).
+    default_k_gd: f64 = 2.26e-4;
+    /// Specific gas constant of dry air, J/(kg K).
+    default_r_specific: f64 = 287.05;
 }
 
 /// Policy for NaN/Inf voxels in imported grids.
@@ -550,8 +534,8 @@ pub enum Sky {
     },
 }
 
-fn default_one() -> f64 {
-    1.0
+defaults! {
+    default_one: f64 = 1.0;
 }
 
 impl Default for Sky {
