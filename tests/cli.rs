@@ -102,3 +102,85 @@ fn bench_accuracy_and_stability_quick_smoke() {
     let md = std::fs::read_to_string(stab.join("stability.md")).expect("stability.md");
     assert!(md.contains("turning point below a face"));
 }
+
+/// An output named like one of the run's inputs (the scene, the baked file exported, the
+/// ray table, a plate the scene shows, under its own name or through a link) is refused
+/// before anything is written, naming the input, and the input is left as it was.
+#[test]
+fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
+    let dir = common::TestDir::new();
+    let scene_text = std::fs::read_to_string(scenes().join("plume.toml")).expect("scene");
+    let scene = dir.write("plume.toml", &scene_text);
+    let kept = |path: &std::path::Path, before: &[u8]| {
+        assert_eq!(
+            std::fs::read(path).expect("input"),
+            before,
+            "{}",
+            path.display()
+        );
+    };
+    let needle = "an input of this run: the output would replace it";
+
+    // `grin bake` onto its scene, directly and through a link to it.
+    run_err(grin().arg("bake").arg(&scene).arg("-o").arg(&scene), needle);
+    let link = dir.path("link.grinf");
+    std::os::unix::fs::symlink(&scene, &link).expect("link");
+    let out = run_err(grin().arg("bake").arg(&scene).arg("-o").arg(&link), needle);
+    assert!(stderr(&out).contains("plume.toml"), "{}", stderr(&out));
+    kept(&scene, scene_text.as_bytes());
+
+    // `grin export` onto the file it exports.
+    let baked = dir.path("plume.grinf");
+    let opts = ["--resolution", "12"];
+    run_ok(
+        grin()
+            .arg("bake")
+            .arg(&scene)
+            .args(opts)
+            .arg("-o")
+            .arg(&baked),
+    );
+    let bytes = std::fs::read(&baked).expect("bake");
+    run_err(
+        grin().arg("export").arg(&baked).arg("-o").arg(&baked),
+        needle,
+    );
+    kept(&baked, &bytes);
+
+    // `grin trace` onto its ray table.
+    let rays = dir.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-5,0,0,1\n");
+    let table = std::fs::read(&rays).expect("rays");
+    run_err(
+        grin()
+            .arg("trace")
+            .arg(&scene)
+            .arg("--rays")
+            .arg(&rays)
+            .arg("-o")
+            .arg(&rays),
+        needle,
+    );
+    kept(&rays, &table);
+
+    // `grin render -o street.exr` whose PNG preview would replace the scene's plate.
+    let plate = dir.path("street.png");
+    std::fs::copy(data("images/street.png"), &plate).expect("plate");
+    let image = std::fs::read(&plate).expect("plate");
+    let plated = dir.write(
+        "plated.toml",
+        &scene_text.replace(
+            "gradient = { horizon = [0.95, 0.92, 0.85], zenith = [0.3, 0.5, 0.9], ground = [0.3, 0.28, 0.25] }",
+            "plate = { path = \"street.png\" }",
+        ),
+    );
+    let out = run_err(
+        grin()
+            .args(["render", "--backend", "cpu", "--size", "8x6", "-o"])
+            .arg(dir.path("street.exr"))
+            .arg(&plated),
+        needle,
+    );
+    assert!(stderr(&out).contains("street.png"), "{}", stderr(&out));
+    kept(&plate, &image);
+    assert!(!dir.path("street.exr").exists(), "no EXR is written");
+}

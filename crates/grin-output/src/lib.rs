@@ -13,6 +13,8 @@
 //! - a character device, FIFO or socket (`/dev/stdout`, `/dev/null`, a named pipe): the
 //!   finished bytes are copied into it, nothing is created or replaced;
 //! - a directory, a dangling link, or a path in a missing directory: an error naming it.
+//! - a file the run reads ([`protect_inputs`]: its scene, VDB, plate, ray table), under
+//!   any name: an error naming it, so a mistyped `-o` cannot replace an input.
 //!
 //! [`install_signal_cleanup`] makes SIGINT and SIGTERM remove the staged temporary files
 //! before the process exits; a commit in progress finishes first.
@@ -80,6 +82,16 @@ impl Destination {
         }
         match fs::metadata(path) {
             Ok(meta) if meta.is_file() => {
+                if let Some(input) = input_at(&meta) {
+                    return Err(OutputError::target(
+                        path,
+                        format!(
+                            "it is {}, an input of this run: the output would replace it \
+                             (name another output)",
+                            input.display()
+                        ),
+                    ));
+                }
                 let file = fs::canonicalize(path).map_err(|e| OutputError::io(path, e))?;
                 Ok(Destination::Replace { file })
             }
@@ -138,6 +150,43 @@ impl Destination {
     pub fn is_stream(&self) -> bool {
         !matches!(self, Destination::Replace { .. })
     }
+}
+
+/// The files this run reads, by device and inode (a link or another name for one is the
+/// same file), with the name it was given: no output may replace one.
+static INPUTS: Mutex<Vec<((u64, u64), PathBuf)>> = Mutex::new(Vec::new());
+
+/// Declare files this run reads (a scene, its VDB, a plate, a ray table): an output that
+/// is one of them, under any name, is refused ([`Destination::resolve`] says which), so
+/// `-o` given an input's name cannot destroy it. Paths that are not files are ignored.
+pub fn protect_inputs<P: AsRef<Path>>(paths: impl IntoIterator<Item = P>) {
+    use std::os::unix::fs::MetadataExt;
+    let mut inputs = INPUTS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    for p in paths {
+        let p = p.as_ref();
+        if let Ok(meta) = fs::metadata(p)
+            && meta.is_file()
+        {
+            let id = (meta.dev(), meta.ino());
+            if !inputs.iter().any(|(i, _)| *i == id) {
+                inputs.push((id, p.to_owned()));
+            }
+        }
+    }
+}
+
+/// The declared input that `meta` is, if any.
+fn input_at(meta: &fs::Metadata) -> Option<PathBuf> {
+    use std::os::unix::fs::MetadataExt;
+    let id = (meta.dev(), meta.ino());
+    INPUTS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .iter()
+        .find(|(i, _)| *i == id)
+        .map(|(_, p)| p.clone())
 }
 
 /// Temporary files staged and not yet put in place or removed, for the signal handler.

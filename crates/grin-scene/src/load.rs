@@ -118,3 +118,39 @@ pub fn locate_key(text: &str, key: &str) -> Option<(usize, usize)> {
         .span_of(key)
         .map(|span| line_column(text, span.start))
 }
+
+impl crate::Scene {
+    /// The files the scene reads besides itself, resolved against `scene_dir` (the scene
+    /// file's directory): the medium's VDB or baked file, the sky's map or plate, the
+    /// textures' images. A path with a frame token is the sequence's: take the scene
+    /// [at its frame](crate::Scene::at_frame) for that frame's file.
+    pub fn files(&self, scene_dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+        use crate::{FieldSpec, Material, Sky};
+        let medium = self.medium.as_ref().and_then(|m| match &m.field {
+            FieldSpec::Vdb(v) => Some(v.path.as_str()),
+            FieldSpec::Baked { path, .. } => Some(path.as_str()),
+            _ => None,
+        });
+        let sky = match &self.sky {
+            Sky::Map { path, .. } | Sky::Plate { path, .. } => Some(path.as_str()),
+            _ => None,
+        };
+        let textures = self.objects.iter().filter_map(|o| match &o.material {
+            Material::Texture { path, .. } => Some(path.as_str()),
+            _ => None,
+        });
+        medium
+            .into_iter()
+            .chain(sky)
+            .chain(textures)
+            .map(|p| {
+                let p = std::path::Path::new(p);
+                if p.is_absolute() {
+                    p.to_path_buf()
+                } else {
+                    scene_dir.join(p)
+                }
+            })
+            .collect()
+    }
+}

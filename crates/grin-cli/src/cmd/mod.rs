@@ -12,6 +12,13 @@ pub mod view;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// Declare the scene file and the files it reads (at its frame) as this run's inputs: no
+/// output of the run may replace one ([`grin_output::protect_inputs`]).
+pub fn protect_scene(scene_file: &std::path::Path, scene: &grin_scene::Scene) {
+    let dir = scene_file.parent().unwrap_or(std::path::Path::new("."));
+    grin_output::protect_inputs(std::iter::once(scene_file.to_owned()).chain(scene.files(dir)));
+}
+
 /// `template` (indicatif's) with `=> ` filling the bar; the default bar where it does not
 /// parse. Every subcommand's progress is drawn through it.
 pub fn bar_style(template: &str) -> ProgressStyle {

@@ -147,7 +147,10 @@ fn check_output(path: &Path) -> anyhow::Result<Option<PathBuf>> {
     {
         bail!("{}: the output must be an .exr file", path.display());
     }
-    Ok(Some(path.with_extension("png")))
+    let png = path.with_extension("png");
+    // The preview may not replace an input either (a plate `bg.png` for `-o bg.exr`).
+    grin_output::Destination::resolve(&png)?;
+    Ok(Some(png))
 }
 
 /// A progress bar on stderr per pass, with the warnings printed above it.
@@ -482,6 +485,8 @@ fn render_one(
     output: &Path,
 ) -> anyhow::Result<(Summary, bool)> {
     // Everything that can be wrong with the input fails here, before any GPU work.
+    super::protect_scene(&args.scene, &scene);
+    grin_output::protect_inputs(args.compare.iter());
     let png = check_output(output)?;
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
     let reference = args
