@@ -152,41 +152,70 @@ impl Destination {
     }
 }
 
-/// The files this run reads, by device and inode (a link or another name for one is the
-/// same file), with the name it was given: no output may replace one.
-static INPUTS: Mutex<Vec<((u64, u64), PathBuf)>> = Mutex::new(Vec::new());
+/// The files being read, by device and inode (a link or another name for one is the same
+/// file), with the name each was given and how many [`Protected`] guards hold it: no
+/// output may replace one.
+static INPUTS: Mutex<Vec<((u64, u64), PathBuf, usize)>> = Mutex::new(Vec::new());
 
-/// Declare files this run reads (a scene, its VDB, a plate, a ray table): an output that
-/// is one of them, under any name, is refused ([`Destination::resolve`] says which), so
-/// `-o` given an input's name cannot destroy it. Paths that are not files are ignored.
-pub fn protect_inputs<P: AsRef<Path>>(paths: impl IntoIterator<Item = P>) {
-    use std::os::unix::fs::MetadataExt;
-    let mut inputs = INPUTS
+fn inputs() -> MutexGuard<'static, Vec<((u64, u64), PathBuf, usize)>> {
+    INPUTS
         .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    for p in paths {
-        let p = p.as_ref();
-        if let Ok(meta) = fs::metadata(p)
-            && meta.is_file()
-        {
-            let id = (meta.dev(), meta.ino());
-            if !inputs.iter().any(|(i, _)| *i == id) {
-                inputs.push((id, p.to_owned()));
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Files declared inputs by [`protect_inputs`], until this is dropped.
+#[derive(Debug)]
+#[must_use = "the inputs are protected only while the guard lives"]
+pub struct Protected {
+    ids: Vec<(u64, u64)>,
+}
+
+impl Drop for Protected {
+    fn drop(&mut self) {
+        let mut inputs = inputs();
+        for id in &self.ids {
+            if let Some(i) = inputs.iter().position(|(x, _, _)| x == id) {
+                inputs[i].2 -= 1;
+                if inputs[i].2 == 0 {
+                    inputs.swap_remove(i);
+                }
             }
         }
     }
 }
 
-/// The declared input that `meta` is, if any.
+/// Declare files a run reads (a scene, its VDB, a plate, a ray table) while the guard
+/// lives: an output that is one of them, under any name, is refused
+/// ([`Destination::resolve`] says which), so `-o` given an input's name cannot destroy
+/// it. Paths that are not files are passed over.
+pub fn protect_inputs<P: AsRef<Path>>(paths: impl IntoIterator<Item = P>) -> Protected {
+    use std::os::unix::fs::MetadataExt;
+    let mut inputs = inputs();
+    let mut ids = Vec::new();
+    for p in paths {
+        let p = p.as_ref();
+        let Ok(meta) = fs::metadata(p) else { continue };
+        let id = (meta.dev(), meta.ino());
+        if !meta.is_file() || ids.contains(&id) {
+            continue;
+        }
+        match inputs.iter_mut().find(|(x, _, _)| *x == id) {
+            Some(entry) => entry.2 += 1,
+            None => inputs.push((id, p.to_owned(), 1)),
+        }
+        ids.push(id);
+    }
+    Protected { ids }
+}
+
+/// The protected input that `meta` is, if any.
 fn input_at(meta: &fs::Metadata) -> Option<PathBuf> {
     use std::os::unix::fs::MetadataExt;
     let id = (meta.dev(), meta.ino());
-    INPUTS
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
+    inputs()
         .iter()
-        .find(|(i, _)| *i == id)
-        .map(|(_, p)| p.clone())
+        .find(|(x, _, _)| *x == id)
+        .map(|(_, p, _)| p.clone())
 }
 
 /// Temporary files staged and not yet put in place or removed, for the signal handler.

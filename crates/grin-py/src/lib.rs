@@ -531,6 +531,10 @@ fn bake<'py>(
     };
     let gradient = grin_field::bake::GradientMode::for_field(&medium.field);
     let opts = bake_options(resolution, error_budget, interp, max_memory, gradient)?;
+    // `path` may not replace the scene file or a file the scene reads (for this call).
+    let _inputs = grin_output::protect_inputs(
+        std::iter::once(PathBuf::from(&scene.label)).chain(scene.scene.files(&scene.dir)),
+    );
     let field = py
         .detach(|| grin_field::build_field(medium, &scene.dir))
         .map_err(|e| err(anyhow::Error::from(e).context(format!("{}: [medium]", scene.label))))?;

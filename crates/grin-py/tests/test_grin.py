@@ -194,6 +194,31 @@ def test_bake_and_read_field_agree_with_the_profile(tmp_path):
     np.testing.assert_allclose(gx, -xx[inside] / exact, atol=5e-3)
 
 
+def test_bake_never_replaces_what_the_scene_reads(tmp_path):
+    # A bake onto its own scene file, or onto the .grinf its medium reads, is refused and
+    # leaves the file as it was; once a call returns, its inputs are free to be written.
+    scene = tmp_path / "lune.toml"
+    scene.write_text((SCENES / "luneburg.toml").read_text())
+    text = scene.read_bytes()
+    with pytest.raises(grin.GrinError, match="an input of this run"):
+        grin.bake(scene, scene, resolution=9)
+    assert scene.read_bytes() == text
+    grin.bake(scene, tmp_path / "b.grinf", resolution=9)
+    baked_scene = tmp_path / "baked.toml"
+    baked_scene.write_text(
+        text.decode().replace('field = { kind = "luneburg" }',
+                              'field = { kind = "baked", path = "b.grinf" }'))
+    assert "b.grinf" in baked_scene.read_text()
+    before = (tmp_path / "b.grinf").read_bytes()
+    with pytest.raises(grin.GrinError, match="b.grinf"):
+        grin.bake(baked_scene, tmp_path / "b.grinf", resolution=9)
+    assert (tmp_path / "b.grinf").read_bytes() == before
+    grin.bake(baked_scene, tmp_path / "c.grinf", resolution=9)
+    # b.grinf was an input of the call before; now it may be written.
+    grin.bake(scene, tmp_path / "b.grinf", resolution=11)
+    assert (tmp_path / "b.grinf").read_bytes() != before
+
+
 def test_a_temperature_volume_bakes_to_gladstone_dale_air(tmp_path):
     # A hot Gaussian plume in air at 293.15 K: n = 1 + K_GD P / (R T).
     h = 0.02

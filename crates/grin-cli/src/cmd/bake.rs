@@ -156,7 +156,7 @@ fn bake_one(
     output: &Path,
     json: bool,
 ) -> anyhow::Result<serde_json::Value> {
-    super::protect_scene(&args.scene, scene);
+    let _inputs = super::protect_scene(&args.scene, scene);
     let medium = scene.medium.as_ref().with_context(|| {
         format!(
             "{}: the scene has no [medium] to bake",

@@ -23,7 +23,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    grin_output::protect_inputs([&args.input]);
+    let _input = grin_output::protect_inputs([&args.input]);
     let field = match grin_field::grinf::open(&args.input)? {
         grin_field::grinf::Grinf::Dense(field) => field,
         grin_field::grinf::Grinf::Sparse(field) => return run_sparse(&args, &field),

@@ -12,11 +12,14 @@ pub mod view;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-/// Declare the scene file and the files it reads (at its frame) as this run's inputs: no
-/// output of the run may replace one ([`grin_output::protect_inputs`]).
-pub fn protect_scene(scene_file: &std::path::Path, scene: &grin_scene::Scene) {
+/// Declare the scene file and the files it reads (at its frame) inputs while the guard
+/// lives: no output may replace one ([`grin_output::protect_inputs`]).
+pub fn protect_scene(
+    scene_file: &std::path::Path,
+    scene: &grin_scene::Scene,
+) -> grin_output::Protected {
     let dir = scene_file.parent().unwrap_or(std::path::Path::new("."));
-    grin_output::protect_inputs(std::iter::once(scene_file.to_owned()).chain(scene.files(dir)));
+    grin_output::protect_inputs(std::iter::once(scene_file.to_owned()).chain(scene.files(dir)))
 }
 
 /// `template` (indicatif's) with `=> ` filling the bar; the default bar where it does not

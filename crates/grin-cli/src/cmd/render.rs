@@ -485,8 +485,10 @@ fn render_one(
     output: &Path,
 ) -> anyhow::Result<(Summary, bool)> {
     // Everything that can be wrong with the input fails here, before any GPU work.
-    super::protect_scene(&args.scene, &scene);
-    grin_output::protect_inputs(args.compare.iter());
+    let _inputs = (
+        super::protect_scene(&args.scene, &scene),
+        grin_output::protect_inputs(args.compare.iter()),
+    );
     let png = check_output(output)?;
     let scene_dir = args.scene.parent().unwrap_or(Path::new("."));
     let reference = args

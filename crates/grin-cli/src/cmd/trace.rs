@@ -109,8 +109,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if scene.medium.is_none() {
         bail!("{label}: the scene has no [medium] to trace rays through");
     }
-    super::protect_scene(&args.scene, &scene);
-    grin_output::protect_inputs([&args.rays]);
+    let _inputs = (
+        super::protect_scene(&args.scene, &scene),
+        grin_output::protect_inputs([&args.rays]),
+    );
     // The table streams: the first batch is read now (its rays are the pilots'), the rest
     // while the output is written, a batch at a time.
     let mut reader = table::RayReader::open(&args.rays)?;

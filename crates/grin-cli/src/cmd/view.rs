@@ -59,9 +59,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // A screenshot may not replace the scene or a file it reads (a reload reads them
     // again; a scene that does not load fails in the viewer, which names it).
-    if let Ok(scene) = grin_scene::load_scene(&args.scene) {
-        super::protect_scene(&args.scene, &scene);
-    }
+    let _inputs = grin_scene::load_scene(&args.scene)
+        .ok()
+        .map(|scene| super::protect_scene(&args.scene, &scene));
     let opts = grin_view::ViewOptions {
         scene: args.scene,
         size: args.size,

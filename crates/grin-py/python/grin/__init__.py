@@ -313,7 +313,8 @@ def bake(
 ) -> Field:
     """Bake the scene's medium, as ``grin bake`` does: the coarsest grid that meets the
     error budget (or ``resolution`` nodes on the longest axis), cropped to where the index
-    varies. Written to ``path`` (a ``.grinf``) when given."""
+    varies. Written to ``path`` (a ``.grinf``) when given, which may not be the scene file
+    or a file the scene reads (``GrinError``)."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     arrays, info, report = _grin.bake(
