@@ -152,12 +152,18 @@ impl Destination {
     }
 }
 
-/// The files being read, by device and inode (a link or another name for one is the same
-/// file), with the name each was given and how many [`Protected`] guards hold it: no
-/// output may replace one.
-static INPUTS: Mutex<Vec<((u64, u64), PathBuf, usize)>> = Mutex::new(Vec::new());
+/// A file being read: its device and inode (a link or another name for it is the same
+/// file), the name it was given, and how many [`Protected`] guards hold it.
+struct Input {
+    id: (u64, u64),
+    path: PathBuf,
+    guards: usize,
+}
 
-fn inputs() -> MutexGuard<'static, Vec<((u64, u64), PathBuf, usize)>> {
+/// The files being read: no output may replace one.
+static INPUTS: Mutex<Vec<Input>> = Mutex::new(Vec::new());
+
+fn inputs() -> MutexGuard<'static, Vec<Input>> {
     INPUTS
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -174,9 +180,9 @@ impl Drop for Protected {
     fn drop(&mut self) {
         let mut inputs = inputs();
         for id in &self.ids {
-            if let Some(i) = inputs.iter().position(|(x, _, _)| x == id) {
-                inputs[i].2 -= 1;
-                if inputs[i].2 == 0 {
+            if let Some(i) = inputs.iter().position(|x| x.id == *id) {
+                inputs[i].guards -= 1;
+                if inputs[i].guards == 0 {
                     inputs.swap_remove(i);
                 }
             }
@@ -199,9 +205,13 @@ pub fn protect_inputs<P: AsRef<Path>>(paths: impl IntoIterator<Item = P>) -> Pro
         if !meta.is_file() || ids.contains(&id) {
             continue;
         }
-        match inputs.iter_mut().find(|(x, _, _)| *x == id) {
-            Some(entry) => entry.2 += 1,
-            None => inputs.push((id, p.to_owned(), 1)),
+        match inputs.iter_mut().find(|x| x.id == id) {
+            Some(entry) => entry.guards += 1,
+            None => inputs.push(Input {
+                id,
+                path: p.to_owned(),
+                guards: 1,
+            }),
         }
         ids.push(id);
     }
@@ -212,10 +222,7 @@ pub fn protect_inputs<P: AsRef<Path>>(paths: impl IntoIterator<Item = P>) -> Pro
 fn input_at(meta: &fs::Metadata) -> Option<PathBuf> {
     use std::os::unix::fs::MetadataExt;
     let id = (meta.dev(), meta.ino());
-    inputs()
-        .iter()
-        .find(|(x, _, _)| *x == id)
-        .map(|(_, p, _)| p.clone())
+    inputs().iter().find(|x| x.id == id).map(|x| x.path.clone())
 }
 
 /// Temporary files staged and not yet put in place or removed, for the signal handler.

@@ -152,3 +152,37 @@ fn os_error_text_is_plain() {
     let e = io::Error::from_raw_os_error(2);
     assert_eq!(plain(&e), "No such file or directory");
 }
+
+/// A protected input refuses outputs under its name, a hard link's and a symbolic link's,
+/// while any guard holding it lives; a second guard on the same file keeps it protected
+/// after the first is dropped, and with both gone it is an ordinary output again.
+#[test]
+fn protected_inputs_refuse_outputs_while_a_guard_lives() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let input = dir.path().join("scene.toml");
+    fs::write(&input, b"scene").expect("input");
+    let hard = dir.path().join("hard.toml");
+    fs::hard_link(&input, &hard).expect("hard link");
+    let soft = dir.path().join("soft.toml");
+    std::os::unix::fs::symlink(&input, &soft).expect("symlink");
+    let refused = |target: &Path| match write_file(target, |w| w.write_all(b"out")) {
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains("an input of this run"), "{msg}");
+            assert!(msg.contains("scene.toml"), "{msg}");
+        }
+        Ok(()) => panic!("{} was replaced", target.display()),
+    };
+    let first = protect_inputs([&input, &dir.path().join("missing.toml")]);
+    let second = protect_inputs([&hard]);
+    for target in [&input, &hard, &soft] {
+        refused(target);
+    }
+    drop(first);
+    refused(&soft);
+    assert_eq!(fs::read(&input).expect("read"), b"scene");
+    assert!(no_temp_files(dir.path()));
+    drop(second);
+    write_file(&soft, |w| w.write_all(b"out")).expect("free again");
+    assert_eq!(fs::read(&input).expect("read"), b"out");
+}
