@@ -2,11 +2,11 @@
 //! with `grin trace`: Luneburg focus through a baked grid, macro-cell flights, round trips,
 //! and clear errors with no output file.
 
-mod common;
 use common::{
     TestDir as Dir, assert_err, bake_with, grin, json, num, read_table, run_err, run_ok, scenes,
     stderr, stdout,
 };
+use grin_testkit as common;
 use std::path::Path;
 use std::process::Output;
 

@@ -4,8 +4,8 @@
 //! both backends; `[sensor]` noise has the variance of its shot and read noise and its
 //! bit depth; contradictory settings are errors naming the key.
 
-mod common;
 use common::{assert_err, assert_ok as ok, gpu_or_skip, render};
+use grin_testkit as common;
 use std::path::Path;
 
 use grin_render::image::Frame;

@@ -1,7 +1,7 @@
 //! End-to-end tests of the `grin` binary.
 
-mod common;
 use common::{data, grin, json, run_err, run_ok, scenes, stderr, stdout};
+use grin_testkit as common;
 
 #[test]
 fn help_lists_subcommands() {

@@ -2,8 +2,8 @@
 //! run, and runs that resume after an interruption without duplicates or half-written
 //! samples.
 
-mod common;
 use common::{assert_ok, grin, json, run_err, run_ok};
+use grin_testkit as common;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Stdio};

@@ -3,10 +3,10 @@
 //! renders a tiny animated scene (an `expr` medium whose time is t + frame / fps) on the
 //! CPU.
 
-mod common;
 use common::{
     TestDir, assert_err, assert_failed, assert_ok, grin, json, run_ok, scenes, stderr, stdout,
 };
+use grin_testkit as common;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::Output;

@@ -4,8 +4,8 @@
 //! `grin bench speed`. A missing adapter fails these tests unless GRIN_ALLOW_NO_GPU=1,
 //! which turns them into a loud SKIPPED line.
 
-mod common;
 use common::{assert_failed, gpu_required, grin, json, render_with, run_ok, scenes, stderr};
+use grin_testkit as common;
 
 #[test]
 fn render_gpu_writes_exr_png_and_summary() {

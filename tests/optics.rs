@@ -6,12 +6,12 @@
 //!
 //! Over 600 lines: one concept, each `[optics]` output against its closed form.
 
-mod common;
 use common::{
     assert_err, assert_failed, assert_ok as ok, bos_plume_scene, exr_channels as channels,
     gpu_or_skip, grin, grin_args as run, read_table, render, render_json, render_with, scenes,
     stderr, stdout, vec3,
 };
+use grin_testkit as common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

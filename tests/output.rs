@@ -3,8 +3,8 @@
 //! write phase. No test writes to the real /dev: streams are links we make to our own
 //! stdout (/proc/self/fd/1) or /dev/null, written through.
 
-mod common;
 use common::{assert_failed, assert_ok, data, run_ok, stderr, stdout};
+use grin_testkit as common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

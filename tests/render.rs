@@ -2,11 +2,11 @@
 //! the exact solution says (through the render's AOVs and through `grin trace`), scene
 //! errors before any work, and no broken output when a render is interrupted.
 
-mod common;
 use common::{
     assert_err, assert_failed, assert_ok, grin, json, read_table, render_with, run_ok, scenes,
     stderr, vec3,
 };
+use grin_testkit as common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;

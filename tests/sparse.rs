@@ -3,11 +3,11 @@
 //! sparse bake against its source, renders on both backends, `grin info` and hostile
 //! files.
 
-mod common;
 use common::{
     TestDir as Dir, assert_err, bake_with, exr_channels, gpu_or_skip, grin, json, num, read_table,
     render_json, run_ok, scenes, stderr,
 };
+use grin_testkit as common;
 use std::path::Path;
 
 /// The plumes of data/scenes/eight-plumes.toml: (centre, width s); amplitude 0.02.

@@ -5,10 +5,10 @@
 //! naming them. Both backends agreeing on textures, dots and plates is tested in
 //! crates/grin-gpu/tests/gpu_vs_cpu.rs.
 
-mod common;
 use common::{
     assert_err, assert_ok as ok, bos_plume_scene, exr_channels, gpu_or_skip, render, stderr,
 };
+use grin_testkit as common;
 
 use grin_render::image::Frame;
 use grin_render::surface::srgb_to_linear;

@@ -1,8 +1,8 @@
 //! End-to-end tests of `grin trace`: ray table in, ray table out, through the real
 //! scene loader and field profiles.
 
-mod common;
 use common::{TestDir as Dir, assert_err, assert_failed, assert_ok, grin, json, stderr};
+use grin_testkit as common;
 use std::path::Path;
 use std::process::Output;
 

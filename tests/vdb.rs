@@ -4,12 +4,12 @@
 //!
 //! Over 600 lines: one concept, the VDB pipeline end to end, through the binary.
 
-mod common;
 use common::rng::Rng;
 use common::{
     Row, assert_failed, assert_ok, bake_with, exr_channels, gpu_or_skip, grin, grin_args as run,
     json, num, read_table, run_ok, stderr, stdout,
 };
+use grin_testkit as common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

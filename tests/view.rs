@@ -4,8 +4,8 @@
 //! scene file while the window renders, and the one-line errors without a display, with a
 //! broken scene and without an adapter.
 
-mod common;
 use common::{grin, json, run_ok, scenes, stderr};
+use grin_testkit as common;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};

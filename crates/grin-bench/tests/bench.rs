@@ -6,9 +6,7 @@
 // Tests: a failed unwrap is the failure message.
 #![allow(clippy::unwrap_used)]
 
-/// The workspace's GPU-presence policy (tests/common/skip.rs).
-#[path = "../../../tests/common/skip.rs"]
-mod skip;
+use grin_testkit::skip;
 
 use grin_bench::accuracy::{self, Point, log_slope, pareto, reference, run_point};
 use grin_bench::cases::{self, Suite};

@@ -142,8 +142,10 @@ fn take_in(r: Vec3, t: Vec3, _: f32, ds_adapt: f32) -> TakeIn {
     TakeIn::new(r.to_array(), t.to_array(), ds_adapt)
 }
 
-/// The tests' one deterministic generator (xorshift64*).
-#[path = "../../../tests/common/rng.rs"]
+/// The tests' one deterministic generator (xorshift64*; grin-testkit's `rng`, included
+/// by path: that crate depends on this one).
+#[path = "../../grin-testkit/src/rng.rs"]
+#[allow(dead_code)]
 mod rng;
 use rng::Rng;
 

@@ -25,10 +25,7 @@ fn budget() -> Duration {
     Duration::from_secs_f64(s)
 }
 
-/// The tests' one generator (xorshift64*): deterministic cases for a given seed.
-#[path = "../../../tests/common/rng.rs"]
-mod rng;
-use rng::Rng;
+use grin_testkit::rng::Rng;
 
 /// One mutation of `seed` using `tokens` for splices.
 fn mutate(rng: &mut Rng, seed: &[u8], tokens: &[&str]) -> Vec<u8> {

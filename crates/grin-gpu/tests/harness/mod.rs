@@ -16,8 +16,9 @@ use grin_render::scene::RenderScene;
 use grin_scene::Scene;
 use grin_trace::render::render_cpu;
 
-/// The workspace's GPU-presence policy (tests/common/skip.rs).
-#[path = "../../../../tests/common/skip.rs"]
+/// The workspace's GPU-presence policy (grin-testkit's `skip`, included by path: that
+/// crate depends on this one).
+#[path = "../../../grin-testkit/src/skip.rs"]
 mod skip;
 
 /// The device, or `None` when no adapter exists and `GRIN_ALLOW_NO_GPU=1` is set (after

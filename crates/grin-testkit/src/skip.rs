@@ -1,9 +1,6 @@
 //! The one GPU-presence policy's words: a test (or the GPU half of one) that needs an
 //! adapter and finds none says so loudly on stderr, never passes silently. Dependency-free,
-//! so that the crates' own tests can include it too
-//! (`#[path = "../../../tests/common/skip.rs"] mod skip;`).
-
-#![allow(dead_code)]
+//! so that grin-gpu's tests (which this crate depends on) can include it by path.
 
 /// The running test's name: libtest names each test's thread after it.
 pub fn test_name() -> String {

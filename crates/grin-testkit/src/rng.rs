@@ -1,8 +1,6 @@
 //! The tests' one deterministic generator, xorshift64*: a given seed gives the same cases
-//! on every machine. Dependency-free, so that the crates' own tests can include it too
-//! (`#[path = "../../../tests/common/rng.rs"] mod rng;`).
-
-#![allow(dead_code)]
+//! on every machine. Dependency-free, so that grin-gpu's tests (which this crate depends
+//! on) can include it by path.
 
 /// xorshift64* (Vigna 2016). The seed must not be zero.
 #[derive(Clone, Debug)]

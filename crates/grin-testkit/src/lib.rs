@@ -1,23 +1,40 @@
-//! Helpers the end-to-end tests share (as wgpu's tests/ harness): running the `grin`
-//! binary and asserting its outcome with its streams, the one GPU-presence policy, the
-//! one random generator, temporary directories, the repository's data and an EXR's
-//! channels.
-
-#![allow(dead_code)]
+//! grin's test harness (as wgpu's tests/ harness): running the `grin` binary and asserting
+//! its outcome with its streams, the one GPU-presence policy ([`skip`]), the one random
+//! generator ([`rng`]), temporary directories, the repository's data, an EXR's channels
+//! and `grin trace`'s tables. The end-to-end tests (tests/, grin-cli's) import it as
+//! `common`; the crates' own tests use what they need. grin-gpu's tests, which this crate
+//! depends on, include its two dependency-free modules by path.
 
 pub mod rng;
-mod skip;
+pub mod skip;
 
-#[allow(unused_imports)]
 pub use skip::{require_gpu, skipped_no_gpu, test_name};
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The `grin` binary cargo built with the running tests: beside the directory of the test
+/// executable (`target/<profile>/deps/<test>` -> `target/<profile>/grin`). Cargo builds a
+/// package's binaries before its integration tests run.
+pub fn grin_path() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable's path");
+    let profile = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("the test executable lies in target/<profile>/deps");
+    let grin = profile.join(format!("grin{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        grin.is_file(),
+        "{} is not built (the tests that run it are grin-cli's)",
+        grin.display()
+    );
+    grin
+}
+
 /// The `grin` binary built with these tests.
 pub fn grin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_grin"))
+    Command::new(grin_path())
 }
 
 /// `grin ARGS`, run to its end.
@@ -125,6 +142,7 @@ pub fn gpu_required() -> bool {
 }
 
 /// A temporary directory the test writes its files in.
+#[derive(Debug)]
 pub struct TestDir {
     pub dir: tempfile::TempDir,
 }
