@@ -196,16 +196,8 @@ example_scene_tests! {
 }
 
 /// The paper's scene with a Luneburg lens, small, for the integrator matrix.
-const PAPER_LUNEBURG: &str = r#"
-[camera]
-position = [0.0, 1.0, -4.0]
-look_at = [0.0, 0.6, 0.0]
-fov_y_deg = 40.0
-
-[[object]]
-shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
-material = { checker = { scale = 0.5 } }
-
+fn paper_luneburg() -> String {
+    let rest = r#"
 [[object]]
 shape = { sphere = { center = [-0.7, 0.5, 1.2], radius = 0.5 } }
 material = "glass"
@@ -218,20 +210,19 @@ material = "metal"
 bounds = { sphere = { center = [0.0, 0.7, -0.6], radius = 0.6 } }
 field = { kind = "luneburg" }
 
-[[light]]
-point = { position = [2.0, 4.0, -2.0], intensity = [30.0, 30.0, 30.0] }
-
 [render]
 width = 96
 height = 54
 "#;
+    format!("{}{rest}", harness::scenes::PAPER_SET)
+}
 
 #[test]
 fn every_integrator_step_policy_and_exit_matches_cpu() {
     let Some(ctx) = harness::context("every_integrator_step_policy_and_exit_matches_cpu") else {
         return;
     };
-    let base = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    let base = parse_scene(&paper_luneburg(), Path::new("inline.toml")).expect("scene");
     let baked = harness::baked(&base, Path::new("."), 48);
     let cases = [
         (
@@ -337,7 +328,7 @@ fn environment_map_sky_matches_cpu() {
         )
     })
     .expect("write exr");
-    let text = PAPER_LUNEBURG.replace(
+    let text = paper_luneburg().replace(
         "[render]",
         "[sky]\nmap = { path = \"sky.exr\", intensity = 2.0 }\n\n[render]",
     );
@@ -361,7 +352,7 @@ fn bent_shadow_rays_match_cpu() {
     };
     // The light above a constant-n ball: bent shadow rays through it carry its Fresnel
     // transmittance (1 - R)^2, straight ones ignore the medium (the paper).
-    let text = PAPER_LUNEBURG
+    let text = paper_luneburg()
         .replace("position = [2.0, 4.0, -2.0]", "position = [0.0, 4.0, -0.6]")
         .replace(
             r#"field = { kind = "luneburg" }"#,
@@ -388,7 +379,7 @@ fn tricubic_field_matches_cpu() {
     let Some(ctx) = harness::context("tricubic_field_matches_cpu") else {
         return;
     };
-    let scene = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    let scene = parse_scene(&paper_luneburg(), Path::new("inline.toml")).expect("scene");
     let trilinear = harness::baked(&scene, Path::new("."), 32).expect("medium");
     let tricubic = std::sync::Arc::new(
         (*trilinear)
@@ -408,13 +399,13 @@ fn baked_file_scene_is_marched_through_its_own_grid() {
         return;
     };
     let dir = tempfile_dir("baked-scene");
-    let source = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    let source = parse_scene(&paper_luneburg(), Path::new("inline.toml")).expect("scene");
     let coarse = harness::baked(&source, Path::new("."), 24).expect("medium");
     let tricubic = (*coarse)
         .clone()
         .with_interp(grin_field::baked::Interp::Tricubic);
     grin_field::grinf::save(&tricubic, &dir.join("lens.grinf")).expect("save .grinf");
-    let text = PAPER_LUNEBURG.replace(
+    let text = paper_luneburg().replace(
         r#"field = { kind = "luneburg" }"#,
         r#"field = { kind = "baked", path = "lens.grinf" }"#,
     );
@@ -444,7 +435,7 @@ fn objects_inside_the_medium_match_cpu() {
     let Some(ctx) = harness::context("objects_inside_the_medium_match_cpu") else {
         return;
     };
-    let text = PAPER_LUNEBURG.replace(
+    let text = paper_luneburg().replace(
         "[medium]",
         r#"[[object]]
 shape = { sphere = { center = [0.15, 0.75, -0.6], radius = 0.15 } }
@@ -520,7 +511,7 @@ fn several_samples_per_pixel_match_cpu() {
     let Some(ctx) = harness::context("several_samples_per_pixel_match_cpu") else {
         return;
     };
-    let mut scene = parse_scene(PAPER_LUNEBURG, Path::new("inline.toml")).expect("scene");
+    let mut scene = parse_scene(&paper_luneburg(), Path::new("inline.toml")).expect("scene");
     scene.render.spp = 3;
     let baked = harness::baked(&scene, Path::new("."), 48);
     let (cpu, gpu) = harness::render_both(&ctx, &scene, Path::new("."), baked);

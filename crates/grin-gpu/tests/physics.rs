@@ -17,27 +17,19 @@ use grin_render::scene::RenderScene;
 use grin_scene::parse_scene;
 use grin_trace::render::render_cpu;
 
-const SCENE: &str = r#"
-[camera]
-position = [0.0, 1.0, -4.0]
-look_at = [0.0, 0.6, 0.0]
-fov_y_deg = 40.0
-
-[[object]]
-shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
-material = { checker = { scale = 0.5 } }
-
+/// The paper's set with a metal sphere.
+fn scene_text() -> String {
+    let rest = r#"
 [[object]]
 shape = { sphere = { center = [0.8, 0.5, 1.4], radius = 0.5 } }
 material = "metal"
-
-[[light]]
-point = { position = [2.0, 4.0, -2.0], intensity = [30.0, 30.0, 30.0] }
 
 [render]
 width = 96
 height = 54
 "#;
+    format!("{}{rest}", harness::scenes::PAPER_SET)
+}
 
 const MEDIUM_AMBIENT: &str = r#"
 [medium]
@@ -65,8 +57,8 @@ fn uniform_ambient_medium_renders_like_no_medium() {
     let Some(ctx) = harness::context("uniform_ambient_medium_renders_like_no_medium") else {
         return;
     };
-    let without = gpu_frame(&ctx, SCENE, None);
-    let with = gpu_frame(&ctx, &format!("{SCENE}{MEDIUM_AMBIENT}"), Some(32));
+    let without = gpu_frame(&ctx, &scene_text(), None);
+    let with = gpu_frame(&ctx, &format!("{}{MEDIUM_AMBIENT}", scene_text()), Some(32));
     let (stats, _) = diff_frames(&without, &with).expect("same size");
     // Rays cross the medium straight (n = ambient: no refraction, no bending), ending on
     // the projected surface point: only f32 rounding separates the two images.
@@ -180,7 +172,7 @@ fn oversized_field_texture_is_a_clear_error() {
         BakeProvenance::default(),
     )
     .expect("a valid (if oversized) grid");
-    let scene = parse_scene(SCENE, Path::new("inline.toml")).expect("scene");
+    let scene = parse_scene(&scene_text(), Path::new("inline.toml")).expect("scene");
     let baked = Arc::new(baked);
     let rs = RenderScene::new(
         &scene,

@@ -11,26 +11,16 @@ use grin_gpu::{GpuContext, GpuRenderer};
 use grin_render::scene::RenderScene;
 use grin_scene::parse_scene;
 
-const SCENE: &str = r#"
-[camera]
-position = [0.0, 1.0, -4.0]
-look_at = [0.0, 0.6, 0.0]
-fov_y_deg = 40.0
-
-[[object]]
-shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
-material = { checker = { scale = 0.5 } }
-
-[[light]]
-point = { position = [2.0, 4.0, -2.0], intensity = [30.0, 30.0, 30.0] }
-
-[render]
-width = 48
-height = 27
-"#;
+/// The paper's set, nothing else.
+fn scene_text() -> String {
+    format!(
+        "{}\n[render]\nwidth = 48\nheight = 27\n",
+        harness::scenes::PAPER_SET
+    )
+}
 
 fn frame(ctx: &GpuContext) -> Vec<[f32; 3]> {
-    let scene = parse_scene(SCENE, Path::new("inline.toml")).expect("scene");
+    let scene = parse_scene(&scene_text(), Path::new("inline.toml")).expect("scene");
     let rs = RenderScene::new(&scene, Path::new("."), None).expect("render scene");
     let f = GpuRenderer::new(ctx, &rs, None)
         .expect("renderer")

@@ -19,16 +19,8 @@ const SPP: u32 = 2;
 const FRAMES: u32 = 3;
 
 /// A noise ball in front of a checker wall, jittered samples (frames differ).
-const SCENE: &str = r#"
-[camera]
-position = [0.0, 0.0, -4.0]
-look_at = [0.0, 0.0, 0.0]
-fov_y_deg = 32.0
-
-[[object]]
-shape = { plane = { point = [0.0, 0.0, 1.5], normal = [0.0, 0.0, -1.0] } }
-material = { checker = { color_a = [0.9, 0.9, 0.85], color_b = [0.1, 0.1, 0.15], scale = 0.2 } }
-
+fn scene_text() -> String {
+    let rest = r#"
 [medium]
 bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }
 field = { kind = "noise", noise = "fbm", octaves = 2, frequency = 1.5, amplitude = 0.03, seed = 3 }
@@ -40,6 +32,8 @@ spp = 2
 integrator = "rk4"
 step = { fixed = 0.02 }
 "#;
+    format!("{}{rest}", harness::scenes::WALL_SET)
+}
 
 /// Whole steps (or evaluations) of a frame's rays: each pixel's mean times its samples.
 fn count(f: &Frame, of: fn(&grin_render::image::PixelOut) -> f32) -> u64 {
@@ -56,7 +50,7 @@ fn frames_added_on_the_device_are_the_frames_read_back_and_averaged() {
     else {
         return;
     };
-    let scene = parse_scene(SCENE, Path::new("inline.toml")).expect("scene");
+    let scene = parse_scene(&scene_text(), Path::new("inline.toml")).expect("scene");
     let field = harness::build_field(&scene, Path::new("."));
     let rs = RenderScene::new(&scene, Path::new("."), field).expect("render scene");
     let mut gpu = GpuRenderer::new(&ctx, &rs, None).expect("renderer");

@@ -1,11 +1,12 @@
 //! grin's test harness (as wgpu's tests/ harness): running the `grin` binary and asserting
 //! its outcome with its streams, the one GPU-presence policy ([`skip`]), the one random
-//! generator ([`rng`]), temporary directories, the repository's data, an EXR's channels
+//! generator ([`rng`]), the shared scenes ([`scenes`]), temporary directories, the repository's data, an EXR's channels
 //! and `grin trace`'s tables. The end-to-end tests (tests/, grin-cli's) import it as
 //! `common`; the crates' own tests use what they need. grin-gpu's tests, which this crate
-//! depends on, include its two dependency-free modules by path.
+//! depends on, include its dependency-free modules by path.
 
 pub mod rng;
+pub mod scenes;
 pub mod skip;
 
 pub use skip::{require_gpu, skipped_no_gpu, test_name};

@@ -17,16 +17,8 @@ const W: u32 = 48;
 const H: u32 = 32;
 
 /// A noise ball drifting upwards in front of a checker wall.
-const SCENE: &str = r#"
-[camera]
-position = [0.0, 0.0, -4.0]
-look_at = [0.0, 0.0, 0.0]
-fov_y_deg = 32.0
-
-[[object]]
-shape = { plane = { point = [0.0, 0.0, 1.5], normal = [0.0, 0.0, -1.0] } }
-material = { checker = { color_a = [0.9, 0.9, 0.85], color_b = [0.1, 0.1, 0.15], scale = 0.2 } }
-
+static SCENE: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+    let rest = r#"
 [medium]
 bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }
 field = { kind = "noise", noise = "fbm", octaves = 2, frequency = 1.5, amplitude = 0.03, seed = 3, envelope = 0.3, drift = [0.0, 0.5, 0.0] }
@@ -39,6 +31,8 @@ integrator = "rk4"
 step = { fixed = 0.02 }
 jitter = false
 "#;
+    format!("{}{rest}", grin_testkit::scenes::WALL_SET)
+});
 
 fn scene_file(dir: &Path, text: &str) -> PathBuf {
     let p = dir.join("scene.toml");
@@ -100,7 +94,7 @@ fn max_deflection(r: &Shot) -> f32 {
 #[test]
 fn every_panel_setting_changes_the_next_frame_of_one_session() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = scene_file(dir.path(), SCENE);
+    let path = scene_file(dir.path(), &SCENE);
     let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
     let mut s = Session::new(&ctx, &path, None).expect("session");
     let mut base = ViewSettings::from_scene(s.scene());
@@ -265,7 +259,7 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
 #[test]
 fn a_cancelled_frame_restarts_the_image() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = scene_file(dir.path(), SCENE);
+    let path = scene_file(dir.path(), &SCENE);
     let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
     let mut s = Session::new(&ctx, &path, None).expect("session");
     let mut v = ViewSettings::from_scene(s.scene());
@@ -300,7 +294,7 @@ fn the_render_thread_recolours_and_captures_without_new_frames() {
     use grin_view::worker::{Reply, Worker};
     use std::time::Duration;
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = scene_file(dir.path(), SCENE);
+    let path = scene_file(dir.path(), &SCENE);
     let ctx = std::sync::Arc::new(GpuContext::new_headless().expect("a wgpu adapter"));
     let worker = Worker::start(ctx, path.clone(), None, None);
     let mut v = ViewSettings::from_scene(&grin_view::session::load(&path).expect("scene"));
@@ -381,7 +375,7 @@ fn the_render_thread_recolours_and_captures_without_new_frames() {
 #[test]
 fn while_moving_the_resolution_drops_to_the_frame_budget() {
     let mut v = ViewSettings::from_scene(
-        &grin_scene::parse_scene(SCENE, Path::new("s.toml")).expect("scene"),
+        &grin_scene::parse_scene(&SCENE, Path::new("s.toml")).expect("scene"),
     );
     v.target_fps = 20.0;
     let req = |moving| Request {
@@ -414,7 +408,7 @@ fn while_moving_the_resolution_drops_to_the_frame_budget() {
 #[test]
 fn reload_follows_the_file_and_keeps_the_last_good_scene() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = scene_file(dir.path(), SCENE);
+    let path = scene_file(dir.path(), &SCENE);
     let ctx = GpuContext::new_headless().expect("a wgpu adapter (lavapipe)");
     let mut s = Session::new(&ctx, &path, None).expect("session");
     // One sample a frame, no accumulation: equal views render equal frames.

@@ -21,6 +21,10 @@ use grin_trace::render::render_cpu;
 #[path = "../../../grin-testkit/src/skip.rs"]
 mod skip;
 
+/// The shared scene text (grin-testkit's `scenes`, included by path as `skip` is).
+#[path = "../../../grin-testkit/src/scenes.rs"]
+pub mod scenes;
+
 /// The device, or `None` when no adapter exists and `GRIN_ALLOW_NO_GPU=1` is set (after
 /// printing a prominent `SKIPPED (no GPU adapter): <test>` line). Without that variable a
 /// missing adapter fails the test: GPU tests must never pass silently.

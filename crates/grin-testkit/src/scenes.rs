@@ -1,0 +1,32 @@
+//! Scene text the tests share, as TOML tables to which a test appends its own (a medium,
+//! objects, `[render]`). Dependency-free, so that grin-gpu's tests (which this crate
+//! depends on) can include it by path.
+
+/// The paper's set: the camera above a checker floor, looking down at it, and a point
+/// light (append spheres, a medium and `[render]`).
+pub const PAPER_SET: &str = r#"
+[camera]
+position = [0.0, 1.0, -4.0]
+look_at = [0.0, 0.6, 0.0]
+fov_y_deg = 40.0
+
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] } }
+material = { checker = { scale = 0.5 } }
+
+[[light]]
+point = { position = [2.0, 4.0, -2.0], intensity = [30.0, 30.0, 30.0] }
+"#;
+
+/// A checker wall at z = 1.5 seen from z = -4 (append a medium about the origin and
+/// `[render]`): the viewer's tests.
+pub const WALL_SET: &str = r#"
+[camera]
+position = [0.0, 0.0, -4.0]
+look_at = [0.0, 0.0, 0.0]
+fov_y_deg = 32.0
+
+[[object]]
+shape = { plane = { point = [0.0, 0.0, 1.5], normal = [0.0, 0.0, -1.0] } }
+material = { checker = { color_a = [0.9, 0.9, 0.85], color_b = [0.1, 0.1, 0.15], scale = 0.2 } }
+"#;
