@@ -30,16 +30,7 @@ fn trace(
     out: &Path,
     extra: &[&str],
 ) -> Vec<(String, [f64; 3], [f64; 3], u64)> {
-    run_ok(
-        grin()
-            .arg("trace")
-            .arg(scene)
-            .arg("--rays")
-            .arg(rays)
-            .arg("-o")
-            .arg(out)
-            .args(extra),
-    );
+    run_ok(common::trace_cmd(&scene, &rays, &out).args(extra));
     read_table(out)
         .iter()
         .map(|r| {
@@ -273,16 +264,7 @@ fn bad_inputs_are_clear_errors_without_output() {
             ),
         );
         let rays = d.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-3,0,0,1\n");
-        run_err(
-            grin()
-                .arg("trace")
-                .arg(&sc)
-                .arg("--rays")
-                .arg(&rays)
-                .arg("-o")
-                .arg(d.path("t.csv")),
-            want,
-        );
+        run_err(&mut common::trace_cmd(&sc, &rays, &d.path("t.csv")), want);
         assert!(!d.path("t.csv").exists());
     }
     // A baked file used with other bounds is refused.

@@ -150,16 +150,7 @@ fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
     // `grin trace` onto its ray table.
     let rays = dir.write("rays.csv", "ox,oy,oz,dx,dy,dz\n0,0,-5,0,0,1\n");
     let table = std::fs::read(&rays).expect("rays");
-    run_err(
-        grin()
-            .arg("trace")
-            .arg(&scene)
-            .arg("--rays")
-            .arg(&rays)
-            .arg("-o")
-            .arg(&rays),
-        needle,
-    );
+    run_err(&mut common::trace_cmd(&scene, &rays, &rays), needle);
     kept(&rays, &table);
 
     // `grin render -o street.exr` whose PNG preview would replace the scene's plate.

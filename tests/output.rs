@@ -24,13 +24,7 @@ fn rays(dir: &Path) -> PathBuf {
 }
 
 fn trace_to(dir: &Path, out: &Path) -> std::process::Output {
-    grin()
-        .arg("trace")
-        .arg(data("scenes/luneburg.toml"))
-        .arg("--rays")
-        .arg(rays(dir))
-        .arg("-o")
-        .arg(out)
+    common::trace_cmd(&data("scenes/luneburg.toml"), &rays(dir), &out)
         .output()
         .expect("run grin")
 }

@@ -174,15 +174,7 @@ fn luneburg_scene_focuses_as_the_exact_solution_predicts() {
     let rays = dir.path().join("rays.csv");
     let traced = dir.path().join("out.csv");
     std::fs::write(&rays, csv).expect("write rays");
-    run_ok(
-        grin()
-            .arg("trace")
-            .arg(&scene_file)
-            .arg("--rays")
-            .arg(&rays)
-            .arg("-o")
-            .arg(&traced),
-    );
+    run_ok(&mut common::trace_cmd(&scene_file, &rays, &traced));
     for (row, &(px, py)) in read_table(&traced).iter().zip(&pixels) {
         let (p, q) = (vec3(row, ["px", "py", "pz"]), vec3(row, ["qx", "qy", "qz"]));
         assert_eq!(row["status"], "exited", "pixel ({px}, {py})");

@@ -1,7 +1,7 @@
 //! End-to-end tests of `grin trace`: ray table in, ray table out, through the real
 //! scene loader and field profiles.
 
-use common::{TestDir as Dir, assert_err, assert_failed, assert_ok, grin, json, stderr};
+use common::{TestDir as Dir, assert_err, assert_failed, assert_ok, json, stderr};
 use grin_testkit as common;
 use std::path::Path;
 use std::process::Output;
@@ -24,15 +24,10 @@ step = { fixed = 0.004 }
 "#;
 
 fn run(args: &[&Path], extra: &[&str]) -> Output {
-    let mut cmd = grin();
-    cmd.arg("trace")
-        .arg(args[0])
-        .arg("--rays")
-        .arg(args[1])
-        .arg("-o")
-        .arg(args[2]);
-    cmd.args(extra);
-    cmd.output().expect("run grin")
+    common::trace_cmd(args[0], args[1], args[2])
+        .args(extra)
+        .output()
+        .expect("run grin")
 }
 
 /// Parse an output CSV into (status, numbers) per row after checking the header.

@@ -1430,15 +1430,11 @@ fn bounds_that_cut_the_data_warn_on_every_command() {
 
     let rays = d.join("rays.csv");
     std::fs::write(&rays, "ox,oy,oz,dx,dy,dz\n-0.05,0.5,-2,0,0,1\n").expect("rays");
-    warned(&run_ok(
-        grin()
-            .arg("trace")
-            .arg(&scene)
-            .arg("--rays")
-            .arg(&rays)
-            .arg("-o")
-            .arg(d.join("out.csv")),
-    ));
+    warned(&run_ok(&mut common::trace_cmd(
+        &scene,
+        &rays,
+        &d.join("out.csv"),
+    )));
 
     warned(&bake(&scene, &d.join("cut.grinf")));
 }

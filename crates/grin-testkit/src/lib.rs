@@ -257,6 +257,18 @@ pub fn render_with(scene: &Path, out: &Path, extra: &[&str]) -> Output {
         .expect("grin runs")
 }
 
+/// `grin trace SCENE --rays RAYS -o OUT`, to run (add options first).
+pub fn trace_cmd(scene: &Path, rays: &Path, out: &Path) -> Command {
+    let mut cmd = grin();
+    cmd.arg("trace")
+        .arg(scene)
+        .arg("--rays")
+        .arg(rays)
+        .arg("-o")
+        .arg(out);
+    cmd
+}
+
 /// `grin bake SCENE -o OUT EXTRA`.
 pub fn bake_with(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     grin()
