@@ -30,7 +30,7 @@ fn trace(
     out: &Path,
     extra: &[&str],
 ) -> Vec<(String, [f64; 3], [f64; 3], u64)> {
-    run_ok(common::trace_cmd(&scene, &rays, &out).args(extra));
+    run_ok(common::trace_cmd(scene, rays, out).args(extra));
     read_table(out)
         .iter()
         .map(|r| {

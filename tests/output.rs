@@ -24,7 +24,7 @@ fn rays(dir: &Path) -> PathBuf {
 }
 
 fn trace_to(dir: &Path, out: &Path) -> std::process::Output {
-    common::trace_cmd(&data("scenes/luneburg.toml"), &rays(dir), &out)
+    common::trace_cmd(&data("scenes/luneburg.toml"), &rays(dir), out)
         .output()
         .expect("run grin")
 }

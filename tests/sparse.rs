@@ -32,7 +32,7 @@ fn eight_plumes_with(d: &Dir, name: &str, field: &str) -> std::path::PathBuf {
 
 /// (status, exit direction) per ray of `grin trace`.
 fn trace(scene: &Path, rays: &Path, out: &Path) -> Vec<(String, [f64; 3])> {
-    run_ok(&mut common::trace_cmd(&scene, &rays, &out));
+    run_ok(&mut common::trace_cmd(scene, rays, out));
     read_table(out)
         .iter()
         .map(|r| (r["status"].clone(), ["qx", "qy", "qz"].map(|k| num(r, k))))
