@@ -476,6 +476,33 @@ pub fn sparse_at(
         .with_context(|| format!("{name}: sparse bake at relative error {error:.2e}"))
 }
 
+/// The coarsest sparse bake of `source` (named `name` in an error) whose measured relative
+/// error is at most `error`: what "the same error" means for a sparse bake held against a
+/// dense grid of measured error `error`. A sparse bake asked for a budget lands below it
+/// (each brick meets 0.8 of it, judged by its nodes' curvature too, on a ladder of levels
+/// 1.25x apart), so where the first measures under 0.9 of `error`, larger budgets are
+/// tried, raised by the ratio it missed by (at most 2x), then by its square and fourth
+/// roots: the first measuring at most `error` is kept, else the first bake.
+pub fn sparse_matching(
+    source: &dyn IndexField,
+    error: f64,
+    name: &str,
+) -> anyhow::Result<(SparseField, SparseReport)> {
+    let first = sparse_at(source, error, name)?;
+    let measured = first.1.relative_error;
+    if measured >= 0.9 * error || measured <= 0.0 {
+        return Ok(first);
+    }
+    let ratio = (error / measured).min(2.0);
+    for root in [1.0, 0.5, 0.25] {
+        let next = sparse_at(source, error * ratio.powf(root), name)?;
+        if next.1.relative_error <= error {
+            return Ok(next);
+        }
+    }
+    Ok(first)
+}
+
 /// A case tracing `grid` (baked from `base`'s source to relative error `error`) with
 /// `base`'s rays and reference.
 fn grid_case(base: &Case, name: String, grid: GpuGrid, error: f64) -> Case {
