@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use grin_field::IndexField;
-use grin_scene::{FieldSpec, MediumSpec};
+use grin_scene::MediumSpec;
 use sha2::{Digest, Sha256};
 
 use crate::GpuError;
@@ -105,12 +105,7 @@ impl BakeCache {
         let spec = serde_json::to_string(medium)
             .map_err(|e| GpuError::Bake(format!("the medium's cache key: {e}")))?;
         h.update(spec.as_bytes());
-        let file = match &medium.field {
-            FieldSpec::Vdb(v) => Some(&v.path),
-            FieldSpec::Baked { path, .. } => Some(path),
-            _ => None,
-        };
-        if let Some(f) = file {
+        if let Some(f) = medium.field.file() {
             let path = scene_dir.join(f);
             let bytes = std::fs::read(&path).map_err(|e| {
                 GpuError::Bake(format!(

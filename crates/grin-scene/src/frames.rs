@@ -373,11 +373,10 @@ impl Scene {
 
     /// Whether the medium reads a file per frame (a frame token in its path).
     pub fn is_sequence(&self) -> bool {
-        match self.medium.as_ref().map(|m| &m.field) {
-            Some(FieldSpec::Vdb(v)) => has_frame_token(&v.path),
-            Some(FieldSpec::Baked { path, .. }) => has_frame_token(path),
-            _ => false,
-        }
+        self.medium
+            .as_ref()
+            .and_then(|m| m.field.file())
+            .is_some_and(has_frame_token)
     }
 
     /// The scene of frame `frame` at `fps`: the frame's file where the medium's path has
@@ -429,11 +428,7 @@ pub fn missing_frames(
     (first..=last)
         .filter_map(|f| {
             let s = scene.at_frame(f, fps);
-            let path = match s.medium.as_ref().map(|m| &m.field) {
-                Some(FieldSpec::Vdb(v)) => scene_dir.join(&v.path),
-                Some(FieldSpec::Baked { path, .. }) => scene_dir.join(path),
-                _ => return None,
-            };
+            let path = scene_dir.join(s.medium.as_ref()?.field.file()?);
             (!path.is_file()).then(|| format!("frame {f}: {}", path.display()))
         })
         .collect()

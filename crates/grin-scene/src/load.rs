@@ -125,12 +125,8 @@ impl crate::Scene {
     /// textures' images. A path with a frame token is the sequence's: take the scene
     /// [at its frame](crate::Scene::at_frame) for that frame's file.
     pub fn files(&self, scene_dir: &std::path::Path) -> Vec<std::path::PathBuf> {
-        use crate::{FieldSpec, Material, Sky};
-        let medium = self.medium.as_ref().and_then(|m| match &m.field {
-            FieldSpec::Vdb(v) => Some(v.path.as_str()),
-            FieldSpec::Baked { path, .. } => Some(path.as_str()),
-            _ => None,
-        });
+        use crate::{Material, Sky};
+        let medium = self.medium.as_ref().and_then(|m| m.field.file());
         let sky = match &self.sky {
             Sky::Map { path, .. } | Sky::Plate { path, .. } => Some(path.as_str()),
             _ => None,
@@ -143,14 +139,7 @@ impl crate::Scene {
             .into_iter()
             .chain(sky)
             .chain(textures)
-            .map(|p| {
-                let p = std::path::Path::new(p);
-                if p.is_absolute() {
-                    p.to_path_buf()
-                } else {
-                    scene_dir.join(p)
-                }
-            })
+            .map(|p| scene_dir.join(p))
             .collect()
     }
 }

@@ -330,6 +330,18 @@ pub enum FieldSpec {
     },
 }
 
+impl FieldSpec {
+    /// The file the field reads (a VDB or a baked `.grinf`, as the scene file writes it:
+    /// relative to its directory, perhaps with a frame token), if any.
+    pub fn file(&self) -> Option<&str> {
+        match self {
+            FieldSpec::Vdb(v) => Some(&v.path),
+            FieldSpec::Baked { path, .. } => Some(path),
+            _ => None,
+        }
+    }
+}
+
 defaults! {
     default_axis_y: Axis = Axis::Y;
     default_axis_z: Axis = Axis::Z;
