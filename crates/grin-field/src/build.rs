@@ -129,8 +129,7 @@ pub fn build_field_capped(
             Some(ambient),
         ) => match crate::grinf::load_for_medium(path, scene_dir, bounds, ambient)? {
             crate::grinf::Grinf::Dense(baked) => Arc::new(match interpolation {
-                Some(grin_scene::Interpolation::Trilinear) => baked.with_interp(Interp::Trilinear),
-                Some(grin_scene::Interpolation::Tricubic) => baked.with_interp(Interp::Tricubic),
+                Some(i) => baked.with_interp(Interp::from(*i)),
                 None => baked,
             }),
             crate::grinf::Grinf::Sparse(_)

@@ -155,6 +155,12 @@ struct Gpu<'a> {
     auto: Option<(String, TraceSettings)>,
 }
 
+/// What an `auto` choice depends on besides the view: the step, integrator and pilot
+/// count asked.
+fn auto_key(s: &grin_scene::RenderSettings) -> String {
+    json(&(s.step, s.integrator, s.pilot_rays))
+}
+
 /// Resolve `scene`'s `auto` step (`applied`: the scene file as viewed) as `grin render
 /// --backend gpu` does ([`grin_pipeline::resolve_auto`]), or reuse `cached` when the step,
 /// integrator and pilot count asked are the same (only the camera or the image moved).
@@ -163,9 +169,8 @@ fn resolve_auto(
     applied: &Scene,
     cached: &mut Option<(String, TraceSettings)>,
 ) {
-    let s = &scene.settings;
-    let key = json(&(s.step, s.integrator, s.pilot_rays));
-    if matches!(s.step, grin_scene::StepSpec::Auto(_))
+    let key = auto_key(&scene.settings);
+    if matches!(scene.settings.step, grin_scene::StepSpec::Auto(_))
         && let Some((k, t)) = cached.as_ref()
         && *k == key
     {
@@ -445,10 +450,9 @@ impl<'a> Session<'a> {
             let mut scene = prepared.render_scene;
             // A background plate stays where the scene file's camera sees it.
             scene.pin_plate_to(&self.scene.camera);
-            let auto = prepared.auto.map(|c| {
-                let s = &scene.settings;
-                (json(&(s.step, s.integrator, s.pilot_rays)), c.settings)
-            });
+            let auto = prepared
+                .auto
+                .map(|c| (auto_key(&scene.settings), c.settings));
             let mut renderer = GpuRenderer::new(self.ctx, &scene, grid.as_deref())?;
             renderer.retarget(&scene, first_sample, spp_total)?;
             self.warnings.extend(renderer.warnings().iter().cloned());
@@ -632,12 +636,7 @@ impl<'a> Session<'a> {
             Some(GpuGrid::Dense(grid)) => {
                 let grid = match interp {
                     None => grid,
-                    Some(Interpolation::Trilinear) => {
-                        Arc::new(Arc::unwrap_or_clone(grid).with_interp(Interp::Trilinear))
-                    }
-                    Some(Interpolation::Tricubic) => {
-                        Arc::new(Arc::unwrap_or_clone(grid).with_interp(Interp::Tricubic))
-                    }
+                    Some(i) => Arc::new(Arc::unwrap_or_clone(grid).with_interp(i.into())),
                 };
                 (field, Some(grid))
             }

@@ -65,6 +65,16 @@ impl Interp {
     }
 }
 
+impl From<grin_scene::Interpolation> for Interp {
+    /// A scene's `interpolation` key.
+    fn from(i: grin_scene::Interpolation) -> Self {
+        match i {
+            grin_scene::Interpolation::Trilinear => Interp::Trilinear,
+            grin_scene::Interpolation::Tricubic => Interp::Tricubic,
+        }
+    }
+}
+
 /// What the field is beyond the grid's nodes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, strum::IntoStaticStr)]
 #[strum(serialize_all = "lowercase")]
