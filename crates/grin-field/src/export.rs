@@ -119,7 +119,7 @@ pub struct SparseGrids {
 
 /// The grids of a sparse bake's export, one pair per brick resolution present, coarsest
 /// first.
-pub fn sparse_export_grids(field: &SparseField) -> Vec<SparseGrids> {
+fn sparse_export_grids(field: &SparseField) -> Vec<SparseGrids> {
     (0..=crate::sparse::MAX_LEVEL)
         .zip(field.level_counts())
         .filter(|&(_, bricks)| bricks > 0)
@@ -136,16 +136,16 @@ pub fn sparse_export_grids(field: &SparseField) -> Vec<SparseGrids> {
 }
 
 /// Write a sparse bake to `output` as OpenVDB grids, one pair per brick resolution
-/// ([`sparse_export_grids`]): each grid holds the stored nodes of the bricks of that
+/// present, coarsest first: each grid holds the stored nodes of the bricks of that
 /// resolution, brick by brick (nothing is resampled, no dense box is ever made), index
 /// (i, j, k) at top origin + spacing (i, j, k). Empty space is the background
-/// (delta_n 0, the ambient index). `half` stores 16-bit floats.
+/// (delta_n 0, the ambient index). `half` stores 16-bit floats. Returns the grids written.
 pub fn export_sparse_vdb(
     field: &SparseField,
     input: &Path,
     output: &Path,
     half: bool,
-) -> Result<(), ExportError> {
+) -> Result<Vec<SparseGrids>, ExportError> {
     let levels = sparse_export_grids(field);
     if levels.is_empty() {
         return Err(ExportError::Empty {
@@ -158,12 +158,12 @@ pub fn export_sparse_vdb(
     base_meta.push(("grin_brick_edge".to_owned(), MetaValue::Number(top.edge)));
     let mut writer = VdbWriter::new()?;
     let mut grids = Vec::new();
-    for SparseGrids {
+    for &SparseGrids {
         cells,
-        delta_n: delta_name,
-        grad_n: grad_name,
+        delta_n: ref delta_name,
+        grad_n: ref grad_name,
         ..
-    } in levels
+    } in &levels
     {
         let s = top.edge / cells as f64;
         let world_from_index = Transform {
@@ -190,7 +190,7 @@ pub fn export_sparse_vdb(
         }
         let node = |b: &crate::sparse::Brick, v: usize| field.voxel_f32(b, b.offset + v);
         writer.add_float_boxes(
-            &delta_name,
+            delta_name,
             world_from_index,
             bricks()
                 .zip(&boxes)
@@ -198,7 +198,7 @@ pub fn export_sparse_vdb(
             &opts,
         )?;
         writer.add_vec3_boxes(
-            &grad_name,
+            grad_name,
             world_from_index,
             bricks().zip(&boxes).map(|(b, &bbox)| {
                 let grad = (0..b.voxel_count())
@@ -211,10 +211,11 @@ pub fn export_sparse_vdb(
             }),
             &opts,
         )?;
-        grids.push((delta_name, false));
-        grids.push((grad_name, true));
+        grids.push((delta_name.clone(), false));
+        grids.push((grad_name.clone(), true));
     }
-    write_verified(writer, input, output, &grids)
+    write_verified(writer, input, output, &grids)?;
+    Ok(levels)
 }
 
 /// Every exported grid's metadata: the ambient index, the bake's source and storage.

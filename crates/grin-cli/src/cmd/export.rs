@@ -71,13 +71,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// A sparse bake: a pair of grids per brick resolution (`delta_n_<m>`, `grad_n_<m>`).
 fn run_sparse(args: &Args, field: &grin_field::sparse::SparseField) -> anyhow::Result<()> {
-    grin_field::export::export_sparse_vdb(field, &args.input, &args.output, args.half)?;
+    let levels =
+        grin_field::export::export_sparse_vdb(field, &args.input, &args.output, args.half)?;
     let size = std::fs::metadata(&args.output)
         .map(|m| m.len())
         .unwrap_or(0);
     let to_stream = crate::is_stream(&args.output);
     let edge = field.top().edge;
-    let levels = grin_field::export::sparse_export_grids(field);
     if args.json {
         let grids: Vec<&str> = levels
             .iter()
