@@ -33,15 +33,18 @@ fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
 }
 
 /// Every file of the folder by name, with its bytes.
+/// Every entry's name and bytes (a directory, such as a staging one, has none).
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     std::fs::read_dir(dir)
         .expect("read dir")
         .map(|e| {
             let e = e.expect("dir entry");
-            (
-                e.file_name().to_string_lossy().into_owned(),
-                std::fs::read(e.path()).expect("read file"),
-            )
+            let bytes = if e.path().is_dir() {
+                Vec::new()
+            } else {
+                std::fs::read(e.path()).expect("read file")
+            };
+            (e.file_name().to_string_lossy().into_owned(), bytes)
         })
         .collect()
 }
@@ -177,7 +180,8 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
             summary["rendered"].as_u64().expect("test step"),
             COUNT - done as u64
         );
-        // SIGKILL leaves its temporary file behind (nothing can remove it); SIGTERM does not.
+        // SIGKILL leaves its staging directory behind (nothing can remove it); SIGTERM
+        // does not.
         let leftovers: Vec<String> = files(&dir)
             .into_keys()
             .filter(|n| n.starts_with(".grin-"))
@@ -186,7 +190,7 @@ fn an_interrupted_run_resumes_without_duplicates_or_half_written_samples() {
             assert!(leftovers.is_empty(), "{leftovers:?}");
         }
         for l in leftovers {
-            std::fs::remove_file(dir.join(l)).expect("test step");
+            std::fs::remove_dir_all(dir.join(l)).expect("test step");
         }
         assert_complete(&dir);
         assert_eq!(files(&dir), files(&reference), "resumed after {signal}");

@@ -1,6 +1,6 @@
-//! Files grin writes. Every output is first written in full to a temporary file (beside
-//! its target, so the final rename stays on one filesystem), synced, and only then put in
-//! place; several outputs of one run (an EXR and its PNG preview) are put in place
+//! Files grin writes. Every output is first written in full to a temporary file (in a
+//! private `.grin-*` directory beside its target, so the final rename stays on one
+//! filesystem and a signal can remove it for good), synced, and only then put in place; several outputs of one run (an EXR and its PNG preview) are put in place
 //! together ([`commit`]), so a failed or interrupted run leaves the previous files as
 //! they were and no temporary file behind.
 //!
@@ -225,12 +225,51 @@ fn input_at(meta: &fs::Metadata) -> Option<PathBuf> {
     inputs().iter().find(|x| x.id == id).map(|x| x.path.clone())
 }
 
-/// Temporary files staged and not yet put in place or removed, for the signal handler.
+/// Staging directories not yet put in place or removed, for the signal handler.
 static LIVE: Mutex<BTreeSet<PathBuf>> = Mutex::new(BTreeSet::new());
 
 fn live() -> MutexGuard<'static, BTreeSet<PathBuf>> {
     LIVE.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Name of the staged file inside its private staging directory.
+const STAGED_NAME: &str = "staged";
+
+/// Remove a staging directory and what is in it. A writer that opens its file by path
+/// may create it again while the directory is being emptied; once the directory itself
+/// is gone, nothing can be created in it, so this tries until it is.
+fn remove_staging(dir: &Path) {
+    for _ in 0..100 {
+        match fs::remove_dir_all(dir) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound && dir.exists() => continue,
+            _ => return,
+        }
+    }
+}
+
+/// A private directory holding one staged output. Writers that only take a path (EXR,
+/// OpenVDB) open the staged file by name, so removing the file alone could race with
+/// them creating it again; removing its directory cannot.
+#[derive(Debug)]
+struct Staging {
+    dir: PathBuf,
+}
+
+impl Staging {
+    fn file(&self) -> PathBuf {
+        self.dir.join(STAGED_NAME)
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if self.dir.as_os_str().is_empty() {
+            return; // committed: removed by `commit`, under the lock it holds
+        }
+        remove_staging(&self.dir);
+        live().remove(&self.dir);
+    }
 }
 
 /// One output written in full to a temporary file, waiting for [`commit`]. Dropped
@@ -240,17 +279,7 @@ pub struct Staged {
     /// The path as the user gave it (for messages).
     target: PathBuf,
     destination: Destination,
-    tmp: Option<tempfile::TempPath>,
-}
-
-impl Drop for Staged {
-    fn drop(&mut self) {
-        if let Some(tmp) = self.tmp.take() {
-            let path = tmp.to_path_buf();
-            drop(tmp);
-            live().remove(&path);
-        }
-    }
+    staging: Option<Staging>,
 }
 
 /// Why [`stage_with`] failed: the target could not be staged, or the caller's writer
@@ -282,28 +311,34 @@ pub fn stage_with<E>(
             .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
         _ => std::env::temp_dir(),
     };
-    let tmp = {
-        // Registered before the file exists, so a signal in between removes it too.
+    let staging = {
+        // Registered before the directory exists, so a signal in between removes it too.
         let mut guard = live();
-        let file = tempfile::Builder::new()
+        let cannot = |e: io::Error| {
+            OutputError::target(
+                target,
+                format!("cannot create a file in {}: {}", dir.display(), plain(&e)),
+            )
+        };
+        let made = tempfile::Builder::new()
             .prefix(".grin-")
-            .suffix(".tmp")
-            .tempfile_in(&dir)
-            .map_err(|e| {
-                OutputError::target(
-                    target,
-                    format!("cannot create a file in {}: {}", dir.display(), plain(&e)),
-                )
-            })?;
-        let tmp = file.into_temp_path();
-        guard.insert(tmp.to_path_buf());
-        tmp
+            .tempdir_in(&dir)
+            .map_err(cannot)?
+            .keep();
+        guard.insert(made.clone());
+        let staging = Staging { dir: made };
+        OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(staging.file())
+            .map_err(cannot)?;
+        staging
     };
-    let tmp_path = tmp.to_path_buf();
+    let tmp_path = staging.file();
     let staged = Staged {
         target: target.to_owned(),
         destination,
-        tmp: Some(tmp),
+        staging: Some(staging),
     };
     write(&tmp_path).map_err(StageError::Writer)?;
     // tempfile creates its files 0600; an output gets the mode of the file it replaces,
@@ -369,13 +404,15 @@ pub fn commit(staged: Vec<Staged>) -> Result<(), OutputError> {
     }
     let mut guard = live();
     for mut s in staged {
-        let Some(tmp) = s.tmp.take() else { continue };
-        let tmp_path = tmp.to_path_buf();
+        let Some(mut staging) = s.staging.take() else {
+            continue;
+        };
+        let tmp_path = staging.file();
+        let dir = std::mem::take(&mut staging.dir);
         let result = match &s.destination {
-            Destination::Replace { file } => tmp
-                .persist(file)
-                .map(|_| ())
-                .map_err(|e| OutputError::io(&s.target, e.error)),
+            Destination::Replace { file } => {
+                fs::rename(&tmp_path, file).map_err(|e| OutputError::io(&s.target, e))
+            }
             Destination::Stream { file } => OpenOptions::new()
                 .write(true)
                 .open(file)
@@ -384,8 +421,8 @@ pub fn commit(staged: Vec<Staged>) -> Result<(), OutputError> {
             Destination::Stdout => copy_into(&tmp_path, &mut io::stdout().lock())
                 .map_err(|e| OutputError::io(&s.target, e)),
         };
-        let _ = fs::remove_file(&tmp_path);
-        guard.remove(&tmp_path);
+        remove_staging(&dir);
+        guard.remove(&dir);
         result?;
     }
     Ok(())
@@ -418,9 +455,10 @@ pub fn plain(e: &io::Error) -> String {
 /// file, and exit with [`INTERRUPTED_EXIT_CODE`]. Call once, early in `main`.
 pub fn install_signal_cleanup() -> Result<(), String> {
     ctrlc::set_handler(|| {
+        // Held until the process is gone: nothing is staged or committed after this.
         let mut guard = live();
-        for path in guard.iter() {
-            let _ = fs::remove_file(path);
+        for dir in guard.iter() {
+            remove_staging(dir);
         }
         guard.clear();
         eprintln!("grin: interrupted; no output was left half-written");

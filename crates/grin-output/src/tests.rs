@@ -189,3 +189,25 @@ fn protected_inputs_refuse_outputs_while_a_guard_lives() {
     write_file(&soft, |w| w.write_all(b"out")).expect("free again");
     assert_eq!(fs::read(&input).expect("read"), b"out");
 }
+
+#[test]
+fn a_writer_that_reopens_its_file_after_the_cleanup_leaves_nothing() {
+    // The signal handler's cleanup may run between a file being staged and a path-only
+    // writer (EXR, OpenVDB) opening it by name: the writer must not create it again.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("late.exr");
+    let result = stage_path(&out, |tmp| {
+        // What the handler does to each directory (all of them there, which here would
+        // reach the other tests' outputs too).
+        remove_staging(tmp.parent().expect("staged in a directory"));
+        fs::write(tmp, b"written after the cleanup").map_err(|e| plain(&e))
+    });
+    let e = result.expect_err("the staging directory is gone");
+    assert!(
+        e.to_string()
+            .starts_with(&format!("{}: No such file or directory", out.display())),
+        "{e}"
+    );
+    assert!(!out.exists());
+    assert!(no_temp_files(dir.path()));
+}
