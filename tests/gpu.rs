@@ -107,10 +107,11 @@ fn band_size_does_not_change_the_image() {
 }
 
 /// Rays too long for lavapipe's loop limit (65,535 loop iterations an invocation in all,
-/// ~21,800 steps) end `error` there, and `grin render` says why and what traces them
-/// whole; on a GPU, which has no such limit, the same rays (~200,000 steps) leave.
+/// ~21,800 steps; these take ~200,000) leave on every adapter: `grin render`'s medium pass
+/// runs in rounds of 1,024 steps, a pixel's state kept on the device between them. (Marched
+/// whole, they ended `error` on lavapipe, with a warning naming the limit.)
 #[test]
-fn rays_past_lavapipes_loop_limit_are_named_as_such() {
+fn rays_past_lavapipes_loop_limit_leave_on_every_adapter() {
     if !gpu_required() {
         return;
     }
@@ -121,30 +122,20 @@ fn rays_past_lavapipes_loop_limit_are_named_as_such() {
         &dir.path().join("long.exr"),
         &["--backend", "gpu", "--size", "6x4", "--json"],
     ));
-    let adapter = v["adapter"].as_str().expect("adapter").to_string();
-    let errors = v["status_counts"]["error"].as_u64().expect("error count");
+    let counts = &v["status_counts"];
+    let count = |s: &str| counts[s].as_u64().expect("status count");
+    assert_eq!(count("error"), 0, "{v}");
+    assert_eq!(count("max_steps"), 0, "{v}");
+    assert!(count("exited") + count("degraded") >= 6, "{v}");
+    let steps = v["steps_per_ray"].as_f64().expect("steps per ray");
+    assert!(steps > 20_000.0, "{steps} steps a pixel: not long rays");
     let warned = v["warnings"]
         .as_array()
         .expect("warnings")
         .iter()
         .filter_map(|w| w.as_str())
-        .find(|w| w.contains("on a CPU adapter (lavapipe)"))
-        .map(str::to_owned);
-    if adapter.ends_with(", Cpu)") {
-        assert!(errors > 0, "{v}");
-        let w = warned.expect("the loop limit is named");
-        assert!(
-            w.starts_with(&format!("{errors} pixels ended `error` after 2000+ steps")),
-            "{w}"
-        );
-        assert!(
-            w.contains("(grin render --backend cpu) traces them whole"),
-            "{w}"
-        );
-    } else {
-        assert_eq!(errors, 0, "{adapter}: {v}");
-        assert!(warned.is_none(), "{adapter}: {warned:?}");
-    }
+        .any(|w| w.contains("on a CPU adapter (lavapipe)"));
+    assert!(!warned, "{v}");
 }
 
 #[test]

@@ -17,3 +17,4 @@
 // Pixels (index within the band) left by PASS_FIRST for PASS_MEDIUM, and their count.
 @group(0) @binding(7) var<storage, read_write> deferred: array<u32>;
 @group(0) @binding(8) var<storage, read_write> deferred_pixels: DeferredPixels;
+// Binding 9, PASS_MEDIUM's pixels between rounds, is declared in render.wgsl.

@@ -410,3 +410,48 @@ fn march_run(carry: ptr<function, MarchCarry>, stats: ptr<function, MarchStats>,
     }
     return march_end(END_STOPPED, STATUS_MAX_STEPS, state.r, normalize_or_zero(state.t), transmittance);
 }
+
+// ErrorEstimate with its flags as u32.
+struct ErrorEstimateStored {
+    order: u32,
+    sum: f32,
+    bend: f32,
+    pos: f32,
+    near_miss: u32,
+    has_prev: u32,
+    prev_d: vec3<f32>,
+    prev_h: f32,
+    last_local: vec3<f32>,
+    last_local_r: f32,
+    staggered: u32,
+    staggered_half: vec3<f32>,
+    vsum: vec3<f32>,
+}
+
+// MarchCarry and MarchStats as a storage buffer holds them between dispatches (stages.wgsl's
+// stage_march, render.wgsl's PASS_MEDIUM), and whether the ray is still marching (1) or
+// has finished (0).
+struct MarchCarryStored {
+    state: RayState,
+    s0: FieldSample,
+    ctrl: StepController,
+    est: ErrorEstimateStored,
+    comp: RayState,
+    transmittance: f32,
+    surface_err: f32,
+    guard: u32,
+    marching: u32,
+    stats: MarchStats,
+}
+
+fn march_carry_store(c: MarchCarry, stats: MarchStats) -> MarchCarryStored {
+    let e = c.est;
+    let est = ErrorEstimateStored(e.order, e.sum, e.bend, e.pos, u32(e.near_miss), u32(e.has_prev), e.prev_d, e.prev_h, e.last_local, e.last_local_r, u32(e.staggered), e.staggered_half, e.vsum);
+    return MarchCarryStored(c.state, c.s0, c.ctrl, est, c.comp, c.transmittance, c.surface_err, c.guard, 1u, stats);
+}
+
+fn march_carry_load(c: MarchCarryStored) -> MarchCarry {
+    let e = c.est;
+    let est = ErrorEstimate(e.order, e.sum, e.bend, e.pos, e.near_miss != 0u, e.has_prev != 0u, e.prev_d, e.prev_h, e.last_local, e.last_local_r, e.staggered != 0u, e.staggered_half, e.vsum);
+    return MarchCarry(c.state, c.s0, c.ctrl, est, c.comp, c.transmittance, c.surface_err, c.guard);
+}

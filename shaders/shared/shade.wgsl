@@ -88,43 +88,131 @@ fn angle_between_deg(a: vec3<f32>, b: vec3<f32>) -> f32 {
     return atan2(length(cross(a, b)), dot(a, b)) * (180.0 / PI);
 }
 
+// A pixel sample's path between loop passes: all a march split over dispatches keeps
+// while the path waits for the next (render.wgsl's PixelCarryStored holds it there).
+struct PathState {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    throughput: vec3<f32>,
+    radiance: vec3<f32>,
+    aov: PrimaryAov,
+    primary: bool,
+    inside: bool,
+    bounces: u32,
+    // The event loop's pass.
+    event: u32,
+    // In the middle of a march through the medium (`march`, `stats`, and the entry
+    // direction and straight exit the AOVs are measured from).
+    marching: bool,
+    march: MarchCarry,
+    stats: MarchStats,
+    entry_dir: vec3<f32>,
+    straight_exit: vec3<f32>,
+}
+
+// path_run's outcomes: the path is done, left to PASS_MEDIUM, or out of budget (its
+// state kept in the PathState, to be run on).
+const PATH_DONE: u32 = 0u;
+const PATH_DEFERRED: u32 = 1u;
+const PATH_SUSPENDED: u32 = 2u;
+
+fn path_start(start: vec3<f32>, d: vec3<f32>) -> PathState {
+    var p: PathState;
+    p.origin = start;
+    p.dir = d;
+    p.throughput = vec3<f32>(1.0);
+    p.radiance = vec3<f32>(0.0);
+    p.aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED, start, 0.0);
+    p.primary = true;
+    p.inside = has_medium() && bounds_signed_distance(start) < 0.0;
+    p.bounces = 0u;
+    p.event = 0u;
+    p.marching = false;
+    return p;
+}
+
 // One pixel sample: the camera ray from `start` along `d` through the medium and the objects, up to
 // max_depth bounces. `jitter` scales the first step of the camera ray's passage.
 fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample {
-    var origin = start;
-    var dir = d;
-    var throughput = vec3<f32>(1.0);
-    var radiance = vec3<f32>(0.0);
-    var aov = PrimaryAov(0.0, d, 0.0, 0u, 0u, STATUS_MISSED, start, 0.0);
-    var primary = true;
-    var inside = has_medium() && bounds_signed_distance(origin) < 0.0;
-    var bounces = 0u;
+    var p = path_start(start, d);
+    var budget = MARCH_UNBOUNDED;
+    let outcome = path_run(&p, jitter, rng, &budget);
+    return PathSample(p.radiance, p.aov, outcome == PATH_DEFERRED);
+}
+
+// Run the path in `p` on until it is done (PATH_DONE, its radiance and AOVs in `p`),
+// left to PASS_MEDIUM (PATH_DEFERRED), or until its marches have taken `budget` steps
+// and flights (PATH_SUSPENDED: `p` runs on from there, the same steps in the same
+// arithmetic as one whole run). `budget` is decreased by the steps taken.
+fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, budget: ptr<function, u32>) -> u32 {
+    var origin = (*p).origin;
+    var dir = (*p).dir;
+    var throughput = (*p).throughput;
+    var radiance = (*p).radiance;
+    var aov = (*p).aov;
+    var primary = (*p).primary;
+    var inside = (*p).inside;
+    var bounces = (*p).bounces;
+    var marching = (*p).marching;
+    var march = (*p).march;
+    var stats = (*p).stats;
+    var entry_dir = (*p).entry_dir;
+    var straight_exit = (*p).straight_exit;
     let max_events = EVENTS_PER_DEPTH * (params.max_depth + 1u);
-    for (var ev_i = 0u; ev_i < max_events; ev_i++) {
-        var event: Event;
-        if inside {
-            event = Event(EVENT_MEDIUM, no_hit(), dir);
-        } else {
-            event = next_event_outside(origin, dir);
+    for (var ev_i = (*p).event; ev_i < max_events; ev_i++) {
+        var hit = no_hit();
+        var hit_dir = dir;
+        var crossing = marching;
+        if !marching {
+            var event: Event;
+            if inside {
+                event = Event(EVENT_MEDIUM, no_hit(), dir);
+            } else {
+                event = next_event_outside(origin, dir);
+            }
+            if event.kind == EVENT_SKY {
+                radiance += throughput * sky_radiance(event.dir);
+                break;
+            }
+            hit = event.hit;
+            hit_dir = event.dir;
+            crossing = event.kind == EVENT_MEDIUM;
         }
-        if event.kind == EVENT_SKY {
-            radiance += throughput * sky_radiance(event.dir);
-            break;
-        }
-        var hit = event.hit;
-        var hit_dir = event.dir;
-        if event.kind == EVENT_MEDIUM {
+        if crossing {
             if defer_medium() {
-                return PathSample(radiance, aov, true);
+                (*p).radiance = radiance;
+                (*p).aov = aov;
+                return PATH_DEFERRED;
             }
-            var stats = march_stats_new(dir);
-            let b = bounds_intersect(origin, dir);
-            var straight_exit = origin;
-            if b.found {
-                straight_exit = origin + dir * max(b.s_out, 0.0);
+            var end: MarchEnd;
+            var ended = false;
+            if !marching {
+                stats = march_stats_new(dir);
+                let b = bounds_intersect(origin, dir);
+                straight_exit = origin;
+                if b.found {
+                    straight_exit = origin + dir * max(b.s_out, 0.0);
+                }
+                entry_dir = dir;
+                let begun = march_begin(origin, dir, select(1.0, jitter, primary), &stats);
+                if begun.done {
+                    end = begun.end;
+                    ended = true;
+                } else {
+                    march = begun.carry;
+                    marching = true;
+                }
             }
-            let entry_dir = dir;
-            let end = march_medium(origin, dir, select(1.0, jitter, primary), &stats);
+            if !ended {
+                let before = stats.steps;
+                end = march_run(&march, &stats, *budget);
+                *budget -= min(*budget, stats.steps - before);
+                if end.kind == END_SUSPENDED {
+                    *p = PathState(origin, dir, throughput, radiance, aov, primary, inside, bounces, ev_i, true, march, stats, entry_dir, straight_exit);
+                    return PATH_SUSPENDED;
+                }
+                marching = false;
+            }
             aov.steps += stats.steps;
             aov.evals += stats.evals;
             inside = false;
@@ -234,7 +322,9 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
                 let side = select(-1.0, 1.0, hit.front_face);
                 let n_outside = index_at(hit.point + hit.normal * (SURFACE_EPS * side));
                 if n_outside < 0.0 {
-                    return PathSample(radiance, aov, true);
+                    (*p).radiance = radiance;
+                    (*p).aov = aov;
+                    return PATH_DEFERRED;
                 }
                 var n1 = ior;
                 var n2 = n_outside;
@@ -264,7 +354,9 @@ fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u3
         dir = next;
         inside = has_medium() && bounds_signed_distance(origin) < 0.0;
     }
-    return PathSample(radiance, aov, false);
+    (*p).radiance = radiance;
+    (*p).aov = aov;
+    return PATH_DONE;
 }
 
 fn shade_diffuse(hit: Hit, albedo: vec3<f32>) -> vec3<f32> {

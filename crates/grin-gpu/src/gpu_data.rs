@@ -446,5 +446,13 @@ pub(crate) mod tests {
         assert_eq!(size_of_wgsl("GpuObject"), std::mem::size_of::<GpuObject>());
         assert_eq!(size_of_wgsl("GpuLight"), std::mem::size_of::<GpuLight>());
         assert_eq!(size_of_wgsl("PixelOut"), std::mem::size_of::<PixelOut>());
+        assert_eq!(
+            size_of_wgsl("PixelCarryStored") as u64,
+            crate::render::PIXEL_CARRY_BYTES
+        );
+        assert_eq!(size_of_wgsl("ResumeRound"), 16);
+        let (_, offsets) = wgsl_offsets(RENDER_WGSL, "Resume");
+        let offsets: Vec<usize> = offsets.into_iter().map(|(_, o)| o).collect();
+        assert_eq!(offsets, [0, 16, 48], "Resume's header");
     }
 }

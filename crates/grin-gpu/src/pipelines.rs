@@ -58,6 +58,7 @@ pub(crate) fn render_layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
         buffer(6, storage(false)),
         buffer(7, storage(false)),
         buffer(8, storage(false)),
+        buffer(9, storage(false)),
     ]
 }
 

@@ -66,6 +66,55 @@ fn band_override() -> Result<Option<u32>, String> {
 /// Workgroup size of `render_main` and `bench_main` (keep in sync with the shaders).
 pub(crate) const WORKGROUP: u32 = 8;
 
+/// Steps (or straight flights) a pixel's marches take in one round of PASS_MEDIUM (the
+/// ray table's dispatch, for the same reasons: lavapipe's loop limit, a GPU's watchdog).
+pub const RENDER_STEPS_PER_ROUND: u32 = crate::stages::MARCH_STEPS_PER_DISPATCH;
+/// Rounds encoded in one submission when the pixels are read back: after each such
+/// batch the count of pixels still marching (16 bytes) is read, and more rounds follow
+/// while there are any.
+const ROUNDS_PER_SUBMISSION: u32 = 8;
+/// Rounds of a viewer's band (nothing is read back there): the pixels still marching
+/// after them run on whole in one last round, as an unsplit march (lavapipe's warning
+/// about its loop limit still counts any that it cut short).
+const VIEW_ROUNDS: u32 = 16;
+/// Bytes of one pixel's state between rounds (WGSL `PixelCarryStored`; held to the WGSL
+/// struct's size by a test).
+pub(crate) const PIXEL_CARRY_BYTES: u64 = 560;
+/// Bytes of `Resume`'s header: the round (ResumeRound) and the two halves' counts.
+const RESUME_HEADER_BYTES: u64 = 48;
+/// Pixels one half of the resume buffer holds at most: beyond it a pixel runs on whole
+/// (35 MiB for both halves).
+const RESUME_PIXELS_MAX: u32 = 32 * 1024;
+
+/// A round of PASS_MEDIUM (WGSL `ResumeRound`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ResumeRound {
+    resuming: u32,
+    read_half: u32,
+    budget: u32,
+    pad: u32,
+}
+
+/// The rounds after the first, as copied into the resume buffer's header before each:
+/// `[read_half * 2 + last]`, the last round's budget unbounded; then a half's empty
+/// count ([`EMPTY_COUNT`]), copied over the count a round is to write.
+fn resume_rounds(steps: u32) -> [ResumeRound; 5] {
+    std::array::from_fn(|i| match i {
+        4 => bytemuck::cast(EMPTY_COUNT),
+        _ => ResumeRound {
+            resuming: 1,
+            read_half: (i / 2) as u32,
+            budget: if i % 2 == 1 { u32::MAX } else { steps },
+            pad: 0,
+        },
+    })
+}
+
+/// A half's count with no pixels: an indirect dispatch of 0 x 1 x 1 workgroups, 0 pixels
+/// (WGSL `ResumeCount`).
+const EMPTY_COUNT: [u32; 4] = [0, 1, 1, 0];
+
 /// Timing of the last [`GpuRenderer::render`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RenderTiming {
@@ -132,6 +181,22 @@ impl PassTimer {
         }
     }
 
+    /// Only the start of pass `pass` (the medium pass's first round).
+    pub(crate) fn writes_begin(&self, pass: u32) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            end_of_pass_write_index: None,
+            ..self.writes(pass)
+        }
+    }
+
+    /// Only the end of pass `pass` (the medium pass's last round so far).
+    pub(crate) fn writes_end(&self, pass: u32) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            beginning_of_pass_write_index: None,
+            ..self.writes(pass)
+        }
+    }
+
     /// Resolve the band's timestamps into the read-back buffer (`passes` of them written).
     pub(crate) fn resolve(&self, encoder: &mut wgpu::CommandEncoder, passes: u32) {
         encoder.resolve_query_set(&self.queries, 0..2 * passes, &self.resolved, 0);
@@ -169,6 +234,15 @@ pub struct GpuRenderer<'a> {
     /// three words copied as PASS_MEDIUM's indirect dispatch.
     pub(crate) deferred_count: wgpu::Buffer,
     pub(crate) deferred_dispatch: wgpu::Buffer,
+    /// PASS_MEDIUM's pixels between rounds (WGSL `Resume`), the rounds' headers
+    /// ([`resume_rounds`]), the 16 bytes read back to see whether a round left any, and
+    /// the steps a round allows.
+    pub(crate) resume: wgpu::Buffer,
+    pub(crate) resume_rounds: wgpu::Buffer,
+    pub(crate) resume_status: wgpu::Buffer,
+    pub(crate) round_steps: u32,
+    /// The most rounds one band of the last frame ran (0 without a medium pass).
+    pub(crate) rounds: std::sync::atomic::AtomicU32,
     pub(crate) out_buffer: wgpu::Buffer,
     pub(crate) readback: wgpu::Buffer,
     pub(crate) rows_per_band: u32,
@@ -387,6 +461,36 @@ impl<'a> GpuRenderer<'a> {
                 usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
+            // Room for a band's pixels in each half (none without PASS_MEDIUM), within the
+            // binding limit.
+            let resume_pixels = if split {
+                let fits = (ctx.limits().max_storage_buffer_binding_size - RESUME_HEADER_BYTES)
+                    / (2 * PIXEL_CARRY_BYTES);
+                (s.width * rows_per_band)
+                    .min(RESUME_PIXELS_MAX)
+                    .min(u32::try_from(fits).unwrap_or(u32::MAX))
+            } else {
+                0
+            };
+            let resume = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("medium pass rounds"),
+                size: RESUME_HEADER_BYTES + 2 * u64::from(resume_pixels.max(1)) * PIXEL_CARRY_BYTES,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let resume_rounds = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("medium pass round headers"),
+                contents: bytemuck::cast_slice(&resume_rounds(RENDER_STEPS_PER_ROUND)),
+                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            });
+            let resume_status = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("medium pass pixels left"),
+                size: 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             let (field_view, macro_view) = field.views();
             let env_view = env_tex.create_view(&wgpu::TextureViewDescriptor::default());
             let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -402,6 +506,7 @@ impl<'a> GpuRenderer<'a> {
                     (6, out_buffer.as_entire_binding()),
                     (7, deferred.as_entire_binding()),
                     (8, deferred_count.as_entire_binding()),
+                    (9, resume.as_entire_binding()),
                 ]),
             });
             GpuRenderer {
@@ -413,6 +518,11 @@ impl<'a> GpuRenderer<'a> {
                 params_buffer,
                 deferred_count,
                 deferred_dispatch,
+                resume,
+                resume_rounds,
+                resume_status,
+                round_steps: RENDER_STEPS_PER_ROUND,
+                rounds: std::sync::atomic::AtomicU32::new(0),
                 out_buffer,
                 readback,
                 rows_per_band,
@@ -466,6 +576,23 @@ impl<'a> GpuRenderer<'a> {
         self.params = p;
         self.rows_per_band = rows;
         Ok(true)
+    }
+
+    /// Let each pixel's marches take at most `steps` steps a round of the medium pass
+    /// (default [`RENDER_STEPS_PER_ROUND`]): the image is the same at any value (tested).
+    pub fn set_round_steps(&mut self, steps: u32) {
+        self.round_steps = steps.max(1);
+        self.ctx.queue.write_buffer(
+            &self.resume_rounds,
+            0,
+            bytemuck::cast_slice(&resume_rounds(self.round_steps)),
+        );
+    }
+
+    /// The most rounds of the medium pass one band of the last frame ran, counting the
+    /// first (each a dispatch; a viewer's band always runs its fixed number).
+    pub fn last_medium_rounds(&self) -> u32 {
+        self.rounds.load(Ordering::Relaxed)
     }
 
     /// Render in bands of at most `rows` rows (the seams between bands, tested; the next
@@ -583,6 +710,7 @@ impl<'a> GpuRenderer<'a> {
         let height = self.params.height;
         let mut row = 0;
         let mut device_seconds = 0.0;
+        self.rounds.store(0, Ordering::Relaxed);
         while row < height {
             if cancel.load(Ordering::Relaxed) {
                 return Err(GpuError::Cancelled);
@@ -641,7 +769,18 @@ impl<'a> GpuRenderer<'a> {
         params.row_count = rows;
         let bytes = u64::from(width) * u64::from(rows) * std::mem::size_of::<PixelOut>() as u64;
         let passes = if self.medium_pipeline.is_some() { 2 } else { 1 };
-        ctx.scoped("dispatching the render kernel", || {
+        let view = matches!(sink, BandSink::View { .. });
+        // Every round there could be: each pixel's samples, each path's events, each
+        // march's loop bound, a round's steps at a time (never reached: the count of
+        // pixels left reaches zero long before).
+        let cap = {
+            let events = 3 * (u64::from(params.max_depth) + 1);
+            let steps = u64::from(params.spp) * events * (2 * u64::from(params.max_steps) + 2);
+            u32::try_from(steps.div_ceil(u64::from(self.round_steps)) + 1).unwrap_or(u32::MAX)
+        };
+        let mut round = 0u32;
+        let mut sink = sink;
+        let mut encoder = ctx.scoped("dispatching the render kernel", || {
             ctx.queue
                 .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
             let mut encoder = ctx
@@ -661,6 +800,17 @@ impl<'a> GpuRenderer<'a> {
                     0,
                     bytemuck::cast_slice(&[0u32, 1, 1, 0]),
                 );
+                // Round 0 starts the pixels PASS_FIRST lists and leaves its unfinished
+                // ones in half 0.
+                let start = ResumeRound {
+                    resuming: 0,
+                    read_half: 1,
+                    budget: self.round_steps,
+                    pad: 0,
+                };
+                let header: [[u32; 4]; 3] = [bytemuck::cast(start), EMPTY_COUNT, EMPTY_COUNT];
+                ctx.queue
+                    .write_buffer(&self.resume, 0, bytemuck::cast_slice(&header));
             }
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -682,29 +832,80 @@ impl<'a> GpuRenderer<'a> {
                 );
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("render_deferred"),
-                    timestamp_writes: self.timer.as_ref().map(|t| t.writes(1)),
+                    timestamp_writes: self.timer.as_ref().map(|t| t.writes_begin(1)),
                 });
                 pass.set_pipeline(medium);
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.dispatch_workgroups_indirect(&self.deferred_dispatch, 0);
             }
-            match &sink {
-                BandSink::ReadBack(_) => {
-                    encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
-                }
-                BandSink::View { image, show, .. } => {
-                    image.accumulate_band(ctx, &mut encoder, &self.out_buffer, first_row, rows);
-                    if let Some(aov) = show {
-                        image.encode_show(ctx, &mut encoder, *aov);
+            encoder
+        })?;
+        loop {
+            let batch_end = if view {
+                VIEW_ROUNDS + 1
+            } else {
+                round + ROUNDS_PER_SUBMISSION
+            }
+            .min(cap);
+            ctx.scoped("dispatching the render kernel", || {
+                if let Some(medium) = &self.medium_pipeline {
+                    for r in round + 1..=batch_end {
+                        let last = r == batch_end && (view || r == cap);
+                        self.encode_round(&mut encoder, medium, r, last, r == batch_end);
+                    }
+                    if !view {
+                        // The count the last round left in the half it wrote.
+                        let written = u64::from(batch_end & 1);
+                        encoder.copy_buffer_to_buffer(
+                            &self.resume,
+                            16 + 16 * written,
+                            &self.resume_status,
+                            0,
+                            16,
+                        );
                     }
                 }
-            }
-            if let Some(timer) = &self.timer {
-                timer.resolve(&mut encoder, passes);
-            }
+                match &sink {
+                    BandSink::ReadBack(_) => {
+                        encoder.copy_buffer_to_buffer(
+                            &self.out_buffer,
+                            0,
+                            &self.readback,
+                            0,
+                            bytes,
+                        );
+                    }
+                    BandSink::View { image, show, .. } => {
+                        image.accumulate_band(ctx, &mut encoder, &self.out_buffer, first_row, rows);
+                        if let Some(aov) = show {
+                            image.encode_show(ctx, &mut encoder, *aov);
+                        }
+                    }
+                }
+                if let Some(timer) = &self.timer {
+                    timer.resolve(&mut encoder, passes);
+                }
+            })?;
             ctx.queue.submit([encoder.finish()]);
-        })?;
-        match sink {
+            round = batch_end;
+            if self.medium_pipeline.is_some() {
+                self.rounds.fetch_max(round + 1, Ordering::Relaxed);
+            }
+            if view || self.medium_pipeline.is_none() || round >= cap {
+                break;
+            }
+            let status: Vec<u32> = read_buffer(ctx, &self.resume_status, 16)?;
+            self.read_back.fetch_add(16, Ordering::Relaxed);
+            if status[3] == 0 {
+                break;
+            }
+            encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("render band rounds"),
+                });
+        }
+        match &mut sink {
             BandSink::ReadBack(take) => {
                 read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
                 self.read_back.fetch_add(bytes, Ordering::Relaxed);
@@ -725,6 +926,47 @@ impl<'a> GpuRenderer<'a> {
             }
             None => Ok(None),
         }
+    }
+
+    /// Encode round `r` (1 or later) of the medium pass: it reads the half round `r - 1`
+    /// wrote (emptying the count of the other, which it writes), with the round's budget
+    /// of steps (none in the `last` round), dispatched over the pixels left.
+    fn encode_round(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        medium: &wgpu::ComputePipeline,
+        r: u32,
+        last: bool,
+        timestamp_end: bool,
+    ) {
+        let read = u64::from((r - 1) & 1);
+        let write = 1 - read;
+        encoder.copy_buffer_to_buffer(
+            &self.resume_rounds,
+            4 * 16,
+            &self.resume,
+            16 + 16 * write,
+            16,
+        );
+        encoder.copy_buffer_to_buffer(
+            &self.resume_rounds,
+            (read * 2 + u64::from(last)) * 16,
+            &self.resume,
+            0,
+            16,
+        );
+        encoder.copy_buffer_to_buffer(&self.resume, 16 + 16 * read, &self.deferred_dispatch, 0, 12);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("render_deferred round"),
+            timestamp_writes: self
+                .timer
+                .as_ref()
+                .filter(|_| timestamp_end)
+                .map(|t| t.writes_end(1)),
+        });
+        pass.set_pipeline(medium);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.dispatch_workgroups_indirect(&self.deferred_dispatch, 0);
     }
 }
 

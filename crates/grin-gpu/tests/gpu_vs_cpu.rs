@@ -728,3 +728,98 @@ fn degraded_rays_are_the_same_on_both_backends() {
         "asking 1e-2 rad degrades fewer rays than 3e-3: {counts:?}"
     );
 }
+
+/// The medium pass runs a pixel's marches a round of steps at a time, its state kept on
+/// the device between rounds: split into rounds of 5 steps (dozens of rounds, samples and
+/// paths suspended mid-march, through glass and metal), the frame is the one a single
+/// unbounded round gives, bit for bit.
+#[test]
+fn a_medium_pass_split_into_rounds_gives_the_whole_runs_pixels() {
+    let Some(ctx) = harness::context("a_medium_pass_split_into_rounds_gives_the_whole_runs_pixels")
+    else {
+        return;
+    };
+    let mut scene = parse_scene(&paper_luneburg(), Path::new("inline.toml")).expect("scene");
+    scene.render.spp = 2;
+    let baked = harness::baked(&scene, Path::new("."), 48);
+    let field = baked
+        .clone()
+        .map(|b| b as std::sync::Arc<dyn grin_field::IndexField>);
+    let rs = grin_render::scene::RenderScene::new(&scene, Path::new("."), field).expect("scene");
+    let mut gpu = grin_gpu::GpuRenderer::new(&ctx, &rs, baked.as_deref()).expect("renderer");
+    let render = |gpu: &grin_gpu::GpuRenderer| {
+        gpu.render(&|_| {}, &std::sync::atomic::AtomicBool::new(false))
+            .expect("render")
+    };
+    gpu.set_round_steps(u32::MAX);
+    let whole = render(&gpu);
+    let whole_rounds = gpu.last_medium_rounds();
+    gpu.set_round_steps(5);
+    let split = render(&gpu);
+    let rounds = gpu.last_medium_rounds();
+    let steps: f32 = whole.pixels.iter().map(|p| p.steps).fold(0.0, f32::max);
+    eprintln!("{rounds} rounds; the longest pixel {steps} steps");
+    assert!(
+        rounds > 16 && whole_rounds <= 9,
+        "{rounds} rounds, {whole_rounds} whole"
+    );
+    assert!(whole.mean_steps() > 0.5);
+    let differ = whole
+        .pixels
+        .iter()
+        .zip(&split.pixels)
+        .filter(|(a, b)| format!("{a:?}") != format!("{b:?}"))
+        .count();
+    assert_eq!(differ, 0, "pixels differ between the split and whole runs");
+}
+
+/// Pixels whose rays take 40,000 steps through the Luneburg lens (fixed steps of 5e-5 R):
+/// on lavapipe, which stops a shader invocation's loops after 65,535 iterations in all,
+/// a whole march ended them `error`; in rounds they leave as their CPU twins do.
+#[test]
+fn pixels_past_lavapipes_loop_limit_render_as_their_cpu_twin() {
+    let Some(ctx) = harness::context("pixels_past_lavapipes_loop_limit_render_as_their_cpu_twin")
+    else {
+        return;
+    };
+    let mut scene = load_scene(&scenes_dir().join("luneburg.toml")).expect("scene");
+    scene.render.width = 8;
+    scene.render.height = 6;
+    scene.render.spp = 1;
+    scene.camera.fov_y_deg = 12.0;
+    scene.render.step = StepSpec::Fixed(5e-5);
+    let dir = scenes_dir();
+    let baked = harness::baked(&scene, &dir, 64);
+    let field = baked
+        .clone()
+        .map(|b| b as std::sync::Arc<dyn grin_field::IndexField>);
+    let rs = grin_render::scene::RenderScene::new(&scene, &dir, field).expect("scene");
+    let cpu =
+        grin_trace::render::render_cpu(&rs, &|_| {}, &std::sync::atomic::AtomicBool::new(false))
+            .expect("CPU render");
+    let mut gpu = grin_gpu::GpuRenderer::new(&ctx, &rs, baked.as_deref()).expect("renderer");
+    let render = |gpu: &grin_gpu::GpuRenderer| {
+        gpu.render(&|_| {}, &std::sync::atomic::AtomicBool::new(false))
+            .expect("render")
+    };
+    let error = 4.0;
+    let split = render(&gpu);
+    let long = cpu.pixels.iter().filter(|p| p.steps > 30_000.0).count();
+    assert!(long > 10, "{long} pixels of 30,000+ steps");
+    let aov = harness::aov_diff(&cpu, &split);
+    eprintln!(
+        "{long} long pixels; {} rounds; {aov:?}",
+        gpu.last_medium_rounds()
+    );
+    assert!(split.pixels.iter().all(|p| p.status != error));
+    assert_eq!(aov.status_mismatch, 0.0, "{aov:?}");
+    assert!(aov.dir_p99 <= AOV_DIR_P99_TOL, "{aov:?}");
+    harness::assert_images_agree("long rays", &cpu, &split, MEAN_TOL, P99_TOL);
+    if ctx.loop_limit().is_some() {
+        // Whole, as before the rounds: lavapipe cuts them short.
+        gpu.set_round_steps(u32::MAX);
+        let whole = render(&gpu);
+        let cut = whole.pixels.iter().filter(|p| p.status == error).count();
+        assert!(cut >= long, "{cut} pixels cut short of {long}");
+    }
+}
