@@ -147,10 +147,21 @@ fn pixel_run(st: ptr<function, PixelState>, budget: ptr<function, u32>) -> u32 {
     let spp = params.spp;
     // Samples first_sample .. first_sample + spp of spp_total: frames of consecutive
     // ranges, averaged, are one render of spp_total samples.
+    // Resumed in the middle of a sample: its path, stream and jitter are read where it
+    // runs on (kept out of the loop's own variables).
+    var resuming = (*st).in_path;
     for (var k = (*st).k; k < spp; k++) {
-        if !(*st).in_path {
+        var path: PathState;
+        var rng: u32;
+        var jitter = 1.0;
+        if resuming {
+            path = (*st).path;
+            rng = (*st).rng;
+            jitter = (*st).jitter;
+            resuming = false;
+        } else {
             let sample = params.first_sample + k;
-            var rng = rng_for_pixel(index, sample, params.seed);
+            rng = rng_for_pixel(index, sample, params.seed);
             var sx = 0.5;
             var sy = 0.5;
             if params.spp_total != 1u {
@@ -159,7 +170,6 @@ fn pixel_run(st: ptr<function, PixelState>, budget: ptr<function, u32>) -> u32 {
             }
             // Per-pixel jitter of the camera ray's first step in the medium (settable;
             // drawn after the sub-pixel position so the stream is the CPU's when it is off).
-            var jitter = 1.0;
             if (FLAGS & FLAG_JITTER) != 0u {
                 jitter = max(rng_next_f32(&rng), MIN_JITTER_FRACTION);
             }
@@ -170,21 +180,17 @@ fn pixel_run(st: ptr<function, PixelState>, budget: ptr<function, u32>) -> u32 {
                 let u2 = rng_next_f32(&rng);
                 ray = lens_ray(ray.d, u1, u2);
             }
-            (*st).rng = rng;
-            (*st).jitter = jitter;
-            (*st).path = path_start(ray.o, ray.d);
-            (*st).in_path = true;
+            path = path_start(ray.o, ray.d);
         }
-        var path = (*st).path;
-        var rng = (*st).rng;
-        let outcome = path_run(&path, (*st).jitter, &rng, budget);
+        let outcome = path_run(&path, jitter, &rng, budget);
         if outcome != PATH_DONE {
             (*st).k = k;
+            (*st).in_path = true;
             (*st).path = path;
             (*st).rng = rng;
+            (*st).jitter = jitter;
             return outcome;
         }
-        (*st).in_path = false;
         (*st).rgb += path.radiance;
         (*st).steps += f32(path.aov.steps);
         (*st).evals += f32(path.aov.evals);
@@ -193,6 +199,7 @@ fn pixel_run(st: ptr<function, PixelState>, budget: ptr<function, u32>) -> u32 {
         }
     }
     (*st).k = spp;
+    (*st).in_path = false;
     return PATH_DONE;
 }
 

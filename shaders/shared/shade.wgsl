@@ -153,17 +153,17 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
     var primary = (*p).primary;
     var inside = (*p).inside;
     var bounces = (*p).bounces;
-    var marching = (*p).marching;
-    var march = (*p).march;
-    var stats = (*p).stats;
-    var entry_dir = (*p).entry_dir;
-    var straight_exit = (*p).straight_exit;
+    // Resumed in the middle of a march: its state is read where the march runs on (kept
+    // out of the loop's own variables, which every pass would carry).
+    var resuming = (*p).marching;
     let max_events = EVENTS_PER_DEPTH * (params.max_depth + 1u);
     for (var ev_i = (*p).event; ev_i < max_events; ev_i++) {
         var hit = no_hit();
         var hit_dir = dir;
-        var crossing = marching;
-        if !marching {
+        let resumed = resuming;
+        resuming = false;
+        var crossing = resumed;
+        if !resumed {
             var event: Event;
             if inside {
                 event = Event(EVENT_MEDIUM, no_hit(), dir);
@@ -186,7 +186,16 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
             }
             var end: MarchEnd;
             var ended = false;
-            if !marching {
+            var march: MarchCarry;
+            var stats: MarchStats;
+            var entry_dir: vec3<f32>;
+            var straight_exit: vec3<f32>;
+            if resumed {
+                march = (*p).march;
+                stats = (*p).stats;
+                entry_dir = (*p).entry_dir;
+                straight_exit = (*p).straight_exit;
+            } else {
                 stats = march_stats_new(dir);
                 let b = bounds_intersect(origin, dir);
                 straight_exit = origin;
@@ -200,7 +209,6 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
                     ended = true;
                 } else {
                     march = begun.carry;
-                    marching = true;
                 }
             }
             if !ended {
@@ -211,7 +219,6 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
                     *p = PathState(origin, dir, throughput, radiance, aov, primary, inside, bounces, ev_i, true, march, stats, entry_dir, straight_exit);
                     return PATH_SUSPENDED;
                 }
-                marching = false;
             }
             aov.steps += stats.steps;
             aov.evals += stats.evals;
