@@ -31,12 +31,13 @@ fn render_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // PASS_MEDIUM's rounds (grin_gpu::render::ResumeRound): whether this round resumes the
 // pixels the last one left (else it starts those PASS_FIRST listed), which half of
-// `entries` it reads, and the steps each pixel may take in it.
+// `entries` it reads, the steps each pixel may take in it, and the pixels a half may
+// hold (at most its size).
 struct ResumeRound {
     resuming: u32,
     read_half: u32,
     budget: u32,
-    pad: u32,
+    capacity: u32,
 }
 
 // Pixels a round left in one half of `entries`, and the workgroups of the next round's
@@ -83,7 +84,7 @@ fn render_deferred(@builtin(global_invocation_id) gid: vec3<u32>) {
     if pixel_run(&st, &budget) == PATH_SUSPENDED {
         let into = 1u - round.read_half;
         let slot = atomicAdd(&resume.counts[into].count, 1u);
-        if slot < half {
+        if slot < min(round.capacity, half) {
             resume.entries[into * half + slot] = pixel_store(st);
             if slot % DEFERRED_WORKGROUP == 0u {
                 atomicAdd(&resume.counts[into].workgroups, 1u);

@@ -93,20 +93,21 @@ struct ResumeRound {
     resuming: u32,
     read_half: u32,
     budget: u32,
-    pad: u32,
+    capacity: u32,
 }
 
 /// The rounds after the first, as copied into the resume buffer's header before each:
 /// `[read_half * 2 + last]`, the last round's budget unbounded; then a half's empty
-/// count ([`EMPTY_COUNT`]), copied over the count a round is to write.
-fn resume_rounds(steps: u32) -> [ResumeRound; 5] {
+/// count ([`EMPTY_COUNT`]), copied over the count a round is to write. A half holds at
+/// most `capacity` pixels.
+fn resume_rounds(steps: u32, capacity: u32) -> [ResumeRound; 5] {
     std::array::from_fn(|i| match i {
         4 => bytemuck::cast(EMPTY_COUNT),
         _ => ResumeRound {
             resuming: 1,
             read_half: (i / 2) as u32,
             budget: if i % 2 == 1 { u32::MAX } else { steps },
-            pad: 0,
+            capacity,
         },
     })
 }
@@ -241,6 +242,8 @@ pub struct GpuRenderer<'a> {
     pub(crate) resume_rounds: wgpu::Buffer,
     pub(crate) resume_status: wgpu::Buffer,
     pub(crate) round_steps: u32,
+    /// Pixels a half of `resume` holds (a pixel beyond them runs on whole).
+    pub(crate) resume_capacity: u32,
     /// The most rounds one band of the last frame ran (0 without a medium pass).
     pub(crate) rounds: std::sync::atomic::AtomicU32,
     pub(crate) out_buffer: wgpu::Buffer,
@@ -482,7 +485,10 @@ impl<'a> GpuRenderer<'a> {
             });
             let resume_rounds = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("medium pass round headers"),
-                contents: bytemuck::cast_slice(&resume_rounds(RENDER_STEPS_PER_ROUND)),
+                contents: bytemuck::cast_slice(&resume_rounds(
+                    RENDER_STEPS_PER_ROUND,
+                    resume_pixels,
+                )),
                 usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             });
             let resume_status = device.create_buffer(&wgpu::BufferDescriptor {
@@ -522,6 +528,7 @@ impl<'a> GpuRenderer<'a> {
                 resume_rounds,
                 resume_status,
                 round_steps: RENDER_STEPS_PER_ROUND,
+                resume_capacity: resume_pixels,
                 rounds: std::sync::atomic::AtomicU32::new(0),
                 out_buffer,
                 readback,
@@ -582,10 +589,22 @@ impl<'a> GpuRenderer<'a> {
     /// (default [`RENDER_STEPS_PER_ROUND`]): the image is the same at any value (tested).
     pub fn set_round_steps(&mut self, steps: u32) {
         self.round_steps = steps.max(1);
+        self.write_resume_rounds();
+    }
+
+    /// Let a round leave at most `pixels` pixels to the next (fewer than its buffer
+    /// holds): the others run on whole in the round that finds no room for them (tested:
+    /// the image is the same).
+    pub fn limit_resume_pixels(&mut self, pixels: u32) {
+        self.resume_capacity = self.resume_capacity.min(pixels);
+        self.write_resume_rounds();
+    }
+
+    fn write_resume_rounds(&self) {
         self.ctx.queue.write_buffer(
             &self.resume_rounds,
             0,
-            bytemuck::cast_slice(&resume_rounds(self.round_steps)),
+            bytemuck::cast_slice(&resume_rounds(self.round_steps, self.resume_capacity)),
         );
     }
 
@@ -806,7 +825,7 @@ impl<'a> GpuRenderer<'a> {
                     resuming: 0,
                     read_half: 1,
                     budget: self.round_steps,
-                    pad: 0,
+                    capacity: self.resume_capacity,
                 };
                 let header: [[u32; 4]; 3] = [bytemuck::cast(start), EMPTY_COUNT, EMPTY_COUNT];
                 ctx.queue
