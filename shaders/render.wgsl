@@ -81,7 +81,12 @@ fn render_deferred(@builtin(global_invocation_id) gid: vec3<u32>) {
         st = pixel_load(resume.entries[round.read_half * half + gid.x]);
     }
     var budget = round.budget;
-    if pixel_run(&st, &budget) == PATH_SUSPENDED {
+    // One call of pixel_run (lavapipe inlines every call: a second one doubled the
+    // kernel and its compile time): a pixel that finds no place runs on whole.
+    loop {
+        if pixel_run(&st, &budget) != PATH_SUSPENDED {
+            break;
+        }
         let into = 1u - round.read_half;
         let slot = atomicAdd(&resume.counts[into].count, 1u);
         if slot < min(round.capacity, half) {
@@ -91,10 +96,8 @@ fn render_deferred(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             return;
         }
-        // No room left for it: run it on whole, as an unsplit march would.
         atomicSub(&resume.counts[into].count, 1u);
         budget = MARCH_UNBOUNDED;
-        pixel_run(&st, &budget);
     }
     pixel_write(st);
 }
@@ -155,7 +158,7 @@ fn pixel_run(st: ptr<function, PixelState>, budget: ptr<function, u32>) -> u32 {
         var path: PathState;
         var rng: u32;
         var jitter = 1.0;
-        if resuming {
+        if resumable() && resuming {
             path = (*st).path;
             rng = (*st).rng;
             jitter = (*st).jitter;
@@ -185,11 +188,13 @@ fn pixel_run(st: ptr<function, PixelState>, budget: ptr<function, u32>) -> u32 {
         }
         let outcome = path_run(&path, jitter, &rng, budget);
         if outcome != PATH_DONE {
-            (*st).k = k;
-            (*st).in_path = true;
-            (*st).path = path;
-            (*st).rng = rng;
-            (*st).jitter = jitter;
+            if resumable() {
+                (*st).k = k;
+                (*st).in_path = true;
+                (*st).path = path;
+                (*st).rng = rng;
+                (*st).jitter = jitter;
+            }
             return outcome;
         }
         (*st).rgb += path.radiance;

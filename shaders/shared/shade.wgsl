@@ -40,6 +40,12 @@ fn defer_medium() -> bool {
     return PASS == PASS_FIRST;
 }
 
+// Only PASS_MEDIUM runs in rounds (render.wgsl): the other passes' kernels leave out the
+// code that suspends and resumes a path (lavapipe's compile time grows with it).
+fn resumable() -> bool {
+    return PASS == PASS_MEDIUM;
+}
+
 struct Event {
     kind: u32,
     hit: Hit,
@@ -160,7 +166,7 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
     for (var ev_i = (*p).event; ev_i < max_events; ev_i++) {
         var hit = no_hit();
         var hit_dir = dir;
-        let resumed = resuming;
+        let resumed = resumable() && resuming;
         resuming = false;
         var crossing = resumed;
         if !resumed {
@@ -215,7 +221,7 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
                 let before = stats.steps;
                 end = march_run(&march, &stats, *budget);
                 *budget -= min(*budget, stats.steps - before);
-                if end.kind == END_SUSPENDED {
+                if resumable() && end.kind == END_SUSPENDED {
                     *p = PathState(origin, dir, throughput, radiance, aov, primary, inside, bounces, ev_i, true, march, stats, entry_dir, straight_exit);
                     return PATH_SUSPENDED;
                 }
