@@ -27,15 +27,8 @@ struct PrimaryAov {
     opd_plane: f32,
 }
 
-struct PathSample {
-    rgb: vec3<f32>,
-    aov: PrimaryAov,
-    // PASS_FIRST only: the path reached the medium and was left to PASS_MEDIUM.
-    deferred: bool,
-}
-
-// In PASS_FIRST a path that reaches the medium stops and the pixel is traced again,
-// whole, by PASS_MEDIUM; the march is compiled out of PASS_FIRST.
+// In PASS_FIRST a path that reaches the medium stops and the pixel is traced again by
+// PASS_MEDIUM (in rounds: render.wgsl); the march is compiled out of PASS_FIRST.
 fn defer_medium() -> bool {
     return PASS == PASS_FIRST;
 }
@@ -137,19 +130,13 @@ fn path_start(start: vec3<f32>, d: vec3<f32>) -> PathState {
     return p;
 }
 
-// One pixel sample: the camera ray from `start` along `d` through the medium and the objects, up to
-// max_depth bounces. `jitter` scales the first step of the camera ray's passage.
-fn trace_path(start: vec3<f32>, d: vec3<f32>, jitter: f32, rng: ptr<function, u32>) -> PathSample {
-    var p = path_start(start, d);
-    var budget = MARCH_UNBOUNDED;
-    let outcome = path_run(&p, jitter, rng, &budget);
-    return PathSample(p.radiance, p.aov, outcome == PATH_DEFERRED);
-}
-
-// Run the path in `p` on until it is done (PATH_DONE, its radiance and AOVs in `p`),
-// left to PASS_MEDIUM (PATH_DEFERRED), or until its marches have taken `budget` steps
-// and flights (PATH_SUSPENDED: `p` runs on from there, the same steps in the same
-// arithmetic as one whole run). `budget` is decreased by the steps taken.
+// One pixel sample (CPU twin: trace_path): the camera ray path_start began, through the
+// medium and the objects, up to max_depth bounces; `jitter` scales the first step of the
+// camera ray's passage. Runs the path in `p` on until it is done (PATH_DONE, its
+// radiance and AOVs in `p`), left to PASS_MEDIUM (PATH_DEFERRED), or until its marches
+// have taken `budget` steps and flights (PATH_SUSPENDED: `p` runs on from there, the
+// same steps in the same arithmetic as one whole run). `budget` is decreased by the
+// steps taken, unless it is MARCH_UNBOUNDED.
 fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, budget: ptr<function, u32>) -> u32 {
     var origin = (*p).origin;
     var dir = (*p).dir;
@@ -220,7 +207,9 @@ fn path_run(p: ptr<function, PathState>, jitter: f32, rng: ptr<function, u32>, b
             if !ended {
                 let before = stats.steps;
                 end = march_run(&march, &stats, *budget);
-                *budget -= min(*budget, stats.steps - before);
+                if *budget != MARCH_UNBOUNDED {
+                    *budget -= min(*budget, stats.steps - before);
+                }
                 if resumable() && end.kind == END_SUSPENDED {
                     *p = PathState(origin, dir, throughput, radiance, aov, primary, inside, bounces, ev_i, true, march, stats, entry_dir, straight_exit);
                     return PATH_SUSPENDED;

@@ -90,7 +90,7 @@ impl GpuRenderer<'_> {
             ctx.wait()?;
             let wall = start.elapsed().as_secs_f64();
             let seconds = match &self.timer {
-                Some(timer) => timer.band_seconds(ctx, 1)?,
+                Some(timer) => timer.pass_seconds(ctx, 1)?.iter().sum(),
                 None => wall,
             };
             best = best.min(seconds);

@@ -82,9 +82,11 @@ const VIEW_ROUNDS: u32 = 16;
 pub(crate) const PIXEL_CARRY_BYTES: u64 = 560;
 /// Bytes of `Resume`'s header: the round (ResumeRound) and the two halves' counts.
 const RESUME_HEADER_BYTES: u64 = 48;
-/// Pixels one half of the resume buffer holds at most: beyond it a pixel runs on whole
-/// (35 MiB for both halves).
-const RESUME_PIXELS_MAX: u32 = 32 * 1024;
+/// Bytes of the resume buffer at most (both halves). A half holds a band's pixels within
+/// it: all of a CPU adapter's 32 Ki-pixel band (35 MiB), 239,674 of a GPU's bigger bands
+/// (a 1080p frame at one sample is one band of 2 Mi pixels). In a band where more pixels
+/// than that need a second round, the ones that find no place run on whole.
+const RESUME_BYTES_MAX: u64 = 256 << 20;
 
 /// A round of PASS_MEDIUM (WGSL `ResumeRound`).
 #[repr(C)]
@@ -204,19 +206,18 @@ impl PassTimer {
         encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, u64::from(passes) * 16);
     }
 
-    /// Bytes [`Self::band_seconds`] reads back for `passes` passes.
+    /// Bytes [`Self::pass_seconds`] reads back for `passes` passes.
     pub(crate) fn read_back_bytes(passes: u32) -> u64 {
         u64::from(passes) * 16
     }
 
-    /// Device seconds of the band just read back (its `passes` passes).
-    pub(crate) fn band_seconds(&self, ctx: &GpuContext, passes: u32) -> Result<f64, GpuError> {
+    /// Device seconds of each of the `passes` passes just resolved.
+    pub(crate) fn pass_seconds(&self, ctx: &GpuContext, passes: u32) -> Result<Vec<f64>, GpuError> {
         let ticks: Vec<u64> = read_buffer(ctx, &self.readback, Self::read_back_bytes(passes))?;
-        let total: u64 = ticks
+        Ok(ticks
             .chunks_exact(2)
-            .map(|t| t[1].saturating_sub(t[0]))
-            .sum();
-        Ok(total as f64 * self.period_ns * 1e-9)
+            .map(|t| t[1].saturating_sub(t[0]) as f64 * self.period_ns * 1e-9)
+            .collect())
     }
 }
 
@@ -467,11 +468,14 @@ impl<'a> GpuRenderer<'a> {
             // Room for a band's pixels in each half (none without PASS_MEDIUM), within the
             // binding limit.
             let resume_pixels = if split {
-                let fits = (ctx.limits().max_storage_buffer_binding_size - RESUME_HEADER_BYTES)
+                let limits = ctx.limits();
+                let fits = (limits
+                    .max_storage_buffer_binding_size
+                    .min(limits.max_buffer_size)
+                    .min(RESUME_BYTES_MAX)
+                    - RESUME_HEADER_BYTES)
                     / (2 * PIXEL_CARRY_BYTES);
-                (s.width * rows_per_band)
-                    .min(RESUME_PIXELS_MAX)
-                    .min(u32::try_from(fits).unwrap_or(u32::MAX))
+                (s.width * rows_per_band).min(u32::try_from(fits).unwrap_or(u32::MAX))
             } else {
                 0
             };
@@ -859,6 +863,10 @@ impl<'a> GpuRenderer<'a> {
             }
             encoder
         })?;
+        // Device seconds of the submissions before the last (each its own passes: the
+        // host's waits between them are not the device's time).
+        let mut earlier_seconds = 0.0;
+        let mut submission = 0u32;
         loop {
             let batch_end = if view {
                 VIEW_ROUNDS + 1
@@ -870,7 +878,10 @@ impl<'a> GpuRenderer<'a> {
                 if let Some(medium) = &self.medium_pipeline {
                     for r in round + 1..=batch_end {
                         let last = r == batch_end && (view || r == cap);
-                        self.encode_round(&mut encoder, medium, r, last, r == batch_end);
+                        // A later submission's medium pass starts at its first round.
+                        let begin = submission > 0 && r == round + 1;
+                        let stamps = (begin, r == batch_end);
+                        self.encode_round(&mut encoder, medium, r, last, stamps);
                     }
                     if !view {
                         // The count the last round left in the half it wrote.
@@ -884,22 +895,10 @@ impl<'a> GpuRenderer<'a> {
                         );
                     }
                 }
-                match &sink {
-                    BandSink::ReadBack(_) => {
-                        encoder.copy_buffer_to_buffer(
-                            &self.out_buffer,
-                            0,
-                            &self.readback,
-                            0,
-                            bytes,
-                        );
-                    }
-                    BandSink::View { image, show, .. } => {
-                        image.accumulate_band(ctx, &mut encoder, &self.out_buffer, first_row, rows);
-                        if let Some(aov) = show {
-                            image.encode_show(ctx, &mut encoder, *aov);
-                        }
-                    }
+                // The pixels, in the first submission (most bands need no other; a band
+                // that does copies them again after its last).
+                if submission == 0 {
+                    self.encode_sink(&mut encoder, &sink, first_row, rows, bytes);
                 }
                 if let Some(timer) = &self.timer {
                     timer.resolve(&mut encoder, passes);
@@ -907,6 +906,7 @@ impl<'a> GpuRenderer<'a> {
             })?;
             ctx.queue.submit([encoder.finish()]);
             round = batch_end;
+            submission += 1;
             if self.medium_pipeline.is_some() {
                 self.rounds.fetch_max(round + 1, Ordering::Relaxed);
             }
@@ -918,11 +918,24 @@ impl<'a> GpuRenderer<'a> {
             if status[3] == 0 {
                 break;
             }
+            if let Some(timer) = &self.timer {
+                earlier_seconds += self.submission_seconds(timer, submission - 1, passes)?;
+            }
             encoder = ctx
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("render band rounds"),
                 });
+        }
+        if submission > 1 {
+            // The pixels as the last round left them.
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("render band pixels"),
+                });
+            self.encode_sink(&mut encoder, &sink, first_row, rows, bytes);
+            ctx.queue.submit([encoder.finish()]);
         }
         match &mut sink {
             BandSink::ReadBack(take) => {
@@ -938,13 +951,47 @@ impl<'a> GpuRenderer<'a> {
         }
         match &self.timer {
             Some(timer) => {
-                let seconds = timer.band_seconds(ctx, passes)?;
-                self.read_back
-                    .fetch_add(PassTimer::read_back_bytes(passes), Ordering::Relaxed);
-                Ok(Some(seconds))
+                let last = self.submission_seconds(timer, submission - 1, passes)?;
+                Ok(Some(earlier_seconds + last))
             }
             None => Ok(None),
         }
+    }
+
+    /// Where the band's pixels go: copied for reading back, or added to the viewer's
+    /// image (and coloured after the frame's last band).
+    fn encode_sink(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        sink: &BandSink<'_>,
+        first_row: u32,
+        rows: u32,
+        bytes: u64,
+    ) {
+        match sink {
+            BandSink::ReadBack(_) => {
+                encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
+            }
+            BandSink::View { image, show, .. } => {
+                image.accumulate_band(self.ctx, encoder, &self.out_buffer, first_row, rows);
+                if let Some(aov) = show {
+                    image.encode_show(self.ctx, encoder, *aov);
+                }
+            }
+        }
+    }
+
+    /// The device seconds of a band's submission `n`: the first runs every pass, a later
+    /// one only rounds of the medium pass.
+    fn submission_seconds(&self, timer: &PassTimer, n: u32, passes: u32) -> Result<f64, GpuError> {
+        self.read_back
+            .fetch_add(PassTimer::read_back_bytes(passes), Ordering::Relaxed);
+        let seconds = timer.pass_seconds(self.ctx, passes)?;
+        Ok(if n == 0 {
+            seconds.iter().sum()
+        } else {
+            seconds[passes as usize - 1]
+        })
     }
 
     /// Encode round `r` (1 or later) of the medium pass: it reads the half round `r - 1`
@@ -956,7 +1003,7 @@ impl<'a> GpuRenderer<'a> {
         medium: &wgpu::ComputePipeline,
         r: u32,
         last: bool,
-        timestamp_end: bool,
+        (stamp_begin, stamp_end): (bool, bool),
     ) {
         let read = u64::from((r - 1) & 1);
         let write = 1 - read;
@@ -980,8 +1027,12 @@ impl<'a> GpuRenderer<'a> {
             timestamp_writes: self
                 .timer
                 .as_ref()
-                .filter(|_| timestamp_end)
-                .map(|t| t.writes_end(1)),
+                .and_then(|t| match (stamp_begin, stamp_end) {
+                    (true, true) => Some(t.writes(1)),
+                    (true, false) => Some(t.writes_begin(1)),
+                    (false, true) => Some(t.writes_end(1)),
+                    (false, false) => None,
+                }),
         });
         pass.set_pipeline(medium);
         pass.set_bind_group(0, &self.bind_group, &[]);
