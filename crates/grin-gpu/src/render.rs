@@ -783,7 +783,7 @@ impl<'a> GpuRenderer<'a> {
         &self,
         first_row: u32,
         rows: u32,
-        sink: BandSink<'_>,
+        mut sink: BandSink<'_>,
     ) -> Result<Option<f64>, GpuError> {
         let ctx = self.ctx;
         let width = self.params.width;
@@ -802,7 +802,6 @@ impl<'a> GpuRenderer<'a> {
             u32::try_from(steps.div_ceil(u64::from(self.round_steps)) + 1).unwrap_or(u32::MAX)
         };
         let mut round = 0u32;
-        let mut sink = sink;
         let mut encoder = ctx.scoped("dispatching the render kernel", || {
             ctx.queue
                 .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));

@@ -1,7 +1,8 @@
 //! Files grin writes. Every output is first written in full to a temporary file (in a
 //! private `.grin-*` directory beside its target, so the final rename stays on one
-//! filesystem and a signal can remove it for good), synced, and only then put in place; several outputs of one run (an EXR and its PNG preview) are put in place
-//! together ([`commit`]), so a failed or interrupted run leaves the previous files as
+//! filesystem and a signal can remove it for good), synced, and only then put in place;
+//! several outputs of one run (an EXR and its PNG preview) are put in place together
+//! ([`commit`]), so a failed or interrupted run leaves the previous files as
 //! they were and no temporary file behind.
 //!
 //! What a target path means ([`Destination::resolve`]):
@@ -260,15 +261,23 @@ impl Staging {
     fn file(&self) -> PathBuf {
         self.dir.join(STAGED_NAME)
     }
+
+    /// Remove the directory and take it out of `live` (the set whose lock the caller
+    /// holds: `commit`'s).
+    fn remove(mut self, live: &mut BTreeSet<PathBuf>) {
+        let dir = std::mem::take(&mut self.dir);
+        remove_staging(&dir);
+        live.remove(&dir);
+    }
 }
 
 impl Drop for Staging {
     fn drop(&mut self) {
-        if self.dir.as_os_str().is_empty() {
-            return; // committed: removed by `commit`, under the lock it holds
+        // An empty path: already removed by `Staging::remove`.
+        if !self.dir.as_os_str().is_empty() {
+            remove_staging(&self.dir);
+            live().remove(&self.dir);
         }
-        remove_staging(&self.dir);
-        live().remove(&self.dir);
     }
 }
 
@@ -404,11 +413,10 @@ pub fn commit(staged: Vec<Staged>) -> Result<(), OutputError> {
     }
     let mut guard = live();
     for mut s in staged {
-        let Some(mut staging) = s.staging.take() else {
+        let Some(staging) = s.staging.take() else {
             continue;
         };
         let tmp_path = staging.file();
-        let dir = std::mem::take(&mut staging.dir);
         let result = match &s.destination {
             Destination::Replace { file } => {
                 fs::rename(&tmp_path, file).map_err(|e| OutputError::io(&s.target, e))
@@ -421,8 +429,7 @@ pub fn commit(staged: Vec<Staged>) -> Result<(), OutputError> {
             Destination::Stdout => copy_into(&tmp_path, &mut io::stdout().lock())
                 .map_err(|e| OutputError::io(&s.target, e)),
         };
-        remove_staging(&dir);
-        guard.remove(&dir);
+        staging.remove(&mut guard);
         result?;
     }
     Ok(())
