@@ -102,9 +102,19 @@ impl TracePlan {
         let auto = if pilots.is_empty() {
             None
         } else if overrides.f32 {
-            grin_trace::auto::choose::<f32>(field.as_ref(), &settings, free_integrator, &pilots)
+            grin_trace::auto::choose_for_table::<f32>(
+                field.as_ref(),
+                &settings,
+                free_integrator,
+                &pilots,
+            )
         } else {
-            grin_trace::auto::choose::<f64>(field.as_ref(), &settings, free_integrator, &pilots)
+            grin_trace::auto::choose_for_table::<f64>(
+                field.as_ref(),
+                &settings,
+                free_integrator,
+                &pilots,
+            )
         };
         if let Some(a) = &auto {
             settings = a.settings;

@@ -58,6 +58,12 @@ pub const JOB_RAYS_PER_PILOT: usize = 200;
 /// Fewer pilots than this say too little: the job runs error control instead.
 pub const MIN_PILOTS: usize = 8;
 
+/// What an evaluation costs in ray packets (crate::packet), against one in the one-ray
+/// tracer: measured 0.37-0.38 for fixed-step RK4 on the expression GRIN rod and on a
+/// Luneburg lens (both f64, one core; the examples of docs/accuracy.md), taken a little
+/// above so a packet candidate wins only where it clearly does.
+pub const PACKET_EVAL_COST: f64 = 0.4;
+
 /// The pilot rays a job of `job_rays` rays affords, at most `wanted`: 0 where even
 /// [`MIN_PILOTS`] would cost more than ~20 % of the job (then `auto` runs error control
 /// per length, which keeps its word without pilots).
@@ -79,6 +85,10 @@ pub struct Candidate {
     /// `RayResult::error_estimate`) where they left the medium.
     pub estimate: f64,
     pub evals_per_ray: f64,
+    /// What the candidate costs a ray, in field evaluations of the one-ray tracer: its
+    /// evaluations, times [`PACKET_EVAL_COST`] where a ray table traces it in packets.
+    /// The choice is the cheapest by this.
+    pub cost_per_ray: f64,
     /// How pessimistic the pilots' own estimates were: the least, over the pilots, of a
     /// pilot's estimate over its measured error (that error taken at least at the
     /// reference's own accuracy), within 1 ..= [`MAX_CALIBRATION`]. A chosen candidate
@@ -275,8 +285,13 @@ impl AutoChoice {
             }
             (None, _) => "error control per length".into(),
         };
+        let packets = if c.cost_per_ray < c.evals_per_ray {
+            ", in ray packets"
+        } else {
+            ""
+        };
         format!(
-            "{}, {how} (worst of {} pilots: {:.1e} {}, {:.0} evals/ray)",
+            "{}, {how} (worst of {} pilots: {:.1e} {}, {:.0} evals/ray{packets})",
             c.integrator, self.pilot_rays, c.error, self.unit, c.evals_per_ray
         )
     }
@@ -402,6 +417,50 @@ pub fn choose_in<R: Real>(
     metric: &Metric,
     asked: f64,
 ) -> Option<AutoChoice> {
+    choose_with::<R>(
+        field,
+        settings,
+        free_integrator,
+        pilots,
+        metric,
+        asked,
+        false,
+    )
+}
+
+/// [`choose`] for a ray table: the job traces in packets where the candidate's settings
+/// and the precision allow ([`crate::packet::packets_apply`], f64), so such a candidate
+/// costs [`PACKET_EVAL_COST`] an evaluation.
+pub fn choose_for_table<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    free_integrator: bool,
+    pilots: &[(DVec3, DVec3)],
+) -> Option<AutoChoice> {
+    let StepSpec::Auto(asked) = settings.step else {
+        return None;
+    };
+    let packets = R::EPS.to_f64() == f64::EPSILON;
+    choose_with::<R>(
+        field,
+        settings,
+        free_integrator,
+        pilots,
+        &Metric::Direction,
+        asked,
+        packets,
+    )
+}
+
+fn choose_with<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    free_integrator: bool,
+    pilots: &[(DVec3, DVec3)],
+    metric: &Metric,
+    asked: f64,
+    packets: bool,
+) -> Option<AutoChoice> {
     let StepSpec::Auto(_) = settings.step else {
         return None;
     };
@@ -487,12 +546,18 @@ pub fn choose_in<R: Real>(
             .filter(|r| r.status.left())
             .map(|r| r.error_estimate)
             .fold(0.0, f64::max);
+        let cost = if packets && crate::packet::packets_apply(s) {
+            PACKET_EVAL_COST
+        } else {
+            1.0
+        };
         let c = Candidate {
             integrator: label(s.integrator),
             fixed_step,
             error,
             estimate,
             evals_per_ray,
+            cost_per_ray: evals_per_ray * cost,
             calibration,
         };
         tried.push(c);
@@ -524,7 +589,7 @@ pub fn choose_in<R: Real>(
         };
         let c = run(&s, None);
         keep_closest(c, s);
-        bound = bound.max(2.0 * c.evals_per_ray);
+        bound = bound.max(2.0 * c.cost_per_ray);
         if c.error <= target {
             best = Some((c, s));
             break;
@@ -549,8 +614,8 @@ pub fn choose_in<R: Real>(
             };
             let c = run(&s, Some(ds));
             keep_closest(c, s);
-            let limit = best.as_ref().map_or(bound, |(b, _)| b.evals_per_ray);
-            if c.evals_per_ray >= limit {
+            let limit = best.as_ref().map_or(bound, |(b, _)| b.cost_per_ray);
+            if c.cost_per_ray >= limit {
                 break; // shorter steps only cost more
             }
             if c.error <= target {
@@ -573,7 +638,7 @@ pub fn choose_in<R: Real>(
                         keep_closest(c, s);
                         let cheaper = best
                             .as_ref()
-                            .is_none_or(|(b, _)| c.evals_per_ray < b.evals_per_ray);
+                            .is_none_or(|(b, _)| c.cost_per_ray < b.cost_per_ray);
                         if c.error <= target && cheaper {
                             best = Some((c, s));
                             met = mid;
@@ -902,7 +967,7 @@ mod tests {
             .tried
             .iter()
             .filter(|t| t.error <= PILOT_TARGET * c.asked)
-            .any(|t| t.evals_per_ray < c.chosen.evals_per_ray);
+            .any(|t| t.cost_per_ray < c.chosen.cost_per_ray);
         assert!(!cheaper_met, "{:?}", c.tried);
     }
 
@@ -920,5 +985,79 @@ mod tests {
         // Another policy is not touched.
         let mut rs = lens("step = { fixed = 0.01 }\n");
         assert!(resolve_scene::<f64>(&mut rs).is_none());
+    }
+
+    /// A ray table prices RK4's fixed steps at what they cost in packets: on the GRIN
+    /// rod at 1e-6 rad it takes RK4 in packets, where the one-ray price (a render's)
+    /// takes another method; both meet the request on their pilots, and each is the
+    /// cheapest that did by its own price.
+    #[test]
+    fn a_ray_table_prices_rk4_at_its_cost_in_packets() {
+        let rod = grin_field::expr::ExprField::new(
+            "1.6 - 0.05*(x^2 + y^2)",
+            grin_field::Bounds::Box {
+                min: DVec3::new(-2.0, -2.0, 0.0),
+                max: DVec3::new(2.0, 2.0, 10.0),
+            },
+            1.0,
+            0.0,
+        )
+        .expect("rod");
+        let pilots: Vec<(DVec3, DVec3)> = (0..64)
+            .map(|i| {
+                let (x, y) = (
+                    -1.5 + 3.0 * (i % 8) as f64 / 7.0,
+                    -1.5 + 3.0 * (i / 8) as f64 / 7.0,
+                );
+                (DVec3::new(x, y, -1.0), DVec3::new(0.0, 0.01 * y, 1.0))
+            })
+            .collect();
+        let settings = TraceSettings {
+            integrator: IntegratorKind::Adaptive,
+            step: StepSpec::Auto(1e-6),
+            max_steps: grin_scene::DEFAULT_MAX_STEPS,
+            exit: grin_scene::ExitMethod::Hermite,
+            macro_cells: true,
+            accuracy: 1e-6,
+            estimate_limit: 1e-6,
+        };
+        let table = choose_for_table::<f64>(&rod, &settings, true, &pilots).expect("table");
+        let render = choose::<f64>(&rod, &settings, true, &pilots).expect("render");
+        for c in [&table, &render] {
+            assert!(c.met && c.chosen.error <= PILOT_TARGET * c.asked, "{c:?}");
+            let cheaper_met = c
+                .tried
+                .iter()
+                .filter(|t| t.error <= PILOT_TARGET * c.asked)
+                .any(|t| t.cost_per_ray < c.chosen.cost_per_ray);
+            assert!(!cheaper_met, "{:?}", c.tried);
+        }
+        assert_eq!(
+            table.settings.integrator,
+            IntegratorKind::Rk4,
+            "{}",
+            table.describe()
+        );
+        assert!(crate::packet::packets_apply(&table.settings));
+        let c = table.chosen;
+        assert_eq!(c.cost_per_ray, PACKET_EVAL_COST * c.evals_per_ray);
+        assert!(
+            table.describe().contains("in ray packets"),
+            "{}",
+            table.describe()
+        );
+        // One ray at a time, RK4 costs its evaluations and is not the choice here.
+        assert_ne!(
+            render.settings.integrator,
+            IntegratorKind::Rk4,
+            "{}",
+            render.describe()
+        );
+        assert_eq!(render.chosen.cost_per_ray, render.chosen.evals_per_ray);
+        // The f32 tracer (no packets) prices every candidate at its evaluations.
+        let f32_table = choose_for_table::<f32>(&rod, &settings, true, &pilots);
+        if let Some(c) = f32_table {
+            assert!(c.tried.iter().all(|t| t.cost_per_ray == t.evals_per_ray));
+        }
     }
 }
