@@ -59,10 +59,26 @@ pub const JOB_RAYS_PER_PILOT: usize = 200;
 pub const MIN_PILOTS: usize = 8;
 
 /// What an evaluation costs in ray packets (crate::packet), against one in the one-ray
-/// tracer: measured 0.37-0.38 for fixed-step RK4 on the expression GRIN rod and on a
-/// Luneburg lens (both f64, one core; the examples of docs/accuracy.md), taken a little
-/// above so a packet candidate wins only where it clearly does.
+/// tracer, for fixed-step RK4: measured 0.37-0.38 on the expression GRIN rod and on a
+/// Luneburg lens (f64, one thread), taken a little above so a packet candidate wins only
+/// where it clearly does.
 pub const PACKET_EVAL_COST: f64 = 0.4;
+/// ... and for dopri under error control: measured 0.41-0.53 on the rod (auto 1e-6 and
+/// 1e-9, f64, one thread).
+pub const PACKET_EVAL_COST_DOPRI: f64 = 0.5;
+
+/// What an evaluation of a trace with `settings` costs, against one of the one-ray
+/// tracer: [`PACKET_EVAL_COST`] or [`PACKET_EVAL_COST_DOPRI`] where a ray table
+/// (`packets`) traces them in packets, else 1.
+pub fn eval_cost(settings: &TraceSettings, packets: bool) -> f64 {
+    if !(packets && crate::packet::packets_apply(settings)) {
+        return 1.0;
+    }
+    match settings.integrator {
+        IntegratorKind::Adaptive => PACKET_EVAL_COST_DOPRI,
+        _ => PACKET_EVAL_COST,
+    }
+}
 
 /// The pilot rays a job of `job_rays` rays affords, at most `wanted`: 0 where even
 /// [`MIN_PILOTS`] would cost more than ~20 % of the job (then `auto` runs error control
@@ -86,7 +102,8 @@ pub struct Candidate {
     pub estimate: f64,
     pub evals_per_ray: f64,
     /// What the candidate costs a ray, in field evaluations of the one-ray tracer: its
-    /// evaluations, times [`PACKET_EVAL_COST`] where a ray table traces it in packets.
+    /// evaluations, times [`eval_cost`] (less than 1 where a ray table traces it in
+    /// packets).
     /// The choice is the cheapest by this.
     pub cost_per_ray: f64,
     /// How pessimistic the pilots' own estimates were: the least, over the pilots, of a
@@ -430,7 +447,7 @@ pub fn choose_in<R: Real>(
 
 /// [`choose`] for a ray table: the job traces in packets where the candidate's settings
 /// and the precision allow ([`crate::packet::packets_apply`], f64), so such a candidate
-/// costs [`PACKET_EVAL_COST`] an evaluation.
+/// costs [`eval_cost`] an evaluation.
 pub fn choose_for_table<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
@@ -546,11 +563,7 @@ fn choose_with<R: Real>(
             .filter(|r| r.status.left())
             .map(|r| r.error_estimate)
             .fold(0.0, f64::max);
-        let cost = if packets && crate::packet::packets_apply(s) {
-            PACKET_EVAL_COST
-        } else {
-            1.0
-        };
+        let cost = eval_cost(s, packets);
         let c = Candidate {
             integrator: label(s.integrator),
             fixed_step,
@@ -987,12 +1000,12 @@ mod tests {
         assert!(resolve_scene::<f64>(&mut rs).is_none());
     }
 
-    /// A ray table prices RK4's fixed steps at what they cost in packets: on the GRIN
-    /// rod at 1e-6 rad it takes RK4 in packets, where the one-ray price (a render's)
-    /// takes another method; both meet the request on their pilots, and each is the
-    /// cheapest that did by its own price.
+    /// A ray table prices the methods it traces in packets at what they cost there: on
+    /// the GRIN rod at 1e-6 rad it takes one of them (RK4 at fixed steps), where the
+    /// one-ray price (a render's) takes another method; both meet the request on their
+    /// pilots, and each is the cheapest that did by its own price.
     #[test]
-    fn a_ray_table_prices_rk4_at_its_cost_in_packets() {
+    fn a_ray_table_prices_packet_methods_at_their_cost_in_packets() {
         let rod = grin_field::expr::ExprField::new(
             "1.6 - 0.05*(x^2 + y^2)",
             grin_field::Bounds::Box {
@@ -1041,6 +1054,16 @@ mod tests {
         assert!(crate::packet::packets_apply(&table.settings));
         let c = table.chosen;
         assert_eq!(c.cost_per_ray, PACKET_EVAL_COST * c.evals_per_ray);
+        // dopri's error control is priced at its own packet cost.
+        let dopri = table
+            .tried
+            .iter()
+            .find(|t| t.integrator == "dopri" && t.fixed_step.is_none());
+        let dopri = dopri.expect("error control tried");
+        assert_eq!(
+            dopri.cost_per_ray,
+            PACKET_EVAL_COST_DOPRI * dopri.evals_per_ray
+        );
         assert!(
             table.describe().contains("in ray packets"),
             "{}",

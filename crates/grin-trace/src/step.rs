@@ -53,6 +53,14 @@ pub enum Tolerance {
     PerLength(f64),
 }
 
+/// A dopri controller's constants ([`StepController::dopri_control`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct DopriControl {
+    pub tol: Tolerance,
+    pub ds_max: f64,
+    pub len_scale: f64,
+}
+
 /// Chooses step lengths along one ray (error control keeps its state between steps).
 #[derive(Debug, Clone)]
 pub struct StepController {
@@ -153,6 +161,33 @@ impl StepController {
     /// The error-controlled step the next [`Self::take`] tries first.
     pub fn current_ds(&self) -> f64 {
         self.ds_adapt
+    }
+
+    /// Set the error-controlled step the next [`Self::take`] tries first (the packets
+    /// write back what their steps left).
+    pub(crate) fn set_current_ds(&mut self, ds: f64) {
+        self.ds_adapt = ds;
+    }
+
+    /// What [`Self::take`] holds an error-controlled dopri step to, where the policy is
+    /// error control and the integrator dopri: the tolerance, the longest step before
+    /// the local caps, and the medium's length scale (the error norm's).
+    pub(crate) fn dopri_control(&self) -> Option<DopriControl> {
+        if self.kind != IntegratorKind::Adaptive {
+            return None;
+        }
+        let tol = match self.spec {
+            StepSpec::Adaptive { tolerance, .. } => Tolerance::PerStep(tolerance),
+            StepSpec::Auto(accuracy) => {
+                Tolerance::PerLength(grin_scene::AUTO_TOL_PER_RAD * accuracy)
+            }
+            _ => return None,
+        };
+        Some(DopriControl {
+            tol,
+            ds_max: self.ds_max,
+            len_scale: self.len_scale,
+        })
     }
 
     /// The jitter factor for this step; later steps get 1.

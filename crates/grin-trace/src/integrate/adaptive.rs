@@ -9,7 +9,7 @@ use grin_field::{IndexField, Real, Vec3Like};
 use super::{Quad, RayState, Step, c};
 
 /// Dormand & Prince (1980) tableau, rows a_ij (i = 2..7); row 7 equals the 5th-order weights.
-const A: [[f64; 6]; 6] = [
+pub(crate) const A: [[f64; 6]; 6] = [
     [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
     [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
@@ -40,7 +40,7 @@ const A: [[f64; 6]; 6] = [
 ];
 
 /// b (5th order) - b* (4th order), the error weights of stages 1..7.
-const E: [f64; 7] = [
+pub(crate) const E: [f64; 7] = [
     71.0 / 57600.0,
     0.0,
     -71.0 / 16695.0,

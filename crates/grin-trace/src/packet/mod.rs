@@ -26,6 +26,8 @@ use glam::DVec3;
 use grin_field::{Bounds, FieldSample, IndexField};
 use grin_scene::{IntegratorKind, StepSpec};
 
+mod dopri;
+
 use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
 use crate::estimate::POSITION_SAFETY;
 use crate::step::StepController;
@@ -38,15 +40,40 @@ pub const LANES: usize = 4;
 /// Packet steps between moving the lanes' state into lane vectors and back.
 const STEPS_PER_GATHER: usize = 32;
 
-/// Whether `settings` are ones the packets take: fourth-order Runge-Kutta at fixed steps
-/// (the packets trace in f64).
+/// Whether `settings` are ones the packets take (the packets trace in f64):
+/// fourth-order Runge-Kutta at fixed steps, or dopri 5(4) under error control
+/// (`adaptive` or `auto` steps; [`dopri`]).
 pub fn packets_apply(settings: &TraceSettings) -> bool {
-    settings.integrator == IntegratorKind::Rk4 && matches!(settings.step, StepSpec::Fixed(_))
+    match settings.integrator {
+        IntegratorKind::Rk4 => matches!(settings.step, StepSpec::Fixed(_)),
+        IntegratorKind::Adaptive => {
+            matches!(settings.step, StepSpec::Adaptive { .. } | StepSpec::Auto(_))
+        }
+        _ => false,
+    }
+}
+
+/// What a packet call did: the steps each lane took, and the lanes that need a step of
+/// their own march now (the entry's jittered step, the step that leaves, a flight, ...).
+#[derive(Debug, Clone, Copy)]
+struct Took {
+    steps: [u32; LANES],
+    own: [bool; LANES],
+}
+
+impl Took {
+    /// No steps; every ray in a lane needs its march.
+    fn all_own(lanes: &[Option<(usize, March<f64>)>; LANES]) -> Took {
+        Took {
+            steps: [0; LANES],
+            own: array::from_fn(|i| lanes[i].is_some()),
+        }
+    }
 }
 
 /// One f64 per lane.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct L([f64; LANES]);
+pub(super) struct L([f64; LANES]);
 
 impl L {
     fn splat(v: f64) -> L {
@@ -89,7 +116,7 @@ impl Neg for L {
 /// A 3-vector per lane, with glam's DVec3 arithmetic (the same operations in the same
 /// order, so every lane rounds as the scalar tracer does).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct V {
+pub(super) struct V {
     x: L,
     y: L,
     z: L,
@@ -209,7 +236,7 @@ fn signed_distance(bounds: &Bounds, p: V) -> L {
 
 /// The lanes' march state as lane vectors.
 #[derive(Debug, Clone, Copy)]
-struct Soa {
+pub(super) struct Soa {
     r: V,
     t: V,
     comp_r: V,
@@ -231,6 +258,15 @@ struct Soa {
     sum: L,
     steps: [u32; LANES],
     evals: [u64; LANES],
+    // Error control (dopri packets): the step the next attempt tries, and the take under
+    // way (an accepted step may need its march after all: the lane then goes back to
+    // where its take began, so the march takes it again from there, the same way).
+    ds_adapt: L,
+    in_take: [bool; LANES],
+    take_ds: L,
+    take_evals: [u64; LANES],
+    take_cap: L,
+    rejections: [u32; LANES],
 }
 
 impl Soa {
@@ -254,6 +290,12 @@ impl Soa {
             sum: L::splat(0.0),
             steps: [0; LANES],
             evals: [0; LANES],
+            ds_adapt: L::splat(0.0),
+            in_take: [false; LANES],
+            take_ds: L::splat(0.0),
+            take_evals: [0; LANES],
+            take_cap: L::splat(0.0),
+            rejections: [0; LANES],
         }
     }
 
@@ -279,6 +321,8 @@ impl Soa {
         s.pos.0[i] = e.pos;
         s.vsum.set(i, e.vsum);
         s.sum.0[i] = e.sum;
+        s.ds_adapt.0[i] = m.ctrl.current_ds();
+        s.in_take[i] = false;
     }
 
     /// Write lane `i` back into its march. The march's reported position and direction
@@ -304,6 +348,7 @@ impl Soa {
         e.pos = self.pos.0[i];
         e.vsum = self.vsum.lane(i);
         e.sum = self.sum.0[i];
+        m.ctrl.set_current_ds(self.ds_adapt.0[i]);
     }
 }
 
@@ -367,7 +412,7 @@ fn normal(bounds: &Bounds, p: V) -> V {
 /// A lane mask: all bits set in the chosen lanes (a blend, where a branch per lane
 /// would keep the lane vectors out of registers).
 #[derive(Debug, Clone, Copy)]
-struct Mask([u64; LANES]);
+pub(super) struct Mask([u64; LANES]);
 
 impl Mask {
     #[inline(always)]
@@ -411,7 +456,7 @@ pub fn trace_packets_counted(
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
 ) -> (Vec<RayResult>, u64) {
-    trace_packets_with(field, settings, rays, packet_step(false))
+    trace_packets_with(field, settings, rays, packet_step(settings, false))
 }
 
 fn trace_packets_with(
@@ -427,8 +472,6 @@ fn trace_packets_with(
     // The lanes' state stays in lane vectors between packet calls; a lane moves back
     // into its march only for the march's own steps (and moves in again after them).
     let mut soa = Soa::new();
-    // Packet steps of each lane not yet written back into its march.
-    let mut unstored = [0u32; LANES];
     let mut cont = |_: &Segment| Control::Continue;
     loop {
         for (i, slot) in lanes.iter_mut().enumerate() {
@@ -438,7 +481,6 @@ fn trace_packets_with(
                 match March::<f64>::begin(field, settings, o, d, 1.0) {
                     Ok(m) => {
                         soa.load(i, &m);
-                        unstored[i] = 0;
                         *slot = Some((k, m));
                     }
                     Err(done) => out[k] = Some(done),
@@ -451,16 +493,12 @@ fn trace_packets_with(
         let took = march_packet(field, settings, &lanes, &mut soa);
         // The lanes the packet could not step: one step of their own march each.
         for (i, slot) in lanes.iter_mut().enumerate() {
-            packet_steps += u64::from(took[i]);
-            unstored[i] += took[i];
-            if took[i] > 0 {
+            packet_steps += u64::from(took.steps[i]);
+            if !took.own[i] {
                 continue;
             }
             let Some((k, m)) = slot else { continue };
-            if unstored[i] > 0 {
-                soa.store(i, m);
-                unstored[i] = 0;
-            }
+            soa.store(i, m);
             match m.advance(field, settings, &mut cont) {
                 Some(done) => {
                     out[*k] = Some(done);
@@ -485,47 +523,55 @@ fn unreachable_result() -> RayResult {
     }
 }
 
-/// The packet step a trace uses: [`march_packet_in`] as compiled for the CPU's widest
-/// lane vectors (AVX2 on x86-64 CPUs that have it: one 256-bit register per lane vector),
-/// else as compiled for the target. The same IEEE operations in the same order either
-/// way (no fused multiply-add), so the results do not depend on which.
-type PacketStep = fn(
-    &dyn IndexField,
-    &TraceSettings,
-    &[Option<(usize, March<f64>)>; LANES],
-    &mut Soa,
-) -> [u32; LANES];
+/// The packet step a trace uses: [`march_packet_in`] (RK4) or [`dopri::march_dopri_in`]
+/// as compiled for the CPU's widest lane vectors (AVX2 on x86-64 CPUs that have it: one
+/// 256-bit register per lane vector), else as compiled for the target. The same IEEE
+/// operations in the same order either way (no fused multiply-add), so the results do not
+/// depend on which.
+type PacketStep =
+    fn(&dyn IndexField, &TraceSettings, &[Option<(usize, March<f64>)>; LANES], &mut Soa) -> Took;
 
-fn packet_step(portable: bool) -> PacketStep {
+fn packet_step(settings: &TraceSettings, portable: bool) -> PacketStep {
+    let dopri = settings.integrator == IntegratorKind::Adaptive;
     #[cfg(target_arch = "x86_64")]
     if !portable && std::arch::is_x86_feature_detected!("avx2") {
-        return march_packet_avx2;
+        return if dopri { dopri_avx2 } else { rk4_avx2 };
     }
-    march_packet_in
+    if dopri {
+        dopri::march_dopri_in
+    } else {
+        march_packet_in
+    }
 }
 
-/// [`march_packet_in`] compiled for AVX2; called only where the CPU has it.
-#[cfg(target_arch = "x86_64")]
-#[allow(unsafe_code)]
-fn march_packet_avx2(
-    field: &dyn IndexField,
-    settings: &TraceSettings,
-    lanes: &[Option<(usize, March<f64>)>; LANES],
-    soa: &mut Soa,
-) -> [u32; LANES] {
-    #[target_feature(enable = "avx2")]
-    fn compiled(
-        field: &dyn IndexField,
-        settings: &TraceSettings,
-        lanes: &[Option<(usize, March<f64>)>; LANES],
-        soa: &mut Soa,
-    ) -> [u32; LANES] {
-        march_packet_in(field, settings, lanes, soa)
-    }
-    debug_assert!(std::arch::is_x86_feature_detected!("avx2"));
-    // SAFETY: `packet_step` hands this function out only on CPUs with AVX2.
-    unsafe { compiled(field, settings, lanes, soa) }
+/// `$name`: the packet step `$step` compiled for AVX2; called only where the CPU has it.
+macro_rules! avx2_build {
+    ($name:ident, $step:path) => {
+        #[cfg(target_arch = "x86_64")]
+        #[allow(unsafe_code)]
+        fn $name(
+            field: &dyn IndexField,
+            settings: &TraceSettings,
+            lanes: &[Option<(usize, March<f64>)>; LANES],
+            soa: &mut Soa,
+        ) -> Took {
+            #[target_feature(enable = "avx2")]
+            fn compiled(
+                field: &dyn IndexField,
+                settings: &TraceSettings,
+                lanes: &[Option<(usize, March<f64>)>; LANES],
+                soa: &mut Soa,
+            ) -> Took {
+                $step(field, settings, lanes, soa)
+            }
+            debug_assert!(std::arch::is_x86_feature_detected!("avx2"));
+            // SAFETY: `packet_step` hands this function out only on CPUs with AVX2.
+            unsafe { compiled(field, settings, lanes, soa) }
+        }
+    };
 }
+avx2_build!(rk4_avx2, march_packet_in);
+avx2_build!(dopri_avx2, dopri::march_dopri_in);
 
 /// Plain steps of the occupied lanes while they all can take them (up to
 /// [`STEPS_PER_GATHER`]); returns the steps each lane took.
@@ -537,7 +583,7 @@ fn march_packet_in(
     settings: &TraceSettings,
     lanes: &[Option<(usize, March<f64>)>; LANES],
     s: &mut Soa,
-) -> [u32; LANES] {
+) -> Took {
     let mut took = [0u32; LANES];
     let mut ds = [f64::NAN; LANES];
     let mut feature_cap = [f64::INFINITY; LANES];
@@ -553,7 +599,9 @@ fn march_packet_in(
             bounds = Some(m.bounds);
         }
     }
-    let Some(bounds) = bounds else { return took };
+    let Some(bounds) = bounds else {
+        return Took::all_own(lanes);
+    };
     let occupied: [bool; LANES] = array::from_fn(|i| lanes[i].is_some() && ds[i].is_finite());
     let ds = L(ds);
     let feature_cap = L(feature_cap);
@@ -563,6 +611,8 @@ fn march_packet_in(
     let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&bounds);
     // Whether the field's macro cells and local caps need asking at every step.
     let local_limits = field.has_local_step_limits();
+    // The lanes stepping; at the end, those that are not need their march.
+    let mut active = [false; LANES];
     for _ in 0..STEPS_PER_GATHER {
         // Which lanes the scalar tracer would give a plain step now, and its length
         // (StepController::take for a fixed step after the first).
@@ -572,7 +622,7 @@ fn march_packet_in(
             StepController::length_scale_cap(s.n0.0[i], g_len.0[i])
         }))
         .zip(feature_cap, f64::min);
-        let mut active: [bool; LANES] = array::from_fn(|i| {
+        active = array::from_fn(|i| {
             let n0 = s.n0.0[i];
             occupied[i]
                 && s.r.finite(i)
@@ -742,7 +792,10 @@ fn march_packet_in(
             break;
         }
     }
-    took
+    Took {
+        steps: took,
+        own: array::from_fn(|i| lanes[i].is_some() && !active[i]),
+    }
 }
 
 #[cfg(test)]
@@ -764,6 +817,15 @@ mod tests {
             macro_cells: true,
             accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
             estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+        }
+    }
+
+    /// dopri 5(4) under error control: per step (`adaptive`) or per length (`auto`).
+    fn dopri(step: StepSpec, max_steps: u32) -> TraceSettings {
+        TraceSettings {
+            integrator: IntegratorKind::Adaptive,
+            step,
+            ..settings(0.0, max_steps, ExitMethod::Hermite)
         }
     }
 
@@ -828,7 +890,11 @@ mod tests {
         .expect("bump");
         // The packets skip asking the rod for local caps, not the bump.
         assert!(!rod.has_local_step_limits() && bump.has_local_step_limits());
-        let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 6] = [
+        let adaptive = |tolerance| StepSpec::Adaptive {
+            tolerance,
+            initial: None,
+        };
+        let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 11] = [
             (
                 &rod,
                 DVec3::new(0.0, 0.0, 1.0),
@@ -865,13 +931,33 @@ mod tests {
                 0.4,
                 settings(0.04, 1_000_000, ExitMethod::Hermite),
             ),
+            (
+                &rod,
+                DVec3::new(0.0, 0.0, 1.0),
+                1.0,
+                dopri(adaptive(1e-9), 1_000_000),
+            ),
+            (
+                &lens,
+                DVec3::ZERO,
+                0.5,
+                dopri(StepSpec::Auto(1e-7), 1_000_000),
+            ),
+            (&lens, DVec3::ZERO, 0.5, dopri(adaptive(1e-6), 9)),
+            (
+                &plume,
+                DVec3::ZERO,
+                0.5,
+                dopri(StepSpec::Auto(1e-6), 1_000_000),
+            ),
+            (&bump, DVec3::ZERO, 0.4, dopri(adaptive(1e-8), 1_000_000)),
         ];
         for (k, (field, center, spread, s)) in cases.iter().enumerate() {
             let table = rays(*center, *spread, 301);
             // The widest lane vectors the CPU has, and the target's own.
             for portable in [false, true] {
                 let (packed, in_packets) =
-                    trace_packets_with(*field, s, &table, packet_step(portable));
+                    trace_packets_with(*field, s, &table, packet_step(s, portable));
                 let mut steps = 0;
                 for (i, &(o, d)) in table.iter().enumerate() {
                     let want = trace_ray::<f64>(*field, s, o, d);

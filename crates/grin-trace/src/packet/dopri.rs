@@ -1,0 +1,381 @@
+//! The dopri 5(4) packet step: error-controlled Dormand-Prince steps of four rays at
+//! once, each lane with its own step length and its own accept or reject, as the
+//! one-ray tracer takes them (`StepController::take`'s error control, `dopri_step`, the
+//! quadrature of the optical path with the fifth-order weights, the error estimate the
+//! step reports), operation for operation, so the results are the same bit for bit.
+//!
+//! A rejected attempt leaves its lane in the packet, to try again at the shorter step
+//! the controller chose. An accepted step that is not a plain one (it ends outside, or its
+//! cubic may leave between its ends) is not kept: the lane goes back to where its take
+//! began (the step the controller tried first, the evaluations counted before) and its
+//! march takes the step from there, through the same attempts.
+
+use std::array;
+
+use grin_field::IndexField;
+use grin_render::settings::TraceSettings;
+use grin_scene::IntegratorKind;
+
+use super::{
+    L, LANES, Mask, STEPS_PER_GATHER, Soa, Took, V, normal, sample, signed_distance, two_sum,
+};
+use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
+use crate::estimate::POSITION_SAFETY;
+use crate::integrate::adaptive::{A, E};
+use crate::step::{
+    ADAPTIVE_MIN_DS_EPS, ADAPTIVE_MIN_DS_REL, ADAPTIVE_TOL_FLOOR_EPS, MAX_GROWTH, MAX_REJECTIONS,
+    MIN_SHRINK, SAFETY, StepController, Tolerance,
+};
+use crate::trace::March;
+
+/// Error-controlled dopri steps of the occupied lanes while they all can take them (up
+/// to [`STEPS_PER_GATHER`] attempts).
+// The lane loops index several lane arrays at once.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+pub(super) fn march_dopri_in(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    lanes: &[Option<(usize, March<f64>)>; LANES],
+    s: &mut Soa,
+) -> Took {
+    let mut took = [0u32; LANES];
+    let mut control = [None; LANES];
+    let mut feature_cap = [f64::INFINITY; LANES];
+    let mut min_flight = [0.0; LANES];
+    let mut bounds = None;
+    for (i, lane) in lanes.iter().enumerate() {
+        if let Some((_, m)) = lane
+            && let Some(c) = m.ctrl.dopri_control()
+        {
+            control[i] = Some(c);
+            feature_cap[i] = m.ctrl.feature_cap();
+            min_flight[i] = m.min_flight;
+            bounds = Some(m.bounds);
+        }
+    }
+    let Some(bounds) = bounds else {
+        return Took::all_own(lanes);
+    };
+    let occupied: [bool; LANES] = array::from_fn(|i| control[i].is_some());
+    // StepController::take_adaptive's constants, per lane (every lane has the same
+    // settings; the unoccupied ones get harmless values).
+    let eps = f64::EPSILON;
+    let len_scale = L(array::from_fn(|i| control[i].map_or(1.0, |c| c.len_scale)));
+    let ds_max_c = L(array::from_fn(|i| control[i].map_or(1.0, |c| c.ds_max)));
+    let ds_min = len_scale.map(|r| ADAPTIVE_MIN_DS_REL.max(ADAPTIVE_MIN_DS_EPS * eps) * r);
+    let floor_eps = eps.max(field.sample_eps());
+    let tol_floor = len_scale.map(|r| ADAPTIVE_TOL_FLOOR_EPS * floor_eps * r);
+    let exponent = 1.0 / f64::from(crate::integrate::order(IntegratorKind::Adaptive));
+    let feature_cap = L(feature_cap);
+    let mut sd0 = signed_distance(&bounds, s.r);
+    let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&bounds);
+    let local_limits = field.has_local_step_limits();
+    let mut active = [false; LANES];
+    // Lanes whose step is their march's to take.
+    let mut own = [false; LANES];
+    for _ in 0..STEPS_PER_GATHER {
+        // A take begins where the one-ray tracer's `advance` would take one: its caps
+        // are fixed for all of the take's attempts.
+        let g_len = s.g0.length();
+        let cap = L(array::from_fn(|i| {
+            StepController::length_scale_cap(s.n0.0[i], g_len.0[i])
+        }))
+        .zip(feature_cap, f64::min);
+        for i in 0..LANES {
+            let n0 = s.n0.0[i];
+            active[i] = occupied[i]
+                && !own[i]
+                && s.r.finite(i)
+                && s.t.finite(i)
+                && n0.is_finite()
+                && n0 > 0.0
+                && s.steps[i] < settings.max_steps;
+            if !active[i] || s.in_take[i] {
+                continue;
+            }
+            let mut lane_cap = cap.0[i];
+            if local_limits {
+                let p = s.r.lane(i);
+                if settings.macro_cells
+                    && field
+                        .homogeneous_span(p, s.t.lane(i).normalize_or_zero())
+                        .is_some_and(|span| span > min_flight[i])
+                {
+                    active[i] = false;
+                    continue;
+                }
+                let reach = s.ds_adapt.0[i].min(ds_max_c.0[i]).min(lane_cap);
+                lane_cap = lane_cap.min(field.step_cap(p, reach));
+            }
+            s.in_take[i] = true;
+            s.take_ds.0[i] = s.ds_adapt.0[i];
+            s.take_evals[i] = s.evals[i];
+            s.take_cap.0[i] = lane_cap;
+            s.rejections[i] = 0;
+        }
+        if !active.iter().any(|&a| a) {
+            break;
+        }
+        // The attempt's length (take_adaptive), in the stepping lanes.
+        let mut ds = L::splat(0.0);
+        let mut ds_max = L::splat(0.0);
+        for i in 0..LANES {
+            if active[i] {
+                ds_max.0[i] = ds_max_c.0[i].min(s.take_cap.0[i]).max(ds_min.0[i]);
+                ds.0[i] = s.ds_adapt.0[i].clamp(ds_min.0[i], ds_max.0[i]);
+            }
+        }
+        let m = Mask::of(active);
+        let h = m.select(ds / s.n0, L::splat(0.0));
+        // dopri_step, lane by lane: six stages, the last at the new point (FSAL), and the
+        // quadrature of n^2, n and n u with the fifth-order weights.
+        let (r, t) = (s.r, s.t);
+        let d0 = s.g0.scale(s.n0);
+        let mut ts = [t; 7];
+        let mut dd = [d0; 7];
+        let mut delta_r = V::zero();
+        let mut delta_t = V::zero();
+        let mut r_end = r;
+        let (mut n_end, mut g_end) = (s.n0, s.g0);
+        let (mut q_opl, mut q_length, mut q_swept) = (L::splat(0.0), L::splat(0.0), V::zero());
+        for k in 1..7 {
+            let row = &A[k - 1];
+            let mut dr = t.scale(L::splat(row[0]));
+            let mut dt = d0.scale(L::splat(row[0]));
+            for j in 1..k {
+                dr = dr + ts[j].scale(L::splat(row[j]));
+                dt = dt + dd[j].scale(L::splat(row[j]));
+            }
+            delta_r = dr.scale(h);
+            delta_t = dt.scale(h);
+            let rk = r + delta_r;
+            ts[k] = t + delta_t;
+            let (n, g) = sample(field, rk);
+            dd[k] = g.scale(n);
+            let b = A[5].get(k).copied().unwrap_or(0.0);
+            if b != 0.0 {
+                let u = ts[k].normalize_or_zero();
+                let bn = L::splat(b) * n;
+                q_opl = q_opl + bn * n;
+                q_length = q_length + bn;
+                q_swept = q_swept + u.scale(bn);
+            }
+            r_end = rk;
+            (n_end, g_end) = (n, g);
+        }
+        let t_end = ts[6];
+        let mut er = ts[0].scale(L::splat(E[0]));
+        let mut et = dd[0].scale(L::splat(E[0]));
+        for j in 1..7 {
+            er = er + ts[j].scale(L::splat(E[j]));
+            et = et + dd[j].scale(L::splat(E[j]));
+        }
+        let (er, et) = (er.scale(h), et.scale(h));
+        // The controller's error norm, tolerance and next step (take_adaptive).
+        let pos = er.length();
+        let dir = et.length() / s.n0.map(|n| n.abs().max(f64::MIN_POSITIVE)) * len_scale;
+        let err = pos.zip(dir, f64::max);
+        let mut accepted = [false; LANES];
+        for i in 0..LANES {
+            if !active[i] {
+                continue;
+            }
+            let Some(c) = control[i] else { continue };
+            s.evals[i] += u64::from(crate::integrate::evals_per_step(IntegratorKind::Adaptive));
+            let (ds, ds_min, ds_max, err) = (ds.0[i], ds_min.0[i], ds_max.0[i], err.0[i]);
+            let tol = match c.tol {
+                Tolerance::PerStep(t) => t,
+                Tolerance::PerLength(t) => t * ds,
+            }
+            .max(tol_floor.0[i]);
+            accepted[i] = err <= tol || ds <= ds_min || s.rejections[i] >= MAX_REJECTIONS;
+            let factor = if err > 0.0 && err.is_finite() {
+                (SAFETY * (tol / err).powf(exponent)).clamp(MIN_SHRINK, MAX_GROWTH)
+            } else if err == 0.0 {
+                MAX_GROWTH
+            } else {
+                MIN_SHRINK
+            };
+            s.ds_adapt.0[i] = (ds * factor).clamp(ds_min, ds_max);
+            if !accepted[i] {
+                s.rejections[i] += 1;
+            }
+        }
+        // An accepted step is the packet's where the one-ray tracer would take it as a
+        // plain step: inside at its end, and no excursion between (excursion_step).
+        let sd1 = signed_distance(&bounds, r_end);
+        let reach = h * t.length().zip(t_end.length(), f64::max);
+        let mut committed = [false; LANES];
+        for i in 0..LANES {
+            if !accepted[i] {
+                continue;
+            }
+            let plain = reach.0[i].is_finite()
+                && r_end.finite(i)
+                && ((sd0.0[i] < -reach.0[i] && sd1.0[i] < -reach.0[i])
+                    || (sd1.0[i] <= 0.0
+                        && Segment {
+                            r0: r.lane(i),
+                            t0: t.lane(i),
+                            r1: r_end.lane(i),
+                            t1: t_end.lane(i),
+                            h: h.0[i],
+                        }
+                        .excursion(|p| bounds.signed_distance(p), slack)
+                        .is_none()));
+            s.in_take[i] = false;
+            if plain {
+                committed[i] = true;
+            } else {
+                // Back to where the take began: the march takes this step itself.
+                s.ds_adapt.0[i] = s.take_ds.0[i];
+                s.evals[i] = s.take_evals[i];
+                own[i] = true;
+                active[i] = false;
+            }
+        }
+        if committed.iter().any(|&c| c) {
+            commit(
+                s,
+                &bounds,
+                &committed,
+                &mut sd0,
+                Step {
+                    t,
+                    d0,
+                    h,
+                    delta_r,
+                    delta_t,
+                    n1: n_end,
+                    g1: g_end,
+                    q: (q_opl, q_length, q_swept),
+                    er,
+                    et,
+                },
+            );
+            for i in 0..LANES {
+                if committed[i] {
+                    took[i] += 1;
+                }
+            }
+        }
+        if (0..LANES).any(|i| occupied[i] && !active[i]) {
+            break;
+        }
+    }
+    Took {
+        steps: took,
+        own: array::from_fn(|i| lanes[i].is_some() && !active[i] && !s.in_take[i]),
+    }
+}
+
+/// An accepted dopri step of every lane, as lane vectors.
+struct Step {
+    t: V,
+    d0: V,
+    h: L,
+    delta_r: V,
+    delta_t: V,
+    /// The sample at the step's end (its seventh stage).
+    n1: L,
+    g1: V,
+    /// The quadrature of n^2, n and n u over stages 2..6 (times h to come).
+    q: (L, L, V),
+    /// The step's reported local errors (position, T).
+    er: V,
+    et: V,
+}
+
+/// The one-ray tracer's bookkeeping of an accepted plain step, in the `committed`
+/// lanes: the compensated state update, the optical path by the step's quadrature
+/// (`Quad::with_start`), the ray's error estimate with the step's reported errors, and
+/// the near-miss check at the new point.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn commit(
+    s: &mut Soa,
+    bounds: &grin_field::Bounds,
+    committed: &[bool; LANES],
+    sd0: &mut L,
+    st: Step,
+) {
+    let Step {
+        t,
+        d0,
+        h,
+        delta_r,
+        delta_t,
+        n1,
+        g1,
+        q,
+        er,
+        et,
+    } = st;
+    let (nr, lost_r) = two_sum(s.r, delta_r + s.comp_r);
+    let (nt, lost_t) = two_sum(t, delta_t + s.comp_t);
+    let d1 = g1.scale(n1);
+    let n0 = s.n0;
+    // accumulate with the step's quadrature (Quad { opl: q * h, .. }.with_start).
+    let w = L::splat(A[5][0]) * h;
+    let u0 = t.normalize_or_zero();
+    let opl = q.0 * h + w * n0 * n0;
+    let length = q.1 * h + w * n0;
+    let swept = q.2.scale(h) + u0.scale(w * n0);
+    // ErrorEstimate::step with the step's own (er, et).
+    let across_v = |v: V| v - u0.scale(v.dot(u0));
+    let across = |v: V| across_v(v).length();
+    let local = across_v(et);
+    let local_r = across(er);
+    let bend_inc = across(d0) * h / n0;
+    let feedback = across(d1 - d0) * s.pos / n0;
+    let direction = s.vsum.length() + s.sum;
+    let turned = t.dot(nt);
+    let pos_new = s.pos + (local_r + direction * h * n0);
+    let vsum_new = s.vsum + local.over(n0);
+    let sum_new = s.sum + feedback / n0;
+    // ErrorEstimate::check_approach at the new point.
+    let sd_new = signed_distance(bounds, nr);
+    let normals = normal(bounds, nr);
+    let v = nt.normalize_or_zero().dot(normals);
+    let kappa = -d1.dot(normals) / (n1 * n1);
+    let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
+    let m = Mask::of(*committed);
+    s.r = m.select_v(nr, s.r);
+    s.t = m.select_v(nt, s.t);
+    s.comp_r = m.select_v(lost_r, s.comp_r);
+    s.comp_t = m.select_v(lost_t, s.comp_t);
+    s.length = m.select(s.length + length, s.length);
+    s.opl = m.select(s.opl + opl, s.opl);
+    s.swept = m.select_v(s.swept + swept, s.swept);
+    s.last_local = m.select_v(local, s.last_local);
+    s.last_r = m.select(local_r, s.last_r);
+    s.bend = m.select(s.bend + bend_inc, s.bend);
+    let counted = Mask::of(array::from_fn(|i| {
+        committed[i] && local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite()
+    }));
+    s.pos = counted.select(pos_new, s.pos);
+    s.vsum = counted.select_v(vsum_new, s.vsum);
+    s.sum = counted.select(sum_new, s.sum);
+    *sd0 = m.select(sd_new, *sd0);
+    s.n0 = m.select(n1, s.n0);
+    s.g0 = m.select_v(g1, s.g0);
+    for i in 0..LANES {
+        if !committed[i] {
+            continue;
+        }
+        if turned.0[i] <= 0.0 {
+            s.near_miss[i] = true;
+        }
+        let n = n1.0[i];
+        if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
+            && v.0[i] > 0.0
+            && kappa.0[i] > 0.0
+            && v.0[i] <= kappa.0[i] * h.0[i].abs()
+            && closest.0[i].abs() < POSITION_SAFETY * s.pos.0[i]
+        {
+            s.near_miss[i] = true;
+        }
+        s.steps[i] += 1;
+    }
+}
