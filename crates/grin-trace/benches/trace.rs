@@ -87,8 +87,9 @@ fn bench_field<R: Real>(c: &mut Criterion, name: &str, f: &dyn IndexField, preci
     group.finish();
 }
 
-/// rk4 at fixed steps of 0.01 R, the same beam ray by ray and in packets
-/// (grin_trace::packet: the same results bit for bit), one thread.
+/// rk4 at fixed steps of 0.01 R and dopri under error control (auto 1e-7 rad), the same
+/// beam ray by ray and in packets (grin_trace::packet: the same results bit for bit), one
+/// thread.
 fn bench_packets(c: &mut Criterion, name: &str, f: &dyn IndexField) {
     let (lo, hi) = f.bounds().aabb();
     let c0 = (lo + hi) * 0.5;
@@ -101,7 +102,7 @@ fn bench_packets(c: &mut Criterion, name: &str, f: &dyn IndexField) {
             (o, d)
         })
         .collect();
-    let settings = TraceSettings {
+    let rk4 = TraceSettings {
         integrator: IntegratorKind::Rk4,
         step: StepSpec::Fixed(0.01 * f.bounds().radius()),
         max_steps: 1 << 20,
@@ -110,20 +111,37 @@ fn bench_packets(c: &mut Criterion, name: &str, f: &dyn IndexField) {
         accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
         estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
     };
-    let mut group = c.benchmark_group(format!("packets/{name}"));
+    let dopri = TraceSettings {
+        integrator: IntegratorKind::Adaptive,
+        step: StepSpec::Auto(1e-7),
+        ..rk4
+    };
+    for (method, settings) in [("rk4", rk4), ("dopri", dopri)] {
+        bench_packet_pair(c, &format!("packets/{name}/{method}"), f, &settings, &rays);
+    }
+}
+
+fn bench_packet_pair(
+    c: &mut Criterion,
+    group: &str,
+    f: &dyn IndexField,
+    settings: &TraceSettings,
+    rays: &[(DVec3, DVec3)],
+) {
+    let mut group = c.benchmark_group(group);
     group.throughput(Throughput::Elements(rays.len() as u64));
     group.bench_function("ray-by-ray", |b| {
         b.iter(|| {
             let mut acc = 0.0;
-            for (o, d) in &rays {
-                acc += trace_ray::<f64>(f, &settings, *o, *d).opl;
+            for (o, d) in rays {
+                acc += trace_ray::<f64>(f, settings, *o, *d).opl;
             }
             std::hint::black_box(acc)
         })
     });
     group.bench_function("packets", |b| {
         b.iter(|| {
-            let out = grin_trace::packet::trace_packets(f, &settings, &rays);
+            let out = grin_trace::packet::trace_packets(f, settings, rays);
             std::hint::black_box(out.iter().map(|r| r.opl).sum::<f64>())
         })
     });

@@ -56,7 +56,8 @@ pub enum Tolerance {
 /// A dopri controller's constants ([`StepController::dopri_control`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct DopriControl {
-    pub tol: Tolerance,
+    /// `None`: fixed steps of `ds_max`.
+    pub tol: Option<Tolerance>,
     pub ds_max: f64,
     pub len_scale: f64,
 }
@@ -169,23 +170,30 @@ impl StepController {
         self.ds_adapt = ds;
     }
 
-    /// What [`Self::take`] holds an error-controlled dopri step to, where the policy is
-    /// error control and the integrator dopri: the tolerance, the longest step before
-    /// the local caps, and the medium's length scale (the error norm's).
+    /// How [`Self::take`] chooses a dopri step, where the integrator is dopri and the
+    /// policy error control or a fixed step (its jitter spent): the tolerance (`None`
+    /// for a fixed step), the step (the fixed one, or the longest error-controlled one
+    /// before the local caps), and the medium's length scale (the error norm's).
     pub(crate) fn dopri_control(&self) -> Option<DopriControl> {
         if self.kind != IntegratorKind::Adaptive {
             return None;
         }
-        let tol = match self.spec {
-            StepSpec::Adaptive { tolerance, .. } => Tolerance::PerStep(tolerance),
-            StepSpec::Auto(accuracy) => {
-                Tolerance::PerLength(grin_scene::AUTO_TOL_PER_RAD * accuracy)
+        let (tol, ds_max) = match self.spec {
+            StepSpec::Adaptive { tolerance, .. } => {
+                (Some(Tolerance::PerStep(tolerance)), self.ds_max)
             }
+            StepSpec::Auto(accuracy) => (
+                Some(Tolerance::PerLength(
+                    grin_scene::AUTO_TOL_PER_RAD * accuracy,
+                )),
+                self.ds_max,
+            ),
+            StepSpec::Fixed(ds) if self.jitter == 1.0 => (None, ds),
             _ => return None,
         };
         Some(DopriControl {
             tol,
-            ds_max: self.ds_max,
+            ds_max,
             len_scale: self.len_scale,
         })
     }

@@ -1,5 +1,6 @@
-//! The dopri 5(4) packet step: error-controlled Dormand-Prince steps of four rays at
-//! once, each lane with its own step length and its own accept or reject, as the
+//! The dopri 5(4) packet step: Dormand-Prince steps of four rays at once, error
+//! controlled (or fixed), each lane with its own step length and its own accept or
+//! reject, as the
 //! one-ray tracer takes them (`StepController::take`'s error control, `dopri_step`, the
 //! quadrature of the optical path with the fifth-order weights, the error estimate the
 //! step reports), operation for operation, so the results are the same bit for bit.
@@ -95,6 +96,7 @@ pub(super) fn march_dopri_in(
                 continue;
             }
             let mut lane_cap = cap.0[i];
+            let fixed = control[i].is_some_and(|c| c.tol.is_none());
             if local_limits {
                 let p = s.r.lane(i);
                 if settings.macro_cells
@@ -105,7 +107,12 @@ pub(super) fn march_dopri_in(
                     active[i] = false;
                     continue;
                 }
-                let reach = s.ds_adapt.0[i].min(ds_max_c.0[i]).min(lane_cap);
+                // StepController::take's reach: the fixed step, or the controller's.
+                let reach = if fixed {
+                    ds_max_c.0[i].min(lane_cap)
+                } else {
+                    s.ds_adapt.0[i].min(ds_max_c.0[i]).min(lane_cap)
+                };
                 lane_cap = lane_cap.min(field.step_cap(p, reach));
             }
             s.in_take[i] = true;
@@ -121,9 +128,16 @@ pub(super) fn march_dopri_in(
         let mut ds = L::splat(0.0);
         let mut ds_max = L::splat(0.0);
         for i in 0..LANES {
-            if active[i] {
-                ds_max.0[i] = ds_max_c.0[i].min(s.take_cap.0[i]).max(ds_min.0[i]);
-                ds.0[i] = s.ds_adapt.0[i].clamp(ds_min.0[i], ds_max.0[i]);
+            if !active[i] {
+                continue;
+            }
+            match control[i].and_then(|c| c.tol) {
+                Some(_) => {
+                    ds_max.0[i] = ds_max_c.0[i].min(s.take_cap.0[i]).max(ds_min.0[i]);
+                    ds.0[i] = s.ds_adapt.0[i].clamp(ds_min.0[i], ds_max.0[i]);
+                }
+                // A fixed step: (ds * jitter).min(cap), the jitter spent.
+                None => ds.0[i] = ds_max_c.0[i].min(s.take_cap.0[i]),
             }
         }
         let m = Mask::of(active);
@@ -183,8 +197,12 @@ pub(super) fn march_dopri_in(
             }
             let Some(c) = control[i] else { continue };
             s.evals[i] += u64::from(crate::integrate::evals_per_step(IntegratorKind::Adaptive));
+            let Some(c_tol) = c.tol else {
+                accepted[i] = true;
+                continue;
+            };
             let (ds, ds_min, ds_max, err) = (ds.0[i], ds_min.0[i], ds_max.0[i], err.0[i]);
-            let tol = match c.tol {
+            let tol = match c_tol {
                 Tolerance::PerStep(t) => t,
                 Tolerance::PerLength(t) => t * ds,
             }

@@ -42,13 +42,14 @@ const STEPS_PER_GATHER: usize = 32;
 
 /// Whether `settings` are ones the packets take (the packets trace in f64):
 /// fourth-order Runge-Kutta at fixed steps, or dopri 5(4) under error control
-/// (`adaptive` or `auto` steps; [`dopri`]).
+/// (`adaptive` or `auto` steps) or at fixed steps ([`dopri`]).
 pub fn packets_apply(settings: &TraceSettings) -> bool {
     match settings.integrator {
         IntegratorKind::Rk4 => matches!(settings.step, StepSpec::Fixed(_)),
-        IntegratorKind::Adaptive => {
-            matches!(settings.step, StepSpec::Adaptive { .. } | StepSpec::Auto(_))
-        }
+        IntegratorKind::Adaptive => matches!(
+            settings.step,
+            StepSpec::Adaptive { .. } | StepSpec::Auto(_) | StepSpec::Fixed(_)
+        ),
         _ => false,
     }
 }
@@ -894,7 +895,7 @@ mod tests {
             tolerance,
             initial: None,
         };
-        let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 11] = [
+        let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 13] = [
             (
                 &rod,
                 DVec3::new(0.0, 0.0, 1.0),
@@ -951,6 +952,18 @@ mod tests {
                 dopri(StepSpec::Auto(1e-6), 1_000_000),
             ),
             (&bump, DVec3::ZERO, 0.4, dopri(adaptive(1e-8), 1_000_000)),
+            (
+                &lens,
+                DVec3::ZERO,
+                0.5,
+                dopri(StepSpec::Fixed(0.04), 1_000_000),
+            ),
+            (
+                &bump,
+                DVec3::ZERO,
+                0.4,
+                dopri(StepSpec::Fixed(0.03), 1_000_000),
+            ),
         ];
         for (k, (field, center, spread, s)) in cases.iter().enumerate() {
             let table = rays(*center, *spread, 301);
