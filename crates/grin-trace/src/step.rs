@@ -53,6 +53,28 @@ pub enum Tolerance {
     PerLength(f64),
 }
 
+impl Tolerance {
+    /// What a step of length `ds` is held to (before the floor).
+    pub(crate) fn for_step(self, ds: f64) -> f64 {
+        match self {
+            Tolerance::PerStep(t) => t,
+            Tolerance::PerLength(t) => t * ds,
+        }
+    }
+}
+
+/// The factor on the next error-controlled step after one of error `err` held to `tol`
+/// (Hairer, Norsett & Wanner, II.4; `exponent` 1 / (the lower order + 1)).
+pub(crate) fn step_factor(err: f64, tol: f64, exponent: f64) -> f64 {
+    if err > 0.0 && err.is_finite() {
+        (SAFETY * (tol / err).powf(exponent)).clamp(MIN_SHRINK, MAX_GROWTH)
+    } else if err == 0.0 {
+        MAX_GROWTH
+    } else {
+        MIN_SHRINK
+    }
+}
+
 /// A dopri controller's constants ([`StepController::dopri_control`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct DopriControl {
@@ -308,20 +330,9 @@ impl StepController {
                 self.doubled(field, s, d0, h, p)
             };
             evals += step.evals;
-            let tol = match tol {
-                Tolerance::PerStep(t) => t,
-                Tolerance::PerLength(t) => t * ds,
-            }
-            .max(tol_floor);
+            let tol = tol.for_step(ds).max(tol_floor);
             let accept = err <= tol || ds <= ds_min || rejections >= MAX_REJECTIONS;
-            let factor = if err > 0.0 && err.is_finite() {
-                (SAFETY * (tol / err).powf(exponent)).clamp(MIN_SHRINK, MAX_GROWTH)
-            } else if err == 0.0 {
-                MAX_GROWTH
-            } else {
-                MIN_SHRINK
-            };
-            self.ds_adapt = (ds * factor).clamp(ds_min, ds_max);
+            self.ds_adapt = (ds * step_factor(err, tol, exponent)).clamp(ds_min, ds_max);
             if accept {
                 return Taken { step, h, evals };
             }

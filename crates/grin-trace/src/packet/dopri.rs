@@ -18,14 +18,14 @@ use grin_render::settings::TraceSettings;
 use grin_scene::IntegratorKind;
 
 use super::{
-    L, LANES, Mask, STEPS_PER_GATHER, Soa, Took, V, normal, sample, signed_distance, two_sum,
+    L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, plain_steps, sample,
+    signed_distance, two_sum,
 };
-use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
-use crate::estimate::POSITION_SAFETY;
+use crate::boundary::{EXCURSION_SLACK_TOLS, exit_tolerance};
 use crate::integrate::adaptive::{A, E};
 use crate::step::{
-    ADAPTIVE_MIN_DS_EPS, ADAPTIVE_MIN_DS_REL, ADAPTIVE_TOL_FLOOR_EPS, MAX_GROWTH, MAX_REJECTIONS,
-    MIN_SHRINK, SAFETY, StepController, Tolerance,
+    ADAPTIVE_MIN_DS_EPS, ADAPTIVE_MIN_DS_REL, ADAPTIVE_TOL_FLOOR_EPS, MAX_REJECTIONS,
+    StepController, step_factor,
 };
 use crate::trace::March;
 
@@ -202,48 +202,23 @@ pub(super) fn march_dopri_in(
                 continue;
             };
             let (ds, ds_min, ds_max, err) = (ds.0[i], ds_min.0[i], ds_max.0[i], err.0[i]);
-            let tol = match c_tol {
-                Tolerance::PerStep(t) => t,
-                Tolerance::PerLength(t) => t * ds,
-            }
-            .max(tol_floor.0[i]);
+            let tol = c_tol.for_step(ds).max(tol_floor.0[i]);
             accepted[i] = err <= tol || ds <= ds_min || s.rejections[i] >= MAX_REJECTIONS;
-            let factor = if err > 0.0 && err.is_finite() {
-                (SAFETY * (tol / err).powf(exponent)).clamp(MIN_SHRINK, MAX_GROWTH)
-            } else if err == 0.0 {
-                MAX_GROWTH
-            } else {
-                MIN_SHRINK
-            };
-            s.ds_adapt.0[i] = (ds * factor).clamp(ds_min, ds_max);
+            s.ds_adapt.0[i] = (ds * step_factor(err, tol, exponent)).clamp(ds_min, ds_max);
             if !accepted[i] {
                 s.rejections[i] += 1;
             }
         }
         // An accepted step is the packet's where the one-ray tracer would take it as a
         // plain step: inside at its end, and no excursion between (excursion_step).
-        let sd1 = signed_distance(&bounds, r_end);
-        let reach = h * t.length().zip(t_end.length(), f64::max);
+        let plain = plain_steps(&bounds, slack, &accepted, sd0, (r, t), (r_end, t_end), h);
         let mut committed = [false; LANES];
         for i in 0..LANES {
             if !accepted[i] {
                 continue;
             }
-            let plain = reach.0[i].is_finite()
-                && r_end.finite(i)
-                && ((sd0.0[i] < -reach.0[i] && sd1.0[i] < -reach.0[i])
-                    || (sd1.0[i] <= 0.0
-                        && Segment {
-                            r0: r.lane(i),
-                            t0: t.lane(i),
-                            r1: r_end.lane(i),
-                            t1: t_end.lane(i),
-                            h: h.0[i],
-                        }
-                        .excursion(|p| bounds.signed_distance(p), slack)
-                        .is_none()));
             s.in_take[i] = false;
-            if plain {
+            if plain[i] {
                 committed[i] = true;
             } else {
                 // Back to where the take began: the march takes this step itself.
@@ -306,10 +281,9 @@ struct Step {
 }
 
 /// The one-ray tracer's bookkeeping of an accepted plain step, in the `committed`
-/// lanes: the compensated state update, the optical path by the step's quadrature
-/// (`Quad::with_start`), the ray's error estimate with the step's reported errors, and
-/// the near-miss check at the new point.
-#[allow(clippy::needless_range_loop)]
+/// lanes: the compensated state update and the optical path by the step's quadrature
+/// (`Quad::with_start`), then what every packet step does after
+/// ([`super::finish_steps`]).
 #[inline(always)]
 fn commit(
     s: &mut Soa,
@@ -332,7 +306,6 @@ fn commit(
     } = st;
     let (nr, lost_r) = two_sum(s.r, delta_r + s.comp_r);
     let (nt, lost_t) = two_sum(t, delta_t + s.comp_t);
-    let d1 = g1.scale(n1);
     let n0 = s.n0;
     // accumulate with the step's quadrature (Quad { opl: q * h, .. }.with_start).
     let w = L::splat(A[5][0]) * h;
@@ -340,60 +313,21 @@ fn commit(
     let opl = q.0 * h + w * n0 * n0;
     let length = q.1 * h + w * n0;
     let swept = q.2.scale(h) + u0.scale(w * n0);
-    // ErrorEstimate::step with the step's own (er, et).
-    let across_v = |v: V| v - u0.scale(v.dot(u0));
-    let across = |v: V| across_v(v).length();
-    let local = across_v(et);
-    let local_r = across(er);
-    let bend_inc = across(d0) * h / n0;
-    let feedback = across(d1 - d0) * s.pos / n0;
-    let direction = s.vsum.length() + s.sum;
-    let turned = t.dot(nt);
-    let pos_new = s.pos + (local_r + direction * h * n0);
-    let vsum_new = s.vsum + local.over(n0);
-    let sum_new = s.sum + feedback / n0;
-    // ErrorEstimate::check_approach at the new point.
-    let sd_new = signed_distance(bounds, nr);
-    let normals = normal(bounds, nr);
-    let v = nt.normalize_or_zero().dot(normals);
-    let kappa = -d1.dot(normals) / (n1 * n1);
-    let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
-    let m = Mask::of(*committed);
-    s.r = m.select_v(nr, s.r);
-    s.t = m.select_v(nt, s.t);
-    s.comp_r = m.select_v(lost_r, s.comp_r);
-    s.comp_t = m.select_v(lost_t, s.comp_t);
-    s.length = m.select(s.length + length, s.length);
-    s.opl = m.select(s.opl + opl, s.opl);
-    s.swept = m.select_v(s.swept + swept, s.swept);
-    s.last_local = m.select_v(local, s.last_local);
-    s.last_r = m.select(local_r, s.last_r);
-    s.bend = m.select(s.bend + bend_inc, s.bend);
-    let counted = Mask::of(array::from_fn(|i| {
-        committed[i] && local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite()
-    }));
-    s.pos = counted.select(pos_new, s.pos);
-    s.vsum = counted.select_v(vsum_new, s.vsum);
-    s.sum = counted.select(sum_new, s.sum);
-    *sd0 = m.select(sd_new, *sd0);
-    s.n0 = m.select(n1, s.n0);
-    s.g0 = m.select_v(g1, s.g0);
-    for i in 0..LANES {
-        if !committed[i] {
-            continue;
-        }
-        if turned.0[i] <= 0.0 {
-            s.near_miss[i] = true;
-        }
-        let n = n1.0[i];
-        if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
-            && v.0[i] > 0.0
-            && kappa.0[i] > 0.0
-            && v.0[i] <= kappa.0[i] * h.0[i].abs()
-            && closest.0[i].abs() < POSITION_SAFETY * s.pos.0[i]
-        {
-            s.near_miss[i] = true;
-        }
-        s.steps[i] += 1;
-    }
+    finish_steps(
+        s,
+        bounds,
+        committed,
+        sd0,
+        StepEnd {
+            t,
+            u0,
+            d0,
+            h,
+            next: (nr, nt),
+            lost: (lost_r, lost_t),
+            end: (n1, g1),
+            path: (opl, length, swept),
+            error: (er, et),
+        },
+    );
 }

@@ -628,7 +628,6 @@ fn march_packet_in(
     for _ in 0..STEPS_PER_GATHER {
         // Which lanes the scalar tracer would give a plain step now, and its length
         // (StepController::take for a fixed step after the first).
-        let tl = s.t.length();
         let g_len = s.g0.length();
         let mut cap = L(array::from_fn(|i| {
             StepController::length_scale_cap(s.n0.0[i], g_len.0[i])
@@ -667,7 +666,6 @@ fn march_packet_in(
         }
         let m = Mask::of(active);
         let h = m.select(hi, L::splat(0.0));
-        let t_len = m.select(tl, L::splat(0.0));
         if !active.iter().any(|&a| a) {
             break;
         }
@@ -695,26 +693,7 @@ fn march_packet_in(
         // The scalar tracer's tests (`excursion_step`): not outside, and no excursion:
         // both ends deeper than the step reaches, or else the step's cubic proven
         // inside (the common case near the surface, and the same test).
-        let sd1 = signed_distance(&bounds, r_end);
-        let reach = h * t_len.zip(t_end.length(), f64::max);
-        for i in 0..LANES {
-            if !active[i] {
-                continue;
-            }
-            active[i] = reach.0[i].is_finite()
-                && r_end.finite(i)
-                && ((sd0.0[i] < -reach.0[i] && sd1.0[i] < -reach.0[i])
-                    || (sd1.0[i] <= 0.0
-                        && Segment {
-                            r0: r.lane(i),
-                            t0: t.lane(i),
-                            r1: r_end.lane(i),
-                            t1: t_end.lane(i),
-                            h: h.0[i],
-                        }
-                        .excursion(|p| bounds.signed_distance(p), slack)
-                        .is_none()));
-        }
+        active = plain_steps(&bounds, slack, &active, sd0, (r, t), (r_end, t_end), h);
         if !active.iter().any(|&a| a) {
             break;
         }
@@ -740,65 +719,30 @@ fn march_packet_in(
         // (its early return cannot happen: h and n0 are positive here).
         let et = (d1_end - d4).scale(h / L::splat(6.0));
         let er = et.scale(L::splat(0.5) * h);
-        let across_v = |v: V| v - u0.scale(v.dot(u0));
-        let across = |v: V| across_v(v).length();
-        let local = across_v(et);
-        let local_r = across(er);
-        let bend_inc = across(d0) * h / n0;
-        let feedback = across(d1_end - d0) * s.pos / n0;
-        let direction = s.vsum.length() + s.sum;
-        let turned = t.dot(nt);
-        let pos_new = s.pos + (local_r + direction * h * n0);
-        let vsum_new = s.vsum + local.over(n0);
-        let sum_new = s.sum + feedback / n0;
-        // ErrorEstimate::check_approach at the new point.
-        let sd_new = signed_distance(&bounds, nr);
-        let normals = normal(&bounds, nr);
-        let v = nt.normalize_or_zero().dot(normals);
-        let kappa = -d1_end.dot(normals) / (n1 * n1);
-        let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
+        finish_steps(
+            s,
+            &bounds,
+            &active,
+            &mut sd0,
+            StepEnd {
+                t,
+                u0,
+                d0,
+                h,
+                next: (nr, nt),
+                lost: (lost_r, lost_t),
+                end: (n1, g1),
+                path: (opl, length, swept),
+                error: (er, et),
+            },
+        );
+        // The step's own 3 and the end sample.
         let evals_per_step = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4));
-        // The new state of the lanes that stepped.
-        let m = Mask::of(active);
-        s.r = m.select_v(nr, s.r);
-        s.t = m.select_v(nt, s.t);
-        s.comp_r = m.select_v(lost_r, s.comp_r);
-        s.comp_t = m.select_v(lost_t, s.comp_t);
-        s.length = m.select(s.length + length, s.length);
-        s.opl = m.select(s.opl + opl, s.opl);
-        s.swept = m.select_v(s.swept + swept, s.swept);
-        s.last_local = m.select_v(local, s.last_local);
-        s.last_r = m.select(local_r, s.last_r);
-        s.bend = m.select(s.bend + bend_inc, s.bend);
-        let counted = Mask::of(array::from_fn(|i| {
-            active[i] && local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite()
-        }));
-        s.pos = counted.select(pos_new, s.pos);
-        s.vsum = counted.select_v(vsum_new, s.vsum);
-        s.sum = counted.select(sum_new, s.sum);
-        sd0 = m.select(sd_new, sd0);
-        s.n0 = m.select(n1, s.n0);
-        s.g0 = m.select_v(g1, s.g0);
         for i in 0..LANES {
-            if !active[i] {
-                continue;
+            if active[i] {
+                s.evals[i] += evals_per_step;
+                took[i] += 1;
             }
-            // The step's own 3 and the end sample.
-            s.evals[i] += evals_per_step;
-            if turned.0[i] <= 0.0 {
-                s.near_miss[i] = true;
-            }
-            let n = n1.0[i];
-            if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
-                && v.0[i] > 0.0
-                && kappa.0[i] > 0.0
-                && v.0[i] <= kappa.0[i] * h.0[i].abs()
-                && closest.0[i].abs() < POSITION_SAFETY * s.pos.0[i]
-            {
-                s.near_miss[i] = true;
-            }
-            s.steps[i] += 1;
-            took[i] += 1;
         }
         if (0..LANES).any(|i| occupied[i] && !active[i]) {
             break;
@@ -807,6 +751,135 @@ fn march_packet_in(
     Took {
         steps: took,
         own: array::from_fn(|i| lanes[i].is_some() && !active[i]),
+    }
+}
+
+/// The lanes among `candidates` whose step (from `start` to `end`, position and T, over
+/// `h`) the one-ray tracer would take as a plain one (`excursion_step`): not outside,
+/// and no excursion between its ends: both ends deeper than the step reaches, or else
+/// the step's cubic proven inside by the same test (the common case near the surface).
+/// `sd0`: the signed distance at the start.
+#[inline(always)]
+fn plain_steps(
+    bounds: &Bounds,
+    slack: f64,
+    candidates: &[bool; LANES],
+    sd0: L,
+    start: (V, V),
+    end: (V, V),
+    h: L,
+) -> [bool; LANES] {
+    let ((r, t), (r_end, t_end)) = (start, end);
+    let sd1 = signed_distance(bounds, r_end);
+    let reach = h * t.length().zip(t_end.length(), f64::max);
+    array::from_fn(|i| {
+        candidates[i]
+            && reach.0[i].is_finite()
+            && r_end.finite(i)
+            && ((sd0.0[i] < -reach.0[i] && sd1.0[i] < -reach.0[i])
+                || (sd1.0[i] <= 0.0
+                    && Segment {
+                        r0: r.lane(i),
+                        t0: t.lane(i),
+                        r1: r_end.lane(i),
+                        t1: t_end.lane(i),
+                        h: h.0[i],
+                    }
+                    .excursion(|p| bounds.signed_distance(p), slack)
+                    .is_none()))
+    })
+}
+
+/// What a lane's accepted step leaves: the step's start direction T0 (and its unit
+/// vector), D at its start, its t-length, the new state and its lost low parts (the
+/// compensated sums), the sample at its end (n, grad n), what it adds to the optical
+/// path, the length and the swept vector, and its local errors (position, T).
+struct StepEnd {
+    t: V,
+    u0: V,
+    d0: V,
+    h: L,
+    next: (V, V),
+    lost: (V, V),
+    end: (L, V),
+    path: (L, L, V),
+    error: (V, V),
+}
+
+/// The one-ray tracer's bookkeeping after a plain step, in the `stepped` lanes: the new
+/// state, the sums of the path, the ray's error estimate (`ErrorEstimate::step` with the
+/// step's local errors), and the near-miss check at the new point (`check_approach`);
+/// `sd0` becomes the signed distance there.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn finish_steps(s: &mut Soa, bounds: &Bounds, stepped: &[bool; LANES], sd0: &mut L, e: StepEnd) {
+    let StepEnd {
+        t,
+        u0,
+        d0,
+        h,
+        next: (nr, nt),
+        lost: (lost_r, lost_t),
+        end: (n1, g1),
+        path: (opl, length, swept),
+        error: (er, et),
+    } = e;
+    let n0 = s.n0;
+    let d1 = g1.scale(n1);
+    let across_v = |v: V| v - u0.scale(v.dot(u0));
+    let across = |v: V| across_v(v).length();
+    let local = across_v(et);
+    let local_r = across(er);
+    let bend_inc = across(d0) * h / n0;
+    let feedback = across(d1 - d0) * s.pos / n0;
+    let direction = s.vsum.length() + s.sum;
+    let turned = t.dot(nt);
+    let pos_new = s.pos + (local_r + direction * h * n0);
+    let vsum_new = s.vsum + local.over(n0);
+    let sum_new = s.sum + feedback / n0;
+    // ErrorEstimate::check_approach at the new point.
+    let sd_new = signed_distance(bounds, nr);
+    let normals = normal(bounds, nr);
+    let v = nt.normalize_or_zero().dot(normals);
+    let kappa = -d1.dot(normals) / (n1 * n1);
+    let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
+    let m = Mask::of(*stepped);
+    s.r = m.select_v(nr, s.r);
+    s.t = m.select_v(nt, s.t);
+    s.comp_r = m.select_v(lost_r, s.comp_r);
+    s.comp_t = m.select_v(lost_t, s.comp_t);
+    s.length = m.select(s.length + length, s.length);
+    s.opl = m.select(s.opl + opl, s.opl);
+    s.swept = m.select_v(s.swept + swept, s.swept);
+    s.last_local = m.select_v(local, s.last_local);
+    s.last_r = m.select(local_r, s.last_r);
+    s.bend = m.select(s.bend + bend_inc, s.bend);
+    let counted = Mask::of(array::from_fn(|i| {
+        stepped[i] && local.finite(i) && local_r.0[i].is_finite() && feedback.0[i].is_finite()
+    }));
+    s.pos = counted.select(pos_new, s.pos);
+    s.vsum = counted.select_v(vsum_new, s.vsum);
+    s.sum = counted.select(sum_new, s.sum);
+    *sd0 = m.select(sd_new, *sd0);
+    s.n0 = m.select(n1, s.n0);
+    s.g0 = m.select_v(g1, s.g0);
+    for i in 0..LANES {
+        if !stepped[i] {
+            continue;
+        }
+        if turned.0[i] <= 0.0 {
+            s.near_miss[i] = true;
+        }
+        let n = n1.0[i];
+        if !(s.near_miss[i] || n.is_nan() || n <= 0.0)
+            && v.0[i] > 0.0
+            && kappa.0[i] > 0.0
+            && v.0[i] <= kappa.0[i] * h.0[i].abs()
+            && closest.0[i].abs() < POSITION_SAFETY * s.pos.0[i]
+        {
+            s.near_miss[i] = true;
+        }
+        s.steps[i] += 1;
     }
 }
 
