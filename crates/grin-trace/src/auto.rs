@@ -67,11 +67,11 @@ pub const PACKET_EVAL_COST: f64 = 0.4;
 /// 1e-9, f64, one thread).
 pub const PACKET_EVAL_COST_DOPRI: f64 = 0.5;
 
-/// What an evaluation of a trace with `settings` costs, against one of the one-ray
-/// tracer: [`PACKET_EVAL_COST`] or [`PACKET_EVAL_COST_DOPRI`] where a ray table
-/// (`packets`) traces them in packets, else 1.
-pub fn eval_cost(settings: &TraceSettings, packets: bool) -> f64 {
-    if !(packets && crate::packet::packets_apply(settings)) {
+/// What an evaluation of a trace with `settings` in precision `R` costs, against one of
+/// the one-ray tracer: [`PACKET_EVAL_COST`] or [`PACKET_EVAL_COST_DOPRI`] where a ray
+/// table (`table`) traces them in packets, else 1.
+pub fn eval_cost<R: Real>(settings: &TraceSettings, table: bool) -> f64 {
+    if !(table && crate::packet::traced_in_packets::<R>(settings)) {
         return 1.0;
     }
     match settings.integrator {
@@ -411,17 +411,7 @@ pub fn choose<R: Real>(
     free_integrator: bool,
     pilots: &[(DVec3, DVec3)],
 ) -> Option<AutoChoice> {
-    let StepSpec::Auto(asked) = settings.step else {
-        return None;
-    };
-    choose_in::<R>(
-        field,
-        settings,
-        free_integrator,
-        pilots,
-        &Metric::Direction,
-        asked,
-    )
+    choose_direction::<R>(field, settings, free_integrator, pilots, false)
 }
 
 /// [`choose`] for an error of `asked` in `metric`'s unit (the step's own `auto` value is
@@ -446,7 +436,7 @@ pub fn choose_in<R: Real>(
 }
 
 /// [`choose`] for a ray table: the job traces in packets where the candidate's settings
-/// and the precision allow ([`crate::packet::packets_apply`], f64), so such a candidate
+/// and the precision allow ([`crate::packet::traced_in_packets`]), so such a candidate
 /// costs [`eval_cost`] an evaluation.
 pub fn choose_for_table<R: Real>(
     field: &dyn IndexField,
@@ -454,10 +444,20 @@ pub fn choose_for_table<R: Real>(
     free_integrator: bool,
     pilots: &[(DVec3, DVec3)],
 ) -> Option<AutoChoice> {
+    choose_direction::<R>(field, settings, free_integrator, pilots, true)
+}
+
+/// The exit direction held to the step's own `auto` value, for a ray table or not.
+fn choose_direction<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    free_integrator: bool,
+    pilots: &[(DVec3, DVec3)],
+    table: bool,
+) -> Option<AutoChoice> {
     let StepSpec::Auto(asked) = settings.step else {
         return None;
     };
-    let packets = R::EPS.to_f64() == f64::EPSILON;
     choose_with::<R>(
         field,
         settings,
@@ -465,7 +465,7 @@ pub fn choose_for_table<R: Real>(
         pilots,
         &Metric::Direction,
         asked,
-        packets,
+        table,
     )
 }
 
@@ -476,7 +476,7 @@ fn choose_with<R: Real>(
     pilots: &[(DVec3, DVec3)],
     metric: &Metric,
     asked: f64,
-    packets: bool,
+    table: bool,
 ) -> Option<AutoChoice> {
     let StepSpec::Auto(_) = settings.step else {
         return None;
@@ -563,7 +563,7 @@ fn choose_with<R: Real>(
             .filter(|r| r.status.left())
             .map(|r| r.error_estimate)
             .fold(0.0, f64::max);
-        let cost = eval_cost(s, packets);
+        let cost = eval_cost::<R>(s, table);
         let c = Candidate {
             integrator: label(s.integrator),
             fixed_step,

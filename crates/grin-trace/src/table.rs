@@ -376,7 +376,7 @@ pub fn trace_rows<R: Real>(
     settings: &TraceSettings,
     rows: &[RayRow],
 ) -> Vec<RayResult> {
-    if R::EPS.to_f64() == f64::EPSILON && crate::packet::packets_apply(settings) {
+    if crate::packet::traced_in_packets::<R>(settings) {
         return rows
             .par_chunks(PACKET_CHUNK)
             .flat_map_iter(|chunk| {

@@ -24,7 +24,7 @@ use std::array;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 use glam::DVec3;
-use grin_field::{Bounds, FieldSample, IndexField};
+use grin_field::{Bounds, FieldSample, IndexField, Real};
 use grin_scene::{IntegratorKind, StepSpec};
 
 mod dopri;
@@ -54,6 +54,12 @@ pub fn packets_apply(settings: &TraceSettings) -> bool {
         ),
         _ => false,
     }
+}
+
+/// Whether a table traced in precision `R` with `settings` runs in packets: f64, and
+/// [`packets_apply`].
+pub fn traced_in_packets<R: Real>(settings: &TraceSettings) -> bool {
+    R::EPS.to_f64() == f64::EPSILON && packets_apply(settings)
 }
 
 /// What a packet call did: the steps each lane took, and the lanes that need a step of
