@@ -462,64 +462,156 @@ impl<R: Real> March<R> {
                     R::sample_field(field, next.r)
                 }
             };
-            let seg = accumulate(res, state, &s0, next, &s1, h, quad);
-            // The ray's own error estimate: the step's reported local error, a fourth-order
-            // step's companion against D at its end (not where the step was cut at the
-            // surface: D there is not where its companion ends), or the low orders' formulas.
-            {
-                let d1 = s1.n_grad_n().to_dvec3();
-                let h64 = h.to_f64();
-                let reported = match (taken.step.error, taken.step.check) {
-                    (Some((er, et)), _) => Some((er.to_dvec3(), et.to_dvec3())),
-                    (None, Some(check)) if !outside => {
-                        let et = (d1 - check.to_dvec3()) * (h64 / 6.0);
-                        Some((et * (0.5 * h64), et))
-                    }
-                    _ => None,
-                };
-                estimate.step(
-                    state.t.to_dvec3(),
-                    next.t.to_dvec3(),
-                    s0.n_grad_n().to_dvec3(),
-                    d1,
-                    h64,
-                    s0.n.to_f64(),
-                    reported,
-                );
-                if !outside {
-                    let p = next.r.to_dvec3();
-                    estimate.check_approach(
-                        -bounds.signed_distance(p),
-                        bounds.normal(p),
-                        next.t.to_dvec3(),
-                        s1.n.to_f64(),
-                        d1,
-                        h64,
-                    );
-                }
-            }
-            res.steps += 1;
-            if observer(&seg) == Control::Stop {
-                res.status = RayStatus::Absorbed;
-                res.position = seg.r1;
-                res.direction = seg.t1.normalize_or_zero();
-                break 'step Some(*res);
-            }
-            state = next;
-            s0 = s1;
-            if outside {
-                let p = state.r.to_dvec3();
-                if let Some(done) = leave(&bounds, res, &mut state, &s0, p, estimate, surface) {
-                    break 'step Some(done);
-                }
-            }
-            None
+            self.state = state;
+            self.s0 = s0;
+            self.comp = comp;
+            return self.record_step(
+                observer,
+                StepTaken {
+                    next,
+                    s1,
+                    h,
+                    quad,
+                    error: taken.step.error,
+                    check: taken.step.check,
+                    outside,
+                },
+            );
         };
         self.state = state;
         self.s0 = s0;
         self.comp = comp;
         out
     }
+
+    /// Finish a step that left the medium, its exit found on the surface by the packet
+    /// tracer (crate::packet) as [`exit_medium`] finds it: the sample there, then what
+    /// [`March::advance`] records of a step that leaves.
+    pub(crate) fn finish_exit(
+        &mut self,
+        field: &dyn IndexField,
+        observer: &mut dyn FnMut(&Segment) -> Control,
+        exit: ExitFound<R>,
+    ) -> Option<RayResult> {
+        self.comp = RayState::zero();
+        self.res.evals += 1;
+        let s1 = R::sample_field(field, exit.next.r);
+        self.record_step(
+            observer,
+            StepTaken {
+                next: exit.next,
+                s1,
+                h: exit.h,
+                quad: exit.quad,
+                error: exit.error,
+                check: None,
+                outside: true,
+            },
+        )
+    }
+
+    /// Record the step from the march's state to `step.next`: its length, optical path
+    /// and swept vector, the ray's error estimate, the observer's say; then the march
+    /// stands at the step's end, and a step that left refracts out (or reflects back).
+    fn record_step(
+        &mut self,
+        observer: &mut dyn FnMut(&Segment) -> Control,
+        step: StepTaken<R>,
+    ) -> Option<RayResult> {
+        let StepTaken {
+            next,
+            s1,
+            h,
+            quad,
+            error,
+            check,
+            outside,
+        } = step;
+        let (state, s0, bounds) = (self.state, self.s0, self.bounds);
+        let res = &mut self.res;
+        let estimate = &mut self.estimate;
+        let seg = accumulate(res, state, &s0, next, &s1, h, quad);
+        // The ray's own error estimate: the step's reported local error, a fourth-order
+        // step's companion against D at its end (not where the step was cut at the
+        // surface: D there is not where its companion ends), or the low orders' formulas.
+        let d1 = s1.n_grad_n().to_dvec3();
+        let h64 = h.to_f64();
+        let reported = match (error, check) {
+            (Some((er, et)), _) => Some((er.to_dvec3(), et.to_dvec3())),
+            (None, Some(check)) if !outside => {
+                let et = (d1 - check.to_dvec3()) * (h64 / 6.0);
+                Some((et * (0.5 * h64), et))
+            }
+            _ => None,
+        };
+        estimate.step(
+            state.t.to_dvec3(),
+            next.t.to_dvec3(),
+            s0.n_grad_n().to_dvec3(),
+            d1,
+            h64,
+            s0.n.to_f64(),
+            reported,
+        );
+        if !outside {
+            let p = next.r.to_dvec3();
+            estimate.check_approach(
+                -bounds.signed_distance(p),
+                bounds.normal(p),
+                next.t.to_dvec3(),
+                s1.n.to_f64(),
+                d1,
+                h64,
+            );
+        }
+        res.steps += 1;
+        if observer(&seg) == Control::Stop {
+            res.status = RayStatus::Absorbed;
+            res.position = seg.r1;
+            res.direction = seg.t1.normalize_or_zero();
+            return Some(*res);
+        }
+        self.state = next;
+        self.s0 = s1;
+        if outside {
+            let p = next.r.to_dvec3();
+            return leave(
+                &bounds,
+                res,
+                &mut self.state,
+                &s1,
+                p,
+                estimate,
+                &mut self.surface,
+            );
+        }
+        None
+    }
+}
+
+/// A step as [`March::record_step`] records it: the state it reached and the sample
+/// there, its t-length, its quadrature where it has one, its reported local errors or
+/// its fourth-order companion's D, and whether it left the medium.
+struct StepTaken<R: Real> {
+    next: RayState<R>,
+    s1: FieldSample<R>,
+    h: R,
+    quad: Option<integrate::Quad>,
+    error: Option<(R::V3, R::V3)>,
+    check: Option<R::V3>,
+    outside: bool,
+}
+
+/// A step that left the medium, cut on the surface ([`exit_medium`]'s Hermite search):
+/// the state there (projected onto the surface), the t-length that reaches it, the
+/// quadrature of the re-step that reached it, and the local errors the step that left
+/// reported.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ExitFound<R: Real> {
+    pub(crate) next: RayState<R>,
+    pub(crate) h: R,
+    pub(crate) quad: Option<integrate::Quad>,
+    pub(crate) error: Option<(R::V3, R::V3)>,
 }
 
 /// The medium's surface as a ray crosses it: the ambient index, the field's n

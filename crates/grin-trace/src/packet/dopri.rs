@@ -6,23 +6,27 @@
 //! step reports), operation for operation, so the results are the same bit for bit.
 //!
 //! A rejected attempt leaves its lane in the packet, to try again at the shorter step
-//! the controller chose. An accepted step that is not a plain one (it ends outside, or its
-//! cubic may leave between its ends) is not kept: the lane goes back to where its take
-//! began (the step the controller tried first, the evaluations counted before) and its
-//! march takes the step from there, through the same attempts.
+//! the controller chose. An accepted step that ends outside starts the lane's exit search
+//! ([`super::exit`]), its re-steps dopri steps in the packet. Any other accepted step that
+//! is not a plain one (its cubic may leave between its ends, or the exit is bisection's)
+//! is not kept: the lane goes back to where its take began (the step the controller tried
+//! first, the evaluations counted before) and its march takes the step from there,
+//! through the same attempts.
 
 use std::array;
 
 use grin_field::IndexField;
 use grin_render::settings::TraceSettings;
-use grin_scene::IntegratorKind;
+use grin_scene::{ExitMethod, IntegratorKind};
 
+use super::exit::{LaneExit, Phase};
 use super::{
-    L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, plain_steps, sample,
-    signed_distance, two_sum,
+    L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, leaves, plain_steps,
+    sample, signed_distance, two_sum,
 };
-use crate::boundary::{EXCURSION_SLACK_TOLS, exit_tolerance};
+use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
 use crate::integrate::adaptive::{A, E};
+use crate::integrate::{Quad, RayState};
 use crate::step::{
     ADAPTIVE_MIN_DS_EPS, ADAPTIVE_MIN_DS_REL, ADAPTIVE_TOL_FLOOR_EPS, MAX_REJECTIONS,
     StepController, step_factor,
@@ -72,9 +76,16 @@ pub(super) fn march_dopri_in(
     let mut sd0 = signed_distance(&bounds, s.r);
     let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&bounds);
     let local_limits = field.has_local_step_limits();
+    let (hermite, exit_tol) = (
+        settings.exit == ExitMethod::Hermite,
+        exit_tolerance::<f64>(&bounds),
+    );
+    let evals_per_step = u64::from(crate::integrate::evals_per_step(IntegratorKind::Adaptive));
     let mut active = [false; LANES];
     // Lanes whose step is their march's to take.
     let mut own = [false; LANES];
+    // Lanes searching for their exit (the re-step due is a packet step).
+    let mut searching = [false; LANES];
     for _ in 0..STEPS_PER_GATHER {
         // A take begins where the one-ray tracer's `advance` would take one: its caps
         // are fixed for all of the take's attempts.
@@ -85,8 +96,10 @@ pub(super) fn march_dopri_in(
         .zip(feature_cap, f64::min);
         for i in 0..LANES {
             let n0 = s.n0.0[i];
+            searching[i] = occupied[i] && s.exits[i].phase == Phase::Search;
             active[i] = occupied[i]
                 && !own[i]
+                && s.exits[i].phase == Phase::Idle
                 && s.r.finite(i)
                 && s.t.finite(i)
                 && n0.is_finite()
@@ -121,7 +134,7 @@ pub(super) fn march_dopri_in(
             s.take_cap.0[i] = lane_cap;
             s.rejections[i] = 0;
         }
-        if !active.iter().any(|&a| a) {
+        if !(0..LANES).any(|i| active[i] || searching[i]) {
             break;
         }
         // The attempt's length (take_adaptive), in the stepping lanes.
@@ -140,8 +153,12 @@ pub(super) fn march_dopri_in(
                 None => ds.0[i] = ds_max_c.0[i].min(s.take_cap.0[i]),
             }
         }
-        let m = Mask::of(active);
-        let h = m.select(ds / s.n0, L::splat(0.0));
+        let mut h = Mask::of(active).select(ds / s.n0, L::splat(0.0));
+        for i in 0..LANES {
+            if searching[i] {
+                h.0[i] = s.exits[i].trial;
+            }
+        }
         // dopri_step, lane by lane: six stages, the last at the new point (FSAL), and the
         // quadrature of n^2, n and n u with the fifth-order weights.
         let (r, t) = (s.r, s.t);
@@ -196,7 +213,7 @@ pub(super) fn march_dopri_in(
                 continue;
             }
             let Some(c) = control[i] else { continue };
-            s.evals[i] += u64::from(crate::integrate::evals_per_step(IntegratorKind::Adaptive));
+            s.evals[i] += evals_per_step;
             let Some(c_tol) = c.tol else {
                 accepted[i] = true;
                 continue;
@@ -214,12 +231,43 @@ pub(super) fn march_dopri_in(
         let plain = plain_steps(&bounds, slack, &accepted, sd0, (r, t), (r_end, t_end), h);
         let mut committed = [false; LANES];
         for i in 0..LANES {
+            let end = RayState {
+                r: r_end.lane(i),
+                t: t_end.lane(i),
+            };
+            if searching[i] {
+                // The exit search's re-step, with its quadrature (dopri_step's Quad).
+                s.evals[i] += evals_per_step;
+                let quad = Quad {
+                    b0: A[5][0],
+                    opl: q_opl.0[i] * h.0[i],
+                    length: q_length.0[i] * h.0[i],
+                    swept: q_swept.lane(i) * h.0[i],
+                };
+                s.exits[i].restepped(&bounds, exit_tol, end, Some(quad));
+                searching[i] = s.exits[i].phase == Phase::Search;
+                continue;
+            }
             if !accepted[i] {
                 continue;
             }
             s.in_take[i] = false;
             if plain[i] {
                 committed[i] = true;
+            } else if hermite && leaves(&bounds, s, i, delta_r.lane(i), end) {
+                // The step left: the lane searches for its exit, its controller as the
+                // accepted step left it.
+                let seg = Segment {
+                    r0: r.lane(i),
+                    t0: t.lane(i),
+                    r1: end.r,
+                    t1: end.t,
+                    h: h.0[i],
+                };
+                let error = Some((er.lane(i), et.lane(i)));
+                s.exits[i] = LaneExit::begin(&bounds, seg, error);
+                searching[i] = true;
+                active[i] = false;
             } else {
                 // Back to where the take began: the march takes this step itself.
                 s.ds_adapt.0[i] = s.take_ds.0[i];
@@ -253,13 +301,13 @@ pub(super) fn march_dopri_in(
                 }
             }
         }
-        if (0..LANES).any(|i| occupied[i] && !active[i]) {
+        if (0..LANES).any(|i| occupied[i] && !active[i] && !searching[i]) {
             break;
         }
     }
     Took {
         steps: took,
-        own: array::from_fn(|i| lanes[i].is_some() && !active[i] && !s.in_take[i]),
+        own: array::from_fn(|i| lanes[i].is_some() && !active[i] && !searching[i] && !s.in_take[i]),
     }
 }
 

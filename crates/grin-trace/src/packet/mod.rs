@@ -2,37 +2,39 @@
 //! vectors the compiler turns into SIMD instructions (f64 lanes; the one piece of
 //! target-specific code compiles the same step for AVX2, chosen at run time).
 //!
-//! A ray enters the medium, leaves it, flies straight, meets a surface or anything else
-//! out of the ordinary one ray at a time, in the scalar tracer ([`March::advance`]); a
-//! packet takes over only the steps that cannot be any of those: a fourth-order
-//! Runge-Kutta step of fixed length, or a dopri 5(4) step, fixed or error-controlled
-//! ([`dopri`]), in f64, that ends inside and stays inside, either because both ends are
-//! farther from the surface than the step reaches or because the scalar tracer's own
-//! excursion test proves its cubic inside (the steps near the surface: the first ones
-//! after the entry, the last before the exit). Each such step computes exactly what the
-//! scalar tracer computes, operation for operation (the state with its compensated sums,
-//! the optical path and length by the method's own rule, the ray's own error estimate,
-//! the near-miss check), so a table traced in packets is bit for bit the table traced ray
-//! by ray (tested). The lanes' state stays in lane vectors between packet calls; a lane
-//! moves back into its ray's march only for the march's own step (the exit, mostly), and
-//! a ray that leaves hands its lane to the next of the queue.
-//!
-//! Over 600 lines: one concept, the packet march: lanes, the step in them and the rays handed in
-//! and out.
+//! A ray enters the medium, flies straight, meets a surface or anything else out of the
+//! ordinary one ray at a time, in the scalar tracer ([`March::advance`]); a packet takes
+//! the plain steps inside: a fourth-order Runge-Kutta step of fixed length, or a dopri
+//! 5(4) step, fixed or error-controlled ([`dopri`]), in f64, that ends inside and stays
+//! inside, either because both ends are farther from the surface than the step reaches
+//! or because the scalar tracer's own excursion test proves its cubic inside (the steps
+//! near the surface: the first ones after the entry, the last before the exit). A step
+//! that ends outside starts its lane's exit search ([`exit`]: the Hermite method's
+//! re-steps, taken in the packet beside the other lanes' steps); the march then only
+//! records the step and refracts out. Each step computes exactly what the scalar tracer
+//! computes, operation for operation (the state with its compensated sums, the optical
+//! path and length by the method's own rule, the ray's own error estimate, the near-miss
+//! check, the exit search), so a table traced in packets is bit for bit the table traced
+//! ray by ray (tested). The lanes' state stays in lane vectors between packet calls; a
+//! lane moves back into its ray's march only for the march's own step, and a ray that
+//! leaves hands its lane to the next of the queue.
 
 use std::array;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 use glam::DVec3;
 use grin_field::{Bounds, FieldSample, IndexField, Real};
-use grin_scene::{IntegratorKind, StepSpec};
+use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
 
 mod dopri;
+mod exit;
 
 use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
 use crate::estimate::POSITION_SAFETY;
+use crate::integrate::RayState;
 use crate::step::StepController;
 use crate::trace::{Control, March, RayResult};
+use exit::{LaneExit, Phase};
 use grin_render::settings::TraceSettings;
 
 /// Rays a packet advances together.
@@ -277,6 +279,9 @@ pub(super) struct Soa {
     take_evals: [u64; LANES],
     take_cap: L,
     rejections: [u32; LANES],
+    // The exit search of lanes whose step left the medium (its re-steps are packet
+    // steps too).
+    exits: [LaneExit; LANES],
 }
 
 impl Soa {
@@ -306,6 +311,7 @@ impl Soa {
             take_evals: [0; LANES],
             take_cap: L::splat(0.0),
             rejections: [0; LANES],
+            exits: [LaneExit::IDLE; LANES],
         }
     }
 
@@ -333,6 +339,7 @@ impl Soa {
         s.sum.0[i] = e.sum;
         s.ds_adapt.0[i] = m.ctrl.current_ds();
         s.in_take[i] = false;
+        s.exits[i] = LaneExit::IDLE;
     }
 
     /// Write lane `i` back into its march. The march's reported position and direction
@@ -460,19 +467,27 @@ pub fn trace_packets(
     trace_packets_counted(field, settings, rays).0
 }
 
-/// [`trace_packets`], with the number of steps the packets took (the rest were the
-/// scalar tracer's).
+/// What the packets did of a trace: the plain steps they took, and the exits they found
+/// (the step that leaves, searched in the packet; the march only records it). The rest
+/// was the scalar tracer's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PacketCounts {
+    pub steps: u64,
+    pub exits: u64,
+}
+
+/// [`trace_packets`], with what the packets did.
 pub fn trace_packets_counted(
     field: &dyn IndexField,
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
-) -> (Vec<RayResult>, u64) {
+) -> (Vec<RayResult>, PacketCounts) {
     if !packets_apply(settings) {
         let results = rays
             .iter()
             .map(|&(o, d)| crate::trace::trace_ray::<f64>(field, settings, o, d))
             .collect();
-        return (results, 0);
+        return (results, PacketCounts::default());
     }
     trace_packets_with(field, settings, rays, packet_step(settings, false))
 }
@@ -482,8 +497,8 @@ fn trace_packets_with(
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
     march_packet: PacketStep,
-) -> (Vec<RayResult>, u64) {
-    let mut packet_steps = 0u64;
+) -> (Vec<RayResult>, PacketCounts) {
+    let mut counts = PacketCounts::default();
     let mut out: Vec<Option<RayResult>> = vec![None; rays.len()];
     let mut queue = 0..rays.len();
     let mut lanes: [Option<(usize, March<f64>)>; LANES] = array::from_fn(|_| None);
@@ -511,13 +526,20 @@ fn trace_packets_with(
         let took = march_packet(field, settings, &lanes, &mut soa);
         // The lanes the packet could not step: one step of their own march each.
         for (i, slot) in lanes.iter_mut().enumerate() {
-            packet_steps += u64::from(took.steps[i]);
+            counts.steps += u64::from(took.steps[i]);
             if !took.own[i] {
                 continue;
             }
             let Some((k, m)) = slot else { continue };
             soa.store(i, m);
-            match m.advance(field, settings, &mut cont) {
+            let done = match soa.exits[i].take_found(&m.bounds) {
+                Some(exit) => {
+                    counts.exits += 1;
+                    m.finish_exit(field, &mut cont, exit)
+                }
+                None => m.advance(field, settings, &mut cont),
+            };
+            match done {
                 Some(done) => {
                     out[*k] = Some(done);
                     *slot = None;
@@ -530,7 +552,7 @@ fn trace_packets_with(
         .into_iter()
         .map(|r| r.unwrap_or_else(unreachable_result))
         .collect();
-    (results, packet_steps)
+    (results, counts)
 }
 
 /// Never used: every ray's result is set before the queue and the lanes run dry.
@@ -629,19 +651,28 @@ fn march_packet_in(
     let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&bounds);
     // Whether the field's macro cells and local caps need asking at every step.
     let local_limits = field.has_local_step_limits();
-    // The lanes stepping; at the end, those that are not need their march.
-    let mut active = [false; LANES];
+    let (hermite, exit_tol) = (
+        settings.exit == ExitMethod::Hermite,
+        exit_tolerance::<f64>(&bounds),
+    );
+    // The lanes still with the packet after a step (a plain step taken, or an exit
+    // search under way); at the end, those that are not need their march.
+    let mut stay = [false; LANES];
     for _ in 0..STEPS_PER_GATHER {
-        // Which lanes the scalar tracer would give a plain step now, and its length
+        // Lanes searching for their exit take the re-step due; the others, the step the
+        // scalar tracer would give them now if it is a plain one, of its length
         // (StepController::take for a fixed step after the first).
+        let searching: [bool; LANES] =
+            array::from_fn(|i| occupied[i] && s.exits[i].phase == Phase::Search);
         let g_len = s.g0.length();
         let mut cap = L(array::from_fn(|i| {
             StepController::length_scale_cap(s.n0.0[i], g_len.0[i])
         }))
         .zip(feature_cap, f64::min);
-        active = array::from_fn(|i| {
+        let mut active: [bool; LANES] = array::from_fn(|i| {
             let n0 = s.n0.0[i];
             occupied[i]
+                && s.exits[i].phase == Phase::Idle
                 && s.r.finite(i)
                 && s.t.finite(i)
                 && n0.is_finite()
@@ -670,9 +701,14 @@ fn march_packet_in(
         for i in 0..LANES {
             active[i] &= hi.0[i] > 0.0;
         }
-        let m = Mask::of(active);
-        let h = m.select(hi, L::splat(0.0));
-        if !active.iter().any(|&a| a) {
+        let mut h = Mask::of(active).select(hi, L::splat(0.0));
+        for i in 0..LANES {
+            if searching[i] {
+                h.0[i] = s.exits[i].trial;
+            }
+        }
+        stay = array::from_fn(|i| active[i] || searching[i]);
+        if !stay.iter().any(|&a| a) {
             break;
         }
         // rk4_step, lane by lane.
@@ -699,65 +735,97 @@ fn march_packet_in(
         // The scalar tracer's tests (`excursion_step`): not outside, and no excursion:
         // both ends deeper than the step reaches, or else the step's cubic proven
         // inside (the common case near the surface, and the same test).
-        active = plain_steps(&bounds, slack, &active, sd0, (r, t), (r_end, t_end), h);
-        if !active.iter().any(|&a| a) {
-            break;
-        }
-        // add_compensated.
-        let (nr, lost_r) = two_sum(r, dr + s.comp_r);
-        let (nt, lost_t) = two_sum(t, dt + s.comp_t);
-        // The end sample (rk4 has none of its own).
-        let (n1, g1) = sample(field, nr);
-        let d1_end = g1.scale(n1);
-        // accumulate: the cubic Hermite rule.
-        let (n0, g0) = (s.n0, s.g0);
-        let dn0 = g0.dot(t);
-        let dn1 = g1.dot(nt);
-        let h2 = h * h / L::splat(12.0);
-        let length = L::splat(0.5) * h * (n0 + n1) + h2 * (dn0 - dn1);
-        let opl =
-            L::splat(0.5) * h * (n0 * n0 + n1 * n1) + h2 * L::splat(2.0) * (n0 * dn0 - n1 * dn1);
-        let (u0, u1) = (t.normalize_or_zero(), nt.normalize_or_zero());
-        let d_swept = |n: L, dn: L, u: V, g: V| u.scale(dn) + (g - u.scale(u.dot(g))).scale(n);
-        let swept = (u0.scale(n0) + u1.scale(n1)).scale(L::splat(0.5) * h)
-            + (d_swept(n0, dn0, u0, g0) - d_swept(n1, dn1, u1, g1)).scale(h2);
-        // ErrorEstimate::step with the third-order companion's e_T = h/6 (D(r1) - D4)
-        // (its early return cannot happen: h and n0 are positive here).
-        let et = (d1_end - d4).scale(h / L::splat(6.0));
-        let er = et.scale(L::splat(0.5) * h);
-        finish_steps(
-            s,
-            &bounds,
-            &active,
-            &mut sd0,
-            StepEnd {
-                t,
-                u0,
-                d0,
-                h,
-                next: (nr, nt),
-                lost: (lost_r, lost_t),
-                end: (n1, g1),
-                path: (opl, length, swept),
-                error: (er, et),
-            },
-        );
-        // The step's own 3 and the end sample.
-        let evals_per_step = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4));
+        let plain = plain_steps(&bounds, slack, &active, sd0, (r, t), (r_end, t_end), h);
+        // A step that left begins its lane's exit search, a re-step goes on with it
+        // (rk4_step's own 3 evaluations each: the exit's sample is its march's).
+        let rk4_evals = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4)) - 1;
         for i in 0..LANES {
-            if active[i] {
-                s.evals[i] += evals_per_step;
-                took[i] += 1;
+            let end = RayState {
+                r: r_end.lane(i),
+                t: t_end.lane(i),
+            };
+            if searching[i] {
+                s.evals[i] += rk4_evals;
+                s.exits[i].restepped(&bounds, exit_tol, end, None);
+                stay[i] = s.exits[i].phase == Phase::Search;
+            } else if active[i] && !plain[i] {
+                stay[i] = hermite && leaves(&bounds, s, i, dr.lane(i), end);
+                if stay[i] {
+                    s.evals[i] += rk4_evals;
+                    let seg = Segment {
+                        r0: r.lane(i),
+                        t0: t.lane(i),
+                        r1: end.r,
+                        t1: end.t,
+                        h: h.0[i],
+                    };
+                    s.exits[i] = LaneExit::begin(&bounds, seg, None);
+                }
             }
         }
-        if (0..LANES).any(|i| occupied[i] && !active[i]) {
+        if plain.iter().any(|&a| a) {
+            // add_compensated.
+            let (nr, lost_r) = two_sum(r, dr + s.comp_r);
+            let (nt, lost_t) = two_sum(t, dt + s.comp_t);
+            // The end sample (rk4 has none of its own).
+            let (n1, g1) = sample(field, nr);
+            let d1_end = g1.scale(n1);
+            // accumulate: the cubic Hermite rule.
+            let (n0, g0) = (s.n0, s.g0);
+            let dn0 = g0.dot(t);
+            let dn1 = g1.dot(nt);
+            let h2 = h * h / L::splat(12.0);
+            let length = L::splat(0.5) * h * (n0 + n1) + h2 * (dn0 - dn1);
+            let opl = L::splat(0.5) * h * (n0 * n0 + n1 * n1)
+                + h2 * L::splat(2.0) * (n0 * dn0 - n1 * dn1);
+            let (u0, u1) = (t.normalize_or_zero(), nt.normalize_or_zero());
+            let d_swept = |n: L, dn: L, u: V, g: V| u.scale(dn) + (g - u.scale(u.dot(g))).scale(n);
+            let swept = (u0.scale(n0) + u1.scale(n1)).scale(L::splat(0.5) * h)
+                + (d_swept(n0, dn0, u0, g0) - d_swept(n1, dn1, u1, g1)).scale(h2);
+            // ErrorEstimate::step with the third-order companion's e_T = h/6 (D(r1) - D4)
+            // (its early return cannot happen: h and n0 are positive here).
+            let et = (d1_end - d4).scale(h / L::splat(6.0));
+            let er = et.scale(L::splat(0.5) * h);
+            finish_steps(
+                s,
+                &bounds,
+                &plain,
+                &mut sd0,
+                StepEnd {
+                    t,
+                    u0,
+                    d0,
+                    h,
+                    next: (nr, nt),
+                    lost: (lost_r, lost_t),
+                    end: (n1, g1),
+                    path: (opl, length, swept),
+                    error: (er, et),
+                },
+            );
+            // The step's own 3 and the end sample.
+            for i in 0..LANES {
+                if plain[i] {
+                    s.evals[i] += rk4_evals + 1;
+                    took[i] += 1;
+                }
+            }
+        }
+        if (0..LANES).any(|i| occupied[i] && !stay[i]) {
             break;
         }
     }
     Took {
         steps: took,
-        own: array::from_fn(|i| lanes[i].is_some() && !active[i]),
+        own: array::from_fn(|i| lanes[i].is_some() && !stay[i]),
     }
+}
+
+/// Whether lane `i`'s step (its position increment `dr`, its end `end`) left the medium
+/// as the one-ray tracer sees it: its end outside, and the compensated sum the march
+/// would form finite (else the march finds no exit: its own step handles the lane).
+fn leaves(bounds: &Bounds, s: &Soa, i: usize, dr: DVec3, end: RayState<f64>) -> bool {
+    bounds.signed_distance(end.r) > 0.0 && (s.r.lane(i) + (dr + s.comp_r.lane(i))).is_finite()
 }
 
 /// The lanes among `candidates` whose step (from `start` to `end`, position and T, over
@@ -1093,7 +1161,7 @@ mod tests {
             let table = rays(*center, *spread, 301);
             // The widest lane vectors the CPU has, and the target's own.
             for portable in [false, true] {
-                let (packed, in_packets) =
+                let (packed, counts) =
                     trace_packets_with(*field, s, &table, packet_step(s, portable));
                 let mut steps = 0;
                 for (i, &(o, d)) in table.iter().enumerate() {
@@ -1119,7 +1187,12 @@ mod tests {
                         "case {k} ray {i}"
                     );
                 }
-                eprintln!("case {k}: {in_packets} of {steps} steps in packets");
+                let in_packets = counts.steps;
+                let exited = packed.iter().filter(|r| r.status.left()).count();
+                eprintln!(
+                    "case {k}: {in_packets} of {steps} steps in packets, {} of {exited} exits",
+                    counts.exits
+                );
                 let own = steps - in_packets;
                 if FLIGHTS.contains(&k) {
                     // The baked plume's rays fly over its ambient macro cells, in
@@ -1128,11 +1201,18 @@ mod tests {
                 } else {
                     // Elsewhere the march's own steps are the ones that leave (no more
                     // than the rays here): the steps near the surface that stay inside
-                    // are the packets'.
+                    // are the packets', and the exits are searched in the packets
+                    // (Hermite's re-steps; bisection's are the march's).
                     assert!(
                         own <= table.len() as u64,
                         "case {k}: {in_packets} of {steps} steps in packets"
                     );
+                    let searched = if s.exit == ExitMethod::Hermite {
+                        exited
+                    } else {
+                        0
+                    };
+                    assert_eq!(counts.exits, searched as u64, "case {k}: exits in packets");
                 }
             }
         }
