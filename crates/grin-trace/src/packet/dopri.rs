@@ -21,12 +21,12 @@ use grin_scene::{ExitMethod, IntegratorKind};
 
 use super::exit::{LaneExit, Phase};
 use super::{
-    L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, leaves, plain_steps,
-    sample, signed_distance, two_sum,
+    L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, lane_step, leaves,
+    plain_steps, sample, signed_distance, two_sum,
 };
-use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
+use crate::boundary::{EXCURSION_SLACK_TOLS, exit_tolerance};
+use crate::integrate::Quad;
 use crate::integrate::adaptive::{A, E};
-use crate::integrate::{Quad, RayState};
 use crate::step::{
     ADAPTIVE_MIN_DS_EPS, ADAPTIVE_MIN_DS_REL, ADAPTIVE_TOL_FLOOR_EPS, MAX_REJECTIONS,
     StepController, step_factor,
@@ -231,10 +231,7 @@ pub(super) fn march_dopri_in(
         let plain = plain_steps(&bounds, slack, &accepted, sd0, (r, t), (r_end, t_end), h);
         let mut committed = [false; LANES];
         for i in 0..LANES {
-            let end = RayState {
-                r: r_end.lane(i),
-                t: t_end.lane(i),
-            };
+            let (end, seg) = lane_step((r, t), (r_end, t_end), h, i);
             if searching[i] {
                 // The exit search's re-step, with its quadrature (dopri_step's Quad).
                 s.evals[i] += evals_per_step;
@@ -257,13 +254,6 @@ pub(super) fn march_dopri_in(
             } else if hermite && leaves(&bounds, s, i, delta_r.lane(i), end) {
                 // The step left: the lane searches for its exit, its controller as the
                 // accepted step left it.
-                let seg = Segment {
-                    r0: r.lane(i),
-                    t0: t.lane(i),
-                    r1: end.r,
-                    t1: end.t,
-                    h: h.0[i],
-                };
                 let error = Some((er.lane(i), et.lane(i)));
                 s.exits[i] = LaneExit::begin(&bounds, seg, error);
                 searching[i] = true;

@@ -740,10 +740,7 @@ fn march_packet_in(
         // (rk4_step's own 3 evaluations each: the exit's sample is its march's).
         let rk4_evals = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4)) - 1;
         for i in 0..LANES {
-            let end = RayState {
-                r: r_end.lane(i),
-                t: t_end.lane(i),
-            };
+            let (end, seg) = lane_step((r, t), (r_end, t_end), h, i);
             if searching[i] {
                 s.evals[i] += rk4_evals;
                 s.exits[i].restepped(&bounds, exit_tol, end, None);
@@ -752,13 +749,6 @@ fn march_packet_in(
                 stay[i] = hermite && leaves(&bounds, s, i, dr.lane(i), end);
                 if stay[i] {
                     s.evals[i] += rk4_evals;
-                    let seg = Segment {
-                        r0: r.lane(i),
-                        t0: t.lane(i),
-                        r1: end.r,
-                        t1: end.t,
-                        h: h.0[i],
-                    };
                     s.exits[i] = LaneExit::begin(&bounds, seg, None);
                 }
             }
@@ -819,6 +809,23 @@ fn march_packet_in(
         steps: took,
         own: array::from_fn(|i| lanes[i].is_some() && !stay[i]),
     }
+}
+
+/// Lane `i`'s step from `start` to `end` (position and T) over `h`: the state it
+/// reached, and its segment.
+fn lane_step(start: (V, V), end: (V, V), h: L, i: usize) -> (RayState<f64>, Segment) {
+    let state = RayState {
+        r: end.0.lane(i),
+        t: end.1.lane(i),
+    };
+    let seg = Segment {
+        r0: start.0.lane(i),
+        t0: start.1.lane(i),
+        r1: state.r,
+        t1: state.t,
+        h: h.0[i],
+    };
+    (state, seg)
 }
 
 /// Whether lane `i`'s step (its position increment `dr`, its end `end`) left the medium
