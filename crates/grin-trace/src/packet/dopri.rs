@@ -231,7 +231,6 @@ pub(super) fn march_dopri_in(
         let plain = plain_steps(&bounds, slack, &accepted, sd0, (r, t), (r_end, t_end), h);
         let mut committed = [false; LANES];
         for i in 0..LANES {
-            let (end, seg) = lane_step((r, t), (r_end, t_end), h, i);
             if searching[i] {
                 // The exit search's re-step, with its quadrature (dopri_step's Quad).
                 s.evals[i] += evals_per_step;
@@ -241,6 +240,7 @@ pub(super) fn march_dopri_in(
                     length: q_length.0[i] * h.0[i],
                     swept: q_swept.lane(i) * h.0[i],
                 };
+                let (end, _) = lane_step((r, t), (r_end, t_end), h, i);
                 s.exits[i].restepped(&bounds, exit_tol, end, Some(quad));
                 searching[i] = s.exits[i].phase == Phase::Search;
                 continue;
@@ -251,20 +251,22 @@ pub(super) fn march_dopri_in(
             s.in_take[i] = false;
             if plain[i] {
                 committed[i] = true;
-            } else if hermite && leaves(&bounds, s, i, delta_r.lane(i), end) {
+                continue;
+            }
+            let (end, seg) = lane_step((r, t), (r_end, t_end), h, i);
+            if hermite && leaves(&bounds, s, i, delta_r.lane(i), end) {
                 // The step left: the lane searches for its exit, its controller as the
                 // accepted step left it.
                 let error = Some((er.lane(i), et.lane(i)));
                 s.exits[i] = LaneExit::begin(&bounds, seg, error);
                 searching[i] = true;
-                active[i] = false;
             } else {
                 // Back to where the take began: the march takes this step itself.
                 s.ds_adapt.0[i] = s.take_ds.0[i];
                 s.evals[i] = s.take_evals[i];
                 own[i] = true;
-                active[i] = false;
             }
+            active[i] = false;
         }
         if committed.iter().any(|&c| c) {
             commit(

@@ -740,12 +740,15 @@ fn march_packet_in(
         // (rk4_step's own 3 evaluations each: the exit's sample is its march's).
         let rk4_evals = u64::from(crate::integrate::evals_per_step(IntegratorKind::Rk4)) - 1;
         for i in 0..LANES {
+            if !searching[i] && (plain[i] || !active[i]) {
+                continue;
+            }
             let (end, seg) = lane_step((r, t), (r_end, t_end), h, i);
             if searching[i] {
                 s.evals[i] += rk4_evals;
                 s.exits[i].restepped(&bounds, exit_tol, end, None);
                 stay[i] = s.exits[i].phase == Phase::Search;
-            } else if active[i] && !plain[i] {
+            } else {
                 stay[i] = hermite && leaves(&bounds, s, i, dr.lane(i), end);
                 if stay[i] {
                     s.evals[i] += rk4_evals;
