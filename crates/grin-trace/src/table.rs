@@ -467,19 +467,57 @@ fn row_values(row: &RayRow) -> [f64; 6] {
     ]
 }
 
-/// A number in Rust's shortest round-trip form, with an exponent where that is shorter
-/// (`1e-11`, not `0.00000000001`) and no `.0` on integers, written into `buf`.
-fn fmt_num_into(buf: &mut String, v: f64) {
+/// A number in its shortest round-trip form, as Rust's `{:?}` writes it (an exponent
+/// where that is shorter: `1e-11`, not `0.00000000001`) but with no `.0` on integers,
+/// written into `buf`. `ryu` finds the digits several times faster than `{:?}`; between
+/// 1e-5 and 1e-4, where it writes no exponent and Rust does, and for non-finite values,
+/// Rust's own formatting writes them. Where the value lies exactly halfway between two
+/// shortest forms (a value with a short exact binary fraction, such as 9803398934280.3125)
+/// ryu picks the even last digit and Rust the upper one; either reads back as the same
+/// number (tested).
+fn fmt_num_into(buf: &mut String, v: f64, ryu: &mut ryu::Buffer) {
     use std::fmt::Write as _;
     buf.clear();
-    let _ = write!(buf, "{v:?}");
+    if v.is_finite() && !(1e-5..1e-4).contains(&v.abs()) {
+        buf.push_str(ryu.format_finite(v));
+    } else {
+        let _ = write!(buf, "{v:?}");
+    }
     if buf.ends_with(".0") {
         buf.truncate(buf.len() - 2);
     }
 }
 
+/// Rows a CSV table formats at a time (in parallel, [`TableWriter::rows`]).
+const FORMAT_CHUNK: usize = 4096;
+
+/// `rows` with their results as CSV records (no header).
+fn csv_rows(rows: &[RayRow], results: &[RayResult]) -> io::Result<Vec<u8>> {
+    let mut out = csv::Writer::from_writer(Vec::new());
+    let (mut buf, mut ryu) = (String::new(), ryu::Buffer::new());
+    for (row, r) in rows.iter().zip(results) {
+        for v in row_values(row) {
+            fmt_num_into(&mut buf, v, &mut ryu);
+            out.write_field(&buf)?;
+        }
+        for v in &row.extra {
+            out.write_field(v)?;
+        }
+        out.write_field(r.status.name())?;
+        for v in result_values(r) {
+            fmt_num_into(&mut buf, v, &mut ryu);
+            out.write_field(&buf)?;
+        }
+        out.write_field(r.steps.to_string())?;
+        out.write_field(r.evals.to_string())?;
+        out.write_record(None::<&[u8]>)?;
+    }
+    out.into_inner()
+        .map_err(|e| io::Error::other(e.to_string()))
+}
+
 /// Writes a traced table a batch at a time: [`TableWriter::rows`] for each batch, then
-/// [`TableWriter::finish`]. CSV numbers are in Rust's shortest round-trip form; JSON is an
+/// [`TableWriter::finish`]. CSV numbers are in their shortest round-trip form ([`fmt_num_into`]); JSON is an
 /// array of objects keyed by column name (non-finite numbers `null`, passed-through values
 /// as strings).
 #[derive(Debug)]
@@ -488,7 +526,6 @@ pub struct TableWriter {
     extra_columns: Vec<String>,
     started: bool,
     rows: usize,
-    buf: String,
 }
 
 impl TableWriter {
@@ -498,7 +535,6 @@ impl TableWriter {
             extra_columns: extra_columns.to_vec(),
             started: false,
             rows: 0,
-            buf: String::new(),
         }
     }
 
@@ -532,25 +568,15 @@ impl TableWriter {
         self.start(w)?;
         match self.format {
             TableFormat::Csv => {
-                let mut out = csv::Writer::from_writer(&mut *w);
-                for (row, r) in rows.iter().zip(results) {
-                    for v in row_values(row) {
-                        fmt_num_into(&mut self.buf, v);
-                        out.write_field(&self.buf)?;
-                    }
-                    for v in &row.extra {
-                        out.write_field(v)?;
-                    }
-                    out.write_field(r.status.name())?;
-                    for v in result_values(r) {
-                        fmt_num_into(&mut self.buf, v);
-                        out.write_field(&self.buf)?;
-                    }
-                    out.write_field(r.steps.to_string())?;
-                    out.write_field(r.evals.to_string())?;
-                    out.write_record(None::<&[u8]>)?;
+                // Formatted in parallel, a chunk of rows each, then written in order.
+                let chunks = rows
+                    .par_chunks(FORMAT_CHUNK)
+                    .zip(results.par_chunks(FORMAT_CHUNK))
+                    .map(|(rows, results)| csv_rows(rows, results))
+                    .collect::<io::Result<Vec<Vec<u8>>>>()?;
+                for chunk in chunks {
+                    w.write_all(&chunk)?;
                 }
-                out.flush()?;
             }
             TableFormat::Json => {
                 for (row, r) in rows.iter().zip(results) {
@@ -619,6 +645,86 @@ mod tests {
 
     fn p() -> &'static Path {
         Path::new("rays.csv")
+    }
+
+    #[test]
+    fn table_numbers_are_rusts_shortest_form() {
+        // What `fmt_num_into` promises: `{:?}` without a trailing `.0`.
+        let rust = |v: f64| {
+            let t = format!("{v:?}");
+            t.strip_suffix(".0").map_or(t.clone(), str::to_owned)
+        };
+        let mut cases = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            1.0 / 3.0,
+            1e-4,
+            1e-4 * (1.0 - f64::EPSILON),
+            1e-5,
+            1e-5 * (1.0 - f64::EPSILON),
+            9.999e-5,
+            2.5e-5,
+            1e15,
+            1e16,
+            1e16 * (1.0 - f64::EPSILON),
+            1.5e16,
+            1e17,
+            1e21,
+            1e22,
+            123456789.0,
+            9007199254740993.0,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        // Random bit patterns (every exponent) and random values over 1e-30..1e30.
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for _ in 0..100_000 {
+            cases.push(f64::from_bits(next()));
+            let u = (next() >> 11) as f64 / (1u64 << 53) as f64;
+            let sign = if next() & 1 == 0 { 1.0 } else { -1.0 };
+            cases.push(sign * 10f64.powf(60.0 * u - 30.0));
+        }
+        let (mut buf, mut ryu) = (String::new(), ryu::Buffer::new());
+        let mut ties = 0;
+        for v in cases {
+            fmt_num_into(&mut buf, v, &mut ryu);
+            let want = rust(v);
+            if buf == want {
+                continue;
+            }
+            // Halfway between two shortest forms: the same length, the same number read
+            // back, the last digit even here and one more in Rust's.
+            let back = |t: &str| t.parse::<f64>().map(f64::to_bits);
+            let last = |t: &str| t.bytes().last().map_or(0, |b| b - b'0');
+            assert_eq!(buf.len(), want.len(), "{:#x}: {buf} vs {want}", v.to_bits());
+            assert_eq!(back(&buf), Ok(v.to_bits()), "{:#x}: {buf}", v.to_bits());
+            assert_eq!(back(&want), Ok(v.to_bits()), "{:#x}: {want}", v.to_bits());
+            assert_eq!(
+                buf[..buf.len() - 1],
+                want[..want.len() - 1],
+                "{buf} vs {want}"
+            );
+            assert!(
+                last(&buf) % 2 == 0 && last(&want) == last(&buf) + 1,
+                "{buf} vs {want}"
+            );
+            ties += 1;
+        }
+        // Ties need a short exact binary fraction: 284 of these 200,000 values.
+        assert!(ties < 1000, "{ties} ties");
     }
 
     fn missed(row: &RayRow) -> RayResult {
