@@ -488,7 +488,7 @@ fn fmt_num_into(buf: &mut String, v: f64, ryu: &mut ryu::Buffer) {
     }
 }
 
-/// Rows a CSV table formats at a time (in parallel, [`TableWriter::rows`]).
+/// Rows a table formats at a time (in parallel, [`TableWriter::rows`]).
 const FORMAT_CHUNK: usize = 4096;
 
 /// `rows` with their results as CSV records (no header).
@@ -579,22 +579,46 @@ impl TableWriter {
                 }
             }
             TableFormat::Json => {
-                for (row, r) in rows.iter().zip(results) {
-                    let text = serde_json::to_string_pretty(&self.json_row(row, r))
-                        .map_err(io::Error::other)?;
-                    w.write_all(if self.rows == 0 { b"\n" } else { b",\n" })?;
-                    for (i, line) in text.lines().enumerate() {
-                        if i > 0 {
-                            w.write_all(b"\n")?;
-                        }
-                        w.write_all(b"  ")?;
-                        w.write_all(line.as_bytes())?;
-                    }
-                    self.rows += 1;
+                let before = self.rows;
+                let chunks = rows
+                    .par_chunks(FORMAT_CHUNK)
+                    .zip(results.par_chunks(FORMAT_CHUNK))
+                    .enumerate()
+                    .map(|(c, (rows, results))| {
+                        self.json_rows(before + c * FORMAT_CHUNK, rows, results)
+                    })
+                    .collect::<io::Result<Vec<Vec<u8>>>>()?;
+                for chunk in chunks {
+                    w.write_all(&chunk)?;
                 }
+                self.rows += rows.len();
             }
         }
         Ok(())
+    }
+
+    /// `rows` with their results as the table's JSON objects, indented, each after its
+    /// separator (`first`: the table's index of the first of them).
+    fn json_rows(
+        &self,
+        first: usize,
+        rows: &[RayRow],
+        results: &[RayResult],
+    ) -> io::Result<Vec<u8>> {
+        let mut out = Vec::new();
+        for (i, (row, r)) in rows.iter().zip(results).enumerate() {
+            let text =
+                serde_json::to_string_pretty(&self.json_row(row, r)).map_err(io::Error::other)?;
+            out.extend_from_slice(if first + i == 0 { b"\n" } else { b",\n" });
+            for (k, line) in text.lines().enumerate() {
+                if k > 0 {
+                    out.push(b'\n');
+                }
+                out.extend_from_slice(b"  ");
+                out.extend_from_slice(line.as_bytes());
+            }
+        }
+        Ok(out)
     }
 
     fn json_row(&self, row: &RayRow, r: &RayResult) -> serde_json::Value {
@@ -882,6 +906,48 @@ mod tests {
             .finish(&mut empty)
             .expect("finish");
         assert_eq!(empty, b"[]\n");
+    }
+
+    /// Rows formatted in parallel chunks come out in the table's order, in one batch or
+    /// in batches that split the chunks anywhere.
+    #[test]
+    fn rows_formatted_in_chunks_keep_their_order() {
+        let n = 2 * FORMAT_CHUNK + 7;
+        let mut text = String::from("ox,oy,oz,dx,dy,dz,id\n");
+        for i in 0..n {
+            text.push_str(&format!("{i},0,-3,0,0,2,r{i}\n"));
+        }
+        let t = parse_rays(&text, p()).expect("valid");
+        let res: Vec<RayResult> = t.rows.iter().map(missed).collect();
+        for format in [TableFormat::Csv, TableFormat::Json] {
+            let mut whole = Vec::new();
+            write_table(&mut whole, format, &t, &res).expect("write");
+            let mut parts = Vec::new();
+            let mut w = TableWriter::new(format, &t.extra_columns);
+            for (a, b) in [(0, 1), (1, FORMAT_CHUNK + 3), (FORMAT_CHUNK + 3, n)] {
+                w.rows(&mut parts, &t.rows[a..b], &res[a..b])
+                    .expect("write");
+            }
+            w.finish(&mut parts).expect("finish");
+            assert!(whole == parts, "{format:?}: batches differ from one write");
+            let ids: Vec<String> = match format {
+                TableFormat::Csv => String::from_utf8(whole)
+                    .expect("utf8")
+                    .lines()
+                    .skip(1)
+                    .map(|l| l.split(',').nth(6).expect("id").to_owned())
+                    .collect(),
+                TableFormat::Json => serde_json::from_slice::<serde_json::Value>(&whole)
+                    .expect("valid JSON")
+                    .as_array()
+                    .expect("array")
+                    .iter()
+                    .map(|o| o["id"].as_str().expect("id").to_owned())
+                    .collect(),
+            };
+            let want: Vec<String> = (0..n).map(|i| format!("r{i}")).collect();
+            assert!(ids == want, "{format:?}: rows out of order");
+        }
     }
 
     #[test]
