@@ -508,8 +508,12 @@ fn csv_rows(rows: &[RayRow], results: &[RayResult]) -> io::Result<Vec<u8>> {
             fmt_num_into(&mut buf, v, &mut ryu);
             out.write_field(&buf)?;
         }
-        out.write_field(r.steps.to_string())?;
-        out.write_field(r.evals.to_string())?;
+        for count in [u64::from(r.steps), r.evals] {
+            use std::fmt::Write as _;
+            buf.clear();
+            let _ = write!(buf, "{count}");
+            out.write_field(&buf)?;
+        }
         out.write_record(None::<&[u8]>)?;
     }
     out.into_inner()
