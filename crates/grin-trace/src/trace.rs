@@ -423,9 +423,11 @@ impl<R: Real> March<R> {
                 res.evals += 1;
                 estimate.break_sequence();
                 if exits {
-                    match leave(&bounds, res, &mut state, &s0, p1, estimate, surface) {
-                        Some(done) => break 'step Some(done),
-                        None => return None,
+                    // Reflected totally: the march goes on from the surface (below, the
+                    // state written back).
+                    if let Some(done) = leave(&bounds, res, &mut state, &s0, p1, estimate, surface)
+                    {
+                        break 'step Some(done);
                     }
                 }
                 break 'step None;

@@ -901,3 +901,66 @@ fn optical_path_is_as_accurate_as_the_exit_position() {
         eprintln!("tol {tol}: optical path {worst_opl:.2e}, exit position {worst_pos:.2e}");
     }
 }
+
+/// A ray that flies straight over a uniform medium's macro cells to a face where it
+/// reflects totally goes on from that face (it used to start the same flight again
+/// from where the first began, until `max_steps`). Uniform n = 1.5 in a box, entered
+/// through its -z face at 70 degrees: inside at asin(sin 70 / 1.5) = 38.8 degrees, it
+/// meets the +x face at 51.2 degrees (past the critical 41.8), reflects, and leaves
+/// through the +z face as it came in, mirrored in x: the exact straight-line answer.
+#[test]
+fn a_flight_that_reflects_totally_goes_on_from_the_surface() {
+    let bounds = grin_field::Bounds::Box {
+        min: DVec3::splat(-1.0),
+        max: DVec3::splat(1.0),
+    };
+    let uniform = grin_field::expr::ExprField::new("1.5", bounds, 1.0, 0.0).expect("uniform");
+    let opts = grin_field::bake::BakeOptions {
+        resolution: Some(8),
+        crop: false,
+        error_points: 100,
+        ..Default::default()
+    };
+    let (baked, _) =
+        grin_field::bake::bake(&uniform, &opts, &|_: &str, _: u64, _: u64| {}).expect("bake");
+    let (sin_i, cos_i) = 70f64.to_radians().sin_cos();
+    let entry = DVec3::new(0.5, 0.0, -1.0);
+    let d = DVec3::new(sin_i, 0.0, cos_i);
+    // Inside: the refracted direction, to the +x face, mirrored, to the +z face.
+    let sin_t = sin_i / 1.5;
+    let inside = DVec3::new(sin_t, 0.0, (1.0 - sin_t * sin_t).sqrt());
+    let at_x = entry + inside * ((1.0 - entry.x) / inside.x);
+    let back = DVec3::new(-inside.x, 0.0, inside.z);
+    let at_z = at_x + back * ((1.0 - at_x.z) / back.z);
+    let want_dir = DVec3::new(-sin_i, 0.0, cos_i);
+    let s = TraceSettings {
+        macro_cells: true,
+        ..settings(
+            IntegratorKind::Rk4,
+            StepSpec::Fixed(0.05),
+            ExitMethod::Hermite,
+        )
+    };
+    let mut flights = 0;
+    let mut count = |seg: &Segment| {
+        // A flight's segment is a straight chord longer than the step.
+        if (seg.r1 - seg.r0).length() > 0.1 {
+            flights += 1;
+        }
+        Control::Continue
+    };
+    let r = trace_ray_observed::<f64>(&baked, &s, entry - d * 2.0, d, &mut count);
+    assert!(r.status.left(), "{:?} after {} steps", r.status, r.steps);
+    assert!(flights >= 2, "{flights} flights: the medium is flown over");
+    assert!(
+        (r.position - at_z).length() < 1e-9,
+        "left at {} (exact {at_z})",
+        r.position
+    );
+    // The bake holds n to its storage's precision (the direction out follows n there).
+    assert!(
+        (r.direction - want_dir).length() < 1e-6,
+        "direction {} (exact {want_dir})",
+        r.direction
+    );
+}

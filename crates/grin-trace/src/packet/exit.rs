@@ -84,7 +84,10 @@ impl LaneExit {
         quad: Option<Quad>,
     ) {
         let sd = |p: DVec3| bounds.signed_distance_in::<f64>(p);
-        if self.resteps > 0 && sd(state.r).abs() >= sd(self.kept.r).abs() {
+        // Kept only if closer (exit_medium's test): a NaN distance is not closer, and
+        // ends the search there as here.
+        let closer = sd(state.r).abs() < sd(self.kept.r).abs();
+        if self.resteps > 0 && !closer {
             self.phase = Phase::Found;
             return;
         }
