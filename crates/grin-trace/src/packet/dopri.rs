@@ -22,7 +22,7 @@ use grin_scene::{ExitMethod, IntegratorKind};
 use super::exit::{LaneExit, Phase};
 use super::{
     L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, lane_step, leaves,
-    plain_steps, sample, signed_distance, two_sum,
+    local_cap, plain_steps, sample, signed_distance, two_sum,
 };
 use crate::boundary::{EXCURSION_SLACK_TOLS, exit_tolerance};
 use crate::integrate::Quad;
@@ -95,38 +95,30 @@ pub(super) fn march_dopri_in(
         }))
         .zip(feature_cap, f64::min);
         for i in 0..LANES {
-            let n0 = s.n0.0[i];
             searching[i] = occupied[i] && s.exits[i].phase == Phase::Search;
-            active[i] = occupied[i]
-                && !own[i]
-                && s.exits[i].phase == Phase::Idle
-                && s.r.finite(i)
-                && s.t.finite(i)
-                && n0.is_finite()
-                && n0 > 0.0
-                && s.steps[i] < settings.max_steps;
+            active[i] = occupied[i] && !own[i] && s.may_step(i, settings.max_steps);
             if !active[i] || s.in_take[i] {
                 continue;
             }
             let mut lane_cap = cap.0[i];
             let fixed = control[i].is_some_and(|c| c.tol.is_none());
             if local_limits {
-                let p = s.r.lane(i);
-                if settings.macro_cells
-                    && field
-                        .homogeneous_span(p, s.t.lane(i).normalize_or_zero())
-                        .is_some_and(|span| span > min_flight[i])
-                {
-                    active[i] = false;
-                    continue;
-                }
                 // StepController::take's reach: the fixed step, or the controller's.
-                let reach = if fixed {
-                    ds_max_c.0[i].min(lane_cap)
-                } else {
-                    s.ds_adapt.0[i].min(ds_max_c.0[i]).min(lane_cap)
+                let (ds_max, ds_adapt) = (ds_max_c.0[i], s.ds_adapt.0[i]);
+                let reach = |c: f64| {
+                    if fixed {
+                        ds_max.min(c)
+                    } else {
+                        ds_adapt.min(ds_max).min(c)
+                    }
                 };
-                lane_cap = lane_cap.min(field.step_cap(p, reach));
+                match local_cap(field, settings, s, i, min_flight[i], lane_cap, reach) {
+                    Some(c) => lane_cap = c,
+                    None => {
+                        active[i] = false;
+                        continue;
+                    }
+                }
             }
             s.in_take[i] = true;
             s.take_ds.0[i] = s.ds_adapt.0[i];

@@ -315,6 +315,19 @@ impl Soa {
         }
     }
 
+    /// Whether lane `i`, not searching for its exit, may take a step as the one-ray tracer
+    /// would (`March::advance`'s first tests): a finite state, n > 0, steps left.
+    #[inline(always)]
+    fn may_step(&self, i: usize, max_steps: u32) -> bool {
+        let n0 = self.n0.0[i];
+        self.exits[i].phase == Phase::Idle
+            && self.r.finite(i)
+            && self.t.finite(i)
+            && n0.is_finite()
+            && n0 > 0.0
+            && self.steps[i] < max_steps
+    }
+
     /// Move march `m`'s state into lane `i`.
     fn load(&mut self, i: usize, m: &March<f64>) {
         let s = self;
@@ -669,32 +682,19 @@ fn march_packet_in(
             StepController::length_scale_cap(s.n0.0[i], g_len.0[i])
         }))
         .zip(feature_cap, f64::min);
-        let mut active: [bool; LANES] = array::from_fn(|i| {
-            let n0 = s.n0.0[i];
-            occupied[i]
-                && s.exits[i].phase == Phase::Idle
-                && s.r.finite(i)
-                && s.t.finite(i)
-                && n0.is_finite()
-                && n0 > 0.0
-                && s.steps[i] < settings.max_steps
-        });
+        let mut active: [bool; LANES] =
+            array::from_fn(|i| occupied[i] && s.may_step(i, settings.max_steps));
         if local_limits {
             for i in 0..LANES {
                 if !active[i] {
                     continue;
                 }
-                let p = s.r.lane(i);
-                if settings.macro_cells
-                    && field
-                        .homogeneous_span(p, s.t.lane(i).normalize_or_zero())
-                        .is_some_and(|span| span > min_flight[i])
-                {
-                    active[i] = false;
-                    continue;
+                match local_cap(field, settings, s, i, min_flight[i], cap.0[i], |c| {
+                    ds.0[i].min(c)
+                }) {
+                    Some(c) => cap.0[i] = c,
+                    None => active[i] = false,
                 }
-                let reach = ds.0[i].min(cap.0[i]);
-                cap.0[i] = cap.0[i].min(field.step_cap(p, reach));
             }
         }
         let hi = ds.zip(cap, f64::min) / s.n0;
@@ -812,6 +812,27 @@ fn march_packet_in(
         steps: took,
         own: array::from_fn(|i| lanes[i].is_some() && !stay[i]),
     }
+}
+
+/// Lane `i`'s step cap `cap` lowered to the field's own local cap over the step's reach
+/// (`reach` of the cap: `StepController::take`'s), or `None` where the lane flies straight
+/// over a homogeneous macro cell instead (its march's step).
+#[inline(always)]
+fn local_cap(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    s: &Soa,
+    i: usize,
+    min_flight: f64,
+    cap: f64,
+    reach: impl Fn(f64) -> f64,
+) -> Option<f64> {
+    let p = s.r.lane(i);
+    let flies = settings.macro_cells
+        && field
+            .homogeneous_span(p, s.t.lane(i).normalize_or_zero())
+            .is_some_and(|span| span > min_flight);
+    (!flies).then(|| cap.min(field.step_cap(p, reach(cap))))
 }
 
 /// Lane `i`'s step from `start` to `end` (position and T) over `h`: the state it
