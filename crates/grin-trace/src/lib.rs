@@ -4,6 +4,7 @@
 pub mod auto;
 pub mod boundary;
 pub mod estimate;
+mod exit_search;
 pub mod integrate;
 pub mod packet;
 pub mod step;

@@ -15,6 +15,7 @@ use crate::boundary::{
     refract, refraction_uncertainty,
 };
 use crate::estimate::{CROSSING_FACTOR, ErrorEstimate};
+use crate::exit_search::{ExitFound, ExitSearch, Phase};
 use crate::integrate::{self, RayState, is_finite_v};
 use crate::step::{StepController, Taken};
 
@@ -604,18 +605,6 @@ struct StepTaken<R: Real> {
     outside: bool,
 }
 
-/// A step that left the medium, cut on the surface ([`exit_medium`]'s Hermite search):
-/// the state there (projected onto the surface), the t-length that reaches it, the
-/// quadrature of the re-step that reached it, and the local errors the step that left
-/// reported.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct ExitFound<R: Real> {
-    pub(crate) next: RayState<R>,
-    pub(crate) h: R,
-    pub(crate) quad: Option<integrate::Quad>,
-    pub(crate) error: Option<(R::V3, R::V3)>,
-}
-
 /// The medium's surface as a ray crosses it: the ambient index, the field's n
 /// uncertainty there, and the direction error the crossings so far added.
 #[derive(Debug, Clone, Copy)]
@@ -784,7 +773,6 @@ pub fn exit_medium<R: Real>(
 ) -> (RayState<R>, R, u32, Option<integrate::Quad>) {
     let kind = settings.integrator;
     let d0 = s0.n_grad_n();
-    let sd = |p: DVec3| bounds.signed_distance(p);
     // The stopping tests in the trace's own precision (what the GPU computes in f32).
     let sd_r = |p: R::V3| bounds.signed_distance_in::<R>(p);
     match settings.exit {
@@ -820,37 +808,18 @@ pub fn exit_medium<R: Real>(
             (st, hm, evals, None)
         }
         ExitMethod::Hermite => {
-            let seg = segment_of_step(s, taken);
             // The cubic's root is O(h^4) off the integrator's own crossing; Newton steps
-            // on the integrator's state (g = signed distance, g' = normal . T) bring it
-            // to the integrator's order. Each costs one re-step; kept only if closer.
-            let mut tau = seg.first_crossing(sd);
-            let h_max = taken.h.to_f64();
-            let mut st = integrate::step(kind, field, s, d0, R::from_f64(tau));
-            let mut evals = st.evals;
-            for _ in 0..EXIT_NEWTON_ITERATIONS {
-                let p = st.state.r.to_dvec3();
-                let g = sd_r(st.state.r);
-                if g.abs() <= tol {
-                    break;
-                }
-                let slope = bounds.normal(p).dot(st.state.t.to_dvec3());
-                if slope.is_nan() || slope <= 0.0 {
-                    break;
-                }
-                let next = (tau - g / slope).clamp(0.0, h_max);
-                let trial = integrate::step(kind, field, s, d0, R::from_f64(next));
-                evals += trial.evals;
-                if sd_r(trial.state.r).abs() < g.abs() {
-                    tau = next;
-                    st = trial;
-                } else {
-                    break;
-                }
+            // on the integrator's state bring it to the integrator's order. Each costs
+            // one re-step; kept only if closer (ExitSearch, the packets' search too).
+            let mut search = ExitSearch::<R>::begin(bounds, segment_of_step(s, taken), None);
+            let mut evals = 0;
+            while search.phase == Phase::Search {
+                let st = integrate::step(kind, field, s, d0, R::from_f64(search.trial));
+                evals += st.evals;
+                search.restepped(bounds, tol, st.state, st.quad);
             }
-            let mut state = st.state;
-            state.r = R::V3::from_dvec3(project_to_surface(bounds, state.r.to_dvec3()));
-            (state, R::from_f64(tau), evals, st.quad)
+            let exit = search.found(bounds);
+            (exit.next, exit.h, evals, exit.quad)
         }
     }
 }

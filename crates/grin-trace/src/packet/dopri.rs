@@ -7,7 +7,7 @@
 //!
 //! A rejected attempt leaves its lane in the packet, to try again at the shorter step
 //! the controller chose. An accepted step that ends outside starts the lane's exit search
-//! ([`super::exit`]), its re-steps dopri steps in the packet. Any other accepted step that
+//! (crate::exit_search), its re-steps dopri steps in the packet. Any other accepted step that
 //! is not a plain one (its cubic may leave between its ends, or the exit is bisection's)
 //! is not kept: the lane goes back to where its take began (the step the controller tried
 //! first, the evaluations counted before) and its march takes the step from there,
@@ -19,12 +19,12 @@ use grin_field::IndexField;
 use grin_render::settings::TraceSettings;
 use grin_scene::{ExitMethod, IntegratorKind};
 
-use super::exit::{LaneExit, Phase};
 use super::{
     L, LANES, Mask, STEPS_PER_GATHER, Soa, StepEnd, Took, V, finish_steps, lane_step, leaves,
     local_cap, plain_steps, sample, signed_distance, two_sum,
 };
 use crate::boundary::{EXCURSION_SLACK_TOLS, exit_tolerance};
+use crate::exit_search::{ExitSearch, Phase};
 use crate::integrate::Quad;
 use crate::integrate::adaptive::{A, E};
 use crate::step::{
@@ -74,12 +74,10 @@ pub(super) fn march_dopri_in(
     let exponent = 1.0 / f64::from(crate::integrate::order(IntegratorKind::Adaptive));
     let feature_cap = L(feature_cap);
     let mut sd0 = signed_distance(&bounds, s.r);
-    let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&bounds);
+    let exit_tol = exit_tolerance::<f64>(&bounds);
+    let slack = EXCURSION_SLACK_TOLS * exit_tol;
+    let hermite = settings.exit == ExitMethod::Hermite;
     let local_limits = field.has_local_step_limits();
-    let (hermite, exit_tol) = (
-        settings.exit == ExitMethod::Hermite,
-        exit_tolerance::<f64>(&bounds),
-    );
     let evals_per_step = u64::from(crate::integrate::evals_per_step(IntegratorKind::Adaptive));
     let mut active = [false; LANES];
     // Lanes whose step is their march's to take.
@@ -250,7 +248,7 @@ pub(super) fn march_dopri_in(
                 // The step left: the lane searches for its exit, its controller as the
                 // accepted step left it.
                 let error = Some((er.lane(i), et.lane(i)));
-                s.exits[i] = LaneExit::begin(&bounds, seg, error);
+                s.exits[i] = ExitSearch::begin(&bounds, seg, error);
                 searching[i] = true;
             } else {
                 // Back to where the take began: the march takes this step itself.

@@ -9,7 +9,7 @@
 //! inside, either because both ends are farther from the surface than the step reaches
 //! or because the scalar tracer's own excursion test proves its cubic inside (the steps
 //! near the surface: the first ones after the entry, the last before the exit). A step
-//! that ends outside starts its lane's exit search ([`exit`]: the Hermite method's
+//! that ends outside starts its lane's exit search (crate::exit_search: the Hermite method's
 //! re-steps, taken in the packet beside the other lanes' steps); the march then only
 //! records the step and refracts out. Each step computes exactly what the scalar tracer
 //! computes, operation for operation (the state with its compensated sums, the optical
@@ -27,14 +27,13 @@ use grin_field::{Bounds, FieldSample, IndexField, Real};
 use grin_scene::{ExitMethod, IntegratorKind, StepSpec};
 
 mod dopri;
-mod exit;
 
 use crate::boundary::{EXCURSION_SLACK_TOLS, Segment, exit_tolerance};
 use crate::estimate::POSITION_SAFETY;
+use crate::exit_search::{ExitSearch, Phase};
 use crate::integrate::RayState;
 use crate::step::StepController;
 use crate::trace::{Control, March, RayResult};
-use exit::{LaneExit, Phase};
 use grin_render::settings::TraceSettings;
 
 /// Rays a packet advances together.
@@ -281,7 +280,7 @@ pub(super) struct Soa {
     rejections: [u32; LANES],
     // The exit search of lanes whose step left the medium (its re-steps are packet
     // steps too).
-    exits: [LaneExit; LANES],
+    exits: [ExitSearch<f64>; LANES],
 }
 
 impl Soa {
@@ -311,7 +310,7 @@ impl Soa {
             take_evals: [0; LANES],
             take_cap: L::splat(0.0),
             rejections: [0; LANES],
-            exits: [LaneExit::IDLE; LANES],
+            exits: [ExitSearch::idle(); LANES],
         }
     }
 
@@ -352,7 +351,7 @@ impl Soa {
         s.sum.0[i] = e.sum;
         s.ds_adapt.0[i] = m.ctrl.current_ds();
         s.in_take[i] = false;
-        s.exits[i] = LaneExit::IDLE;
+        s.exits[i] = ExitSearch::idle();
     }
 
     /// Write lane `i` back into its march. The march's reported position and direction
@@ -660,14 +659,13 @@ fn march_packet_in(
     let feature_cap = L(feature_cap);
     // The signed distance of each lane's point (carried from the step that got there).
     let mut sd0 = signed_distance(&bounds, s.r);
-    // The scalar tracer's slack for proving a step near the surface inside.
-    let slack = EXCURSION_SLACK_TOLS * exit_tolerance::<f64>(&bounds);
+    // The exit search's tolerance, and the scalar tracer's slack for proving a step
+    // near the surface inside.
+    let exit_tol = exit_tolerance::<f64>(&bounds);
+    let slack = EXCURSION_SLACK_TOLS * exit_tol;
+    let hermite = settings.exit == ExitMethod::Hermite;
     // Whether the field's macro cells and local caps need asking at every step.
     let local_limits = field.has_local_step_limits();
-    let (hermite, exit_tol) = (
-        settings.exit == ExitMethod::Hermite,
-        exit_tolerance::<f64>(&bounds),
-    );
     // The lanes still with the packet after a step (a plain step taken, or an exit
     // search under way); at the end, those that are not need their march.
     let mut stay = [false; LANES];
@@ -752,7 +750,7 @@ fn march_packet_in(
                 stay[i] = hermite && leaves(&bounds, s, i, dr.lane(i), end);
                 if stay[i] {
                     s.evals[i] += rk4_evals;
-                    s.exits[i] = LaneExit::begin(&bounds, seg, None);
+                    s.exits[i] = ExitSearch::begin(&bounds, seg, None);
                 }
             }
         }
@@ -837,6 +835,7 @@ fn local_cap(
 
 /// Lane `i`'s step from `start` to `end` (position and T) over `h`: the state it
 /// reached, and its segment.
+#[inline(always)]
 fn lane_step(start: (V, V), end: (V, V), h: L, i: usize) -> (RayState<f64>, Segment) {
     let state = RayState {
         r: end.0.lane(i),
