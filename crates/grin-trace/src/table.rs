@@ -491,6 +491,26 @@ fn fmt_num_into(buf: &mut String, v: f64, ryu: &mut ryu::Buffer) {
 /// Rows a table formats at a time (in parallel, [`TableWriter::rows`]).
 const FORMAT_CHUNK: usize = 4096;
 
+/// Write `rows` with their results as `format` gives each chunk of [`FORMAT_CHUNK`]
+/// rows (from its index in `rows`), the chunks formatted in parallel, written in order.
+fn write_in_chunks(
+    w: &mut dyn Write,
+    rows: &[RayRow],
+    results: &[RayResult],
+    format: impl Fn(usize, &[RayRow], &[RayResult]) -> io::Result<Vec<u8>> + Sync,
+) -> io::Result<()> {
+    let chunks = rows
+        .par_chunks(FORMAT_CHUNK)
+        .zip(results.par_chunks(FORMAT_CHUNK))
+        .enumerate()
+        .map(|(c, (rows, results))| format(c * FORMAT_CHUNK, rows, results))
+        .collect::<io::Result<Vec<Vec<u8>>>>()?;
+    for chunk in chunks {
+        w.write_all(&chunk)?;
+    }
+    Ok(())
+}
+
 /// `rows` with their results as CSV records (no header).
 fn csv_rows(rows: &[RayRow], results: &[RayResult]) -> io::Result<Vec<u8>> {
     let mut out = csv::Writer::from_writer(Vec::new());
@@ -572,29 +592,13 @@ impl TableWriter {
         self.start(w)?;
         match self.format {
             TableFormat::Csv => {
-                // Formatted in parallel, a chunk of rows each, then written in order.
-                let chunks = rows
-                    .par_chunks(FORMAT_CHUNK)
-                    .zip(results.par_chunks(FORMAT_CHUNK))
-                    .map(|(rows, results)| csv_rows(rows, results))
-                    .collect::<io::Result<Vec<Vec<u8>>>>()?;
-                for chunk in chunks {
-                    w.write_all(&chunk)?;
-                }
+                write_in_chunks(w, rows, results, |_, rows, results| csv_rows(rows, results))?;
             }
             TableFormat::Json => {
                 let before = self.rows;
-                let chunks = rows
-                    .par_chunks(FORMAT_CHUNK)
-                    .zip(results.par_chunks(FORMAT_CHUNK))
-                    .enumerate()
-                    .map(|(c, (rows, results))| {
-                        self.json_rows(before + c * FORMAT_CHUNK, rows, results)
-                    })
-                    .collect::<io::Result<Vec<Vec<u8>>>>()?;
-                for chunk in chunks {
-                    w.write_all(&chunk)?;
-                }
+                write_in_chunks(w, rows, results, |at, rows, results| {
+                    self.json_rows(before + at, rows, results)
+                })?;
                 self.rows += rows.len();
             }
         }
