@@ -123,12 +123,15 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
 
 // ---- Sparse bakes (grin_field::sparse::SparseField::sample) ----
 //
-// field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: first one
-// texel per top brick (x fastest), (first voxel / 65536, first voxel % 65536, cells a
-// brick edge, most cells a side among it and its 26 neighbours) with 0 cells for an empty
-// brick; then every active brick's (cells + 1)^3
-// nodes, x fastest. The grid parameters place the top grid: grid_origin its corner,
-// grid_inv_spacing 1 / brick edge, grid_dims bricks + 1.
+// macro_tex is the brick table, one texel per top brick: (cells a brick edge, first voxel
+// / 65536, first voxel % 65536, most cells a side among it and its 26 neighbours), with 0
+// cells for an empty brick (so the macro-cell test flies over it). Where the voxels are
+// i16 (FLAG_SPARSE_I16), a second block of as many texels follows in z: each brick's
+// scales (delta_n, gradient), times 32767.
+// field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: every active
+// brick's (cells + 1)^3 nodes, x fastest, in f32 or rgba16snorm (q / 32767).
+// The grid parameters place the top grid: grid_origin its corner, grid_inv_spacing 1 /
+// brick edge, grid_dims bricks + 1.
 
 const SPARSE_ROW: u32 = 256u;
 
@@ -146,7 +149,7 @@ struct SparseBrick {
 fn sparse_brick(g: vec3<f32>) -> SparseBrick {
     let bricks = params.grid_dims - vec3<u32>(1u);
     let b = min(vec3<u32>(max(floor(g), vec3<f32>(0.0))), bricks - vec3<u32>(1u));
-    return SparseBrick(b, linear_texel(b.x + bricks.x * (b.y + bricks.y * b.z)));
+    return SparseBrick(b, textureLoad(macro_tex, vec3<i32>(b), 0));
 }
 
 fn sparse_sample(p: vec3<f32>) -> FieldSample {
@@ -158,15 +161,15 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let brick = sparse_brick(g);
     let b = brick.at;
     let entry = brick.entry;
-    if entry.z < 1.0 {
+    if entry.x < 1.0 {
         return ambient;
     }
-    let cells = u32(entry.z);
+    let cells = u32(entry.x);
     let m = cells + 1u;
     let u = clamp((g - vec3<f32>(b)) * f32(cells), vec3<f32>(0.0), vec3<f32>(f32(cells)));
     let i = min(vec3<u32>(u), vec3<u32>(cells - 1u));
     let t = u - vec3<f32>(i);
-    let first = u32(entry.x) * 65536u + u32(entry.y) + i.x + m * (i.y + m * i.z);
+    let first = u32(entry.y) * 65536u + u32(entry.z) + i.x + m * (i.y + m * i.z);
     let c000 = linear_texel(first);
     let c100 = linear_texel(first + 1u);
     let c010 = linear_texel(first + m);
@@ -179,7 +182,12 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let x10 = mix(c010, c110, t.x);
     let x01 = mix(c001, c101, t.x);
     let x11 = mix(c011, c111, t.x);
-    let v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+    var v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+    if (FLAGS & FLAG_SPARSE_I16) != 0u {
+        let bricks = params.grid_dims - vec3<u32>(1u);
+        let s = textureLoad(macro_tex, vec3<i32>(b + vec3<u32>(0u, 0u, bricks.z)), 0);
+        v = v * s.xyyy;
+    }
     return FieldSample(ambient_index() + v.x, v.yzw, v.x);
 }
 

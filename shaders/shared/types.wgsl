@@ -131,6 +131,7 @@ const FLAG_EXIT_HERMITE: u32 = 64u;
 const FLAG_MEDIUM_OBJECTS: u32 = 128u;
 const FLAG_HAS_OBJECTS: u32 = 256u;
 const FLAG_SPARSE: u32 = 512u;
+const FLAG_SPARSE_I16: u32 = 1024u;
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_PLANE: u32 = 1u;
 const SHAPE_BOX: u32 = 2u;

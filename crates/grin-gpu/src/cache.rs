@@ -262,7 +262,8 @@ pub fn bake_for_gpu_grid(field: &dyn IndexField) -> Result<(GpuGrid, Vec<String>
         && report.homogeneous_cells >= SPARSE_WHEN_HOMOGENEOUS
     {
         let opts = grin_field::sparse::bake::SparseOptions {
-            // i16 on the host, f32 texels on the device: half the cap on the host.
+            // i16 on the host; on the device f32 texels where it lacks rgba16snorm: half
+            // the cap on the host.
             max_memory: grin_field::bake::device::GPU_BAKE_MAX_BYTES / 2,
             ..Default::default()
         };

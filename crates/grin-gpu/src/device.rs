@@ -154,9 +154,12 @@ impl GpuContext {
         // Timestamps around the render passes, where the adapter has them: the device's
         // own time per frame ([`crate::GpuRenderer::last_device_seconds`]).
         let timestamp_features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        // rgba16snorm texels for i16 fields (half the memory of f32), where the adapter
+        // has them ([`GpuContext::has_snorm16`]).
+        let snorm_features = adapter.features() & wgpu::Features::TEXTURE_FORMAT_16BIT_NORM;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("grin"),
-            required_features: cache_features | timestamp_features,
+            required_features: cache_features | timestamp_features | snorm_features,
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -198,6 +201,16 @@ impl GpuContext {
         self.device
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
+    }
+
+    /// Whether i16 fields can stay 16-bit on the device (rgba16snorm textures,
+    /// `Features::TEXTURE_FORMAT_16BIT_NORM`); without it they are decoded to f32 on upload.
+    /// `GRIN_GPU_F32_FIELDS=1` decodes them anyway (to compare the two).
+    pub fn has_snorm16(&self) -> bool {
+        self.device
+            .features()
+            .contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM)
+            && std::env::var_os("GRIN_GPU_F32_FIELDS").is_none_or(|v| v.is_empty() || v == "0")
     }
 
     /// The pipelines under `key`, compiled by `compile` the first time (and kept only

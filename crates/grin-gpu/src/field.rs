@@ -9,14 +9,15 @@
 //! Manual trilinear costs 8 loads per sample but uses the CPU's weights exactly, so GPU
 //! and CPU march the same field: the GPU-vs-CPU tests measure p99 pixel differences
 //! <= 2e-5 with it. Its speed on lavapipe (`grin bench speed`, docs/benchmarks.md) is
-//! ~100 M trilinear samples/s on a 2-core VM. i16-quantized baked files are decoded to f32
-//! on upload.
+//! ~100 M trilinear samples/s on a 2-core VM. A dense i16 file is decoded to f32 on upload;
+//! a sparse one's voxels stay 16-bit as rgba16snorm where the device has that format
+//! ([`upload_sparse`]).
 
 use std::sync::Arc;
 
 use grin_field::IndexField;
 use grin_field::baked::{BakedField, Interp, Outside};
-use grin_field::sparse::SparseField;
+use grin_field::sparse::{Pool, SparseField};
 
 /// The policy for baking a field the GPU marches is grin-field's (its `bake::device`);
 /// re-exported here, where callers of the GPU look for it.
@@ -26,12 +27,15 @@ pub use grin_field::bake::device::{
 };
 
 use crate::gpu_data::{
-    FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC, FrameParams,
+    FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_SPARSE_I16, FLAG_TRICUBIC,
+    FrameParams,
 };
 use crate::{GpuContext, GpuError};
 
 /// Bytes per texel of the field texture (rgba32float).
 pub const FIELD_TEXEL_BYTES: u64 = 16;
+/// Bytes per texel of an i16 sparse field's texture (rgba16snorm).
+pub const SNORM_TEXEL_BYTES: u64 = 8;
 
 /// The field's textures on the device.
 #[derive(Debug)]
@@ -312,9 +316,13 @@ pub const SPARSE_ROW: usize = 256;
 /// Layers of the sparse field's texture written at a time (64 MiB of f32 texels).
 const SPARSE_UPLOAD_LAYERS: usize = 64;
 
-/// Upload a sparse bake: its brick table and voxels, as f32 texels in one linear 3D
-/// texture (layout in shaders/shared/field.wgsl), and its top grid as the macro cells
-/// (empty bricks 0, active 1, threshold 1/2: a ray flies over empty bricks).
+/// Upload a sparse bake (layout in shaders/shared/field.wgsl): its voxels in one linear
+/// 3D texture, as rgba16snorm texels where they are i16 and the device has the format
+/// ([`GpuContext::has_snorm16`]: 8 bytes a voxel, scaled per brick in the shader), else as
+/// f32 (16 bytes); its brick table as the macro-cell texture, one rgba32float texel per
+/// top-grid brick (cells, 0 where empty, so that a ray flies over empty bricks with the
+/// macro-cell threshold 1/2), followed where the voxels are i16 by a block of the bricks'
+/// scales.
 pub fn upload_sparse(
     ctx: &GpuContext,
     sparse: &SparseField,
@@ -323,13 +331,18 @@ pub fn upload_sparse(
     let top = sparse.top();
     let table = sparse.table();
     let bricks = sparse.bricks();
+    let snorm = matches!(sparse.pool(), Pool::I16(_)) && ctx.has_snorm16();
+    let (format, texel_bytes) = if snorm {
+        (wgpu::TextureFormat::Rgba16Snorm, SNORM_TEXEL_BYTES)
+    } else {
+        (wgpu::TextureFormat::Rgba32Float, FIELD_TEXEL_BYTES)
+    };
     let voxels = sparse.pool().len();
-    let total = table.len() + voxels;
     let layer = SPARSE_ROW * SPARSE_ROW;
-    let depth = total.div_ceil(layer).max(1);
+    let depth = voxels.div_ceil(layer).max(1);
     let dims = dims_u32([SPARSE_ROW, SPARSE_ROW, depth], "sparse field")?;
     check_dims(ctx, "sparse field", dims)?;
-    let bytes = (layer * depth) as u64 * FIELD_TEXEL_BYTES;
+    let bytes = (layer * depth) as u64 * texel_bytes;
     let max_buffer = ctx.limits().max_buffer_size;
     if bytes > max_buffer {
         return Err(GpuError::TooLarge {
@@ -339,9 +352,6 @@ pub fn upload_sparse(
             adapter: ctx.adapter_name(),
         });
     }
-    // Written a slab of layers at a time, each slab's texels made just before (the table's
-    // entries, then the bricks' voxels decoded to f32) and its staging flushed by a
-    // submission: host memory holds one slab, not a copy of the whole field.
     let field = ctx.scoped("uploading the sparse field texture", || {
         ctx.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("sparse field"),
@@ -353,51 +363,114 @@ pub fn upload_sparse(
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::Rgba32Float,
+            format,
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         })
     })?;
-    let base = table.len();
-    let texel = |t: usize, brick: &mut usize| -> [f32; 4] {
-        if t < base {
-            let near = f32::from(sparse.near_cells_at(t));
-            return match bricks.get(table[t] as usize) {
-                None => [0.0, 0.0, 0.0, near],
-                Some(b) => {
-                    let first = base + b.offset;
-                    [
-                        (first / 65536) as f32,
-                        (first % 65536) as f32,
-                        b.cells() as f32,
-                        near,
-                    ]
+    match sparse.pool() {
+        Pool::I16(p) if snorm => {
+            upload_linear(ctx, &field, dims, |t| p.get(t).copied().unwrap_or_default())?
+        }
+        _ => {
+            // The brick holding the last texel asked for: texels are asked for in order.
+            let mut brick = 0;
+            upload_linear(ctx, &field, dims, |v| {
+                if v >= voxels {
+                    return [0.0; 4];
                 }
-            };
+                if bricks[brick].offset > v {
+                    brick = 0;
+                }
+                while brick + 1 < bricks.len() && bricks[brick + 1].offset <= v {
+                    brick += 1;
+                }
+                sparse.voxel_f32(&bricks[brick], v)
+            })?
         }
-        let v = t - base;
-        if v >= voxels {
-            return [0.0; 4];
+    }
+    let mdims = dims_u32(top.dims, "sparse top grid")?;
+    let entries = table.iter().enumerate().map(|(t, &e)| {
+        let near = f32::from(sparse.near_cells_at(t));
+        match bricks.get(e as usize) {
+            None => [0.0, 0.0, 0.0, near],
+            Some(b) => [
+                b.cells() as f32,
+                (b.offset / 65536) as f32,
+                (b.offset % 65536) as f32,
+                near,
+            ],
         }
-        while *brick + 1 < bricks.len() && bricks[*brick + 1].offset <= v {
-            *brick += 1;
-        }
-        sparse.voxel_f32(&bricks[*brick], v)
+    });
+    // An snorm texel reads as q / 32767: the shader's scale puts the 32767 back.
+    let scales = table.iter().map(|&e| match bricks.get(e as usize) {
+        Some(b) if snorm => [
+            b.scale[0] * f32::from(i16::MAX),
+            b.scale[1] * f32::from(i16::MAX),
+            0.0,
+            0.0,
+        ],
+        _ => [0.0; 4],
+    });
+    let texels: Vec<[f32; 4]> = if snorm {
+        entries.chain(scales).collect()
+    } else {
+        entries.collect()
     };
+    let table_dims = [mdims[0], mdims[1], mdims[2] * if snorm { 2 } else { 1 }];
+    let macro_cells = texture_3d(
+        ctx,
+        "sparse brick table",
+        table_dims,
+        wgpu::TextureFormat::Rgba32Float,
+        FIELD_TEXEL_BYTES as u32,
+        bytemuck::cast_slice(&texels),
+    )?;
+    params.grid_origin = top.origin.as_vec3().to_array();
+    params.grid_inv_spacing = [(1.0 / top.edge) as f32; 3];
+    params.grid_dims = mdims.map(|d| d + 1);
+    params.macro_dims = mdims;
+    params.macro_cell_voxels = 1;
+    params.macro_threshold = 0.5;
+    params.n_uncertainty = grin_field::IndexField::n_uncertainty(sparse) as f32;
+    params.flags |= FLAG_OUTSIDE_AMBIENT | FLAG_SPARSE;
+    if snorm {
+        params.flags |= FLAG_SPARSE_I16;
+    }
+    if !table.contains(&grin_field::sparse::EMPTY) {
+        params.flags &= !FLAG_MACRO_CELLS;
+    }
+    Ok(FieldTextures {
+        field,
+        macro_cells,
+        bytes: bytes + texels.len() as u64 * FIELD_TEXEL_BYTES,
+        dims,
+    })
+}
+
+/// Write `texture` (a linear one, `dims` of `SPARSE_ROW` x `SPARSE_ROW` x layers), texel
+/// `t` being `texel(t)` (asked for in order), a slab of layers at a time: each slab's
+/// texels are made just before and its staging flushed by a submission, so host memory
+/// holds one slab, not a copy of the whole field.
+fn upload_linear<T: bytemuck::Pod>(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    dims: [u32; 3],
+    mut texel: impl FnMut(usize) -> T,
+) -> Result<(), GpuError> {
+    let layer = SPARSE_ROW * SPARSE_ROW;
+    let depth = dims[2] as usize;
     let mut slab = Vec::new();
     let mut z = 0;
     while z < depth {
         let layers = SPARSE_UPLOAD_LAYERS.min(depth - z);
         let first = z * layer;
-        let mut brick = bricks
-            .partition_point(|b| b.offset + base <= first)
-            .saturating_sub(1);
         slab.clear();
-        slab.extend((first..first + layers * layer).map(|t| texel(t, &mut brick)));
+        slab.extend((first..first + layers * layer).map(&mut texel));
         ctx.scoped("uploading the sparse field texture", || {
             ctx.queue.write_texture(
                 wgpu::TexelCopyTextureInfo {
-                    texture: &field,
+                    texture,
                     mip_level: 0,
                     origin: wgpu::Origin3d {
                         x: 0,
@@ -409,7 +482,7 @@ pub fn upload_sparse(
                 bytemuck::cast_slice(&slab),
                 wgpu::TexelCopyBufferLayout {
                     offset: 0,
-                    bytes_per_row: Some(dims[0] * FIELD_TEXEL_BYTES as u32),
+                    bytes_per_row: Some(dims[0] * std::mem::size_of::<T>() as u32),
                     rows_per_image: Some(dims[1]),
                 },
                 wgpu::Extent3d {
@@ -422,43 +495,7 @@ pub fn upload_sparse(
         })?;
         z += layers;
     }
-    drop(slab);
-    let mdims = dims_u32(top.dims, "sparse top grid")?;
-    let occupancy: Vec<f32> = table
-        .iter()
-        .map(|&e| {
-            if e == grin_field::sparse::EMPTY {
-                0.0
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    let macro_cells = texture_3d(
-        ctx,
-        "sparse top grid",
-        mdims,
-        wgpu::TextureFormat::R32Float,
-        4,
-        bytemuck::cast_slice(&occupancy),
-    )?;
-    params.grid_origin = top.origin.as_vec3().to_array();
-    params.grid_inv_spacing = [(1.0 / top.edge) as f32; 3];
-    params.grid_dims = mdims.map(|d| d + 1);
-    params.macro_dims = mdims;
-    params.macro_cell_voxels = 1;
-    params.macro_threshold = 0.5;
-    params.n_uncertainty = grin_field::IndexField::n_uncertainty(sparse) as f32;
-    params.flags |= FLAG_OUTSIDE_AMBIENT | FLAG_SPARSE;
-    if !table.contains(&grin_field::sparse::EMPTY) {
-        params.flags &= !FLAG_MACRO_CELLS;
-    }
-    Ok(FieldTextures {
-        field,
-        macro_cells,
-        bytes: bytes + occupancy.len() as u64 * 4,
-        dims,
-    })
+    Ok(())
 }
 
 /// Placeholder textures for a scene without a medium (never sampled).

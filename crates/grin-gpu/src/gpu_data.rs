@@ -38,9 +38,14 @@ pub const FLAG_EXIT_HERMITE: u32 = 64;
 pub const FLAG_MEDIUM_OBJECTS: u32 = 128;
 /// The scene has objects (else the kernel is compiled without its surface code).
 pub const FLAG_HAS_OBJECTS: u32 = 256;
-/// The field is a sparse bake: `field_tex` holds its brick table and voxels as one linear
-/// array (crate::field::upload_sparse), the grid parameters place its top grid.
+/// The field is a sparse bake: `field_tex` holds its voxels as one linear array,
+/// `macro_tex` its brick table (crate::field::upload_sparse), the grid parameters place
+/// its top grid.
 pub const FLAG_SPARSE: u32 = 512;
+/// The sparse voxels are rgba16snorm, scaled per brick by the table's second block.
+pub const FLAG_SPARSE_I16: u32 = 1024;
+/// The flags a field's upload sets (crate::field): how the field is sampled.
+pub const FIELD_FLAGS: u32 = FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE | FLAG_SPARSE_I16;
 
 /// Passes of a frame (the `PASS` pipeline constant, shaders/shared/types.wgsl).
 pub const PASS_ALL: u32 = 0;

@@ -31,9 +31,7 @@ use grin_render::sky::SkyModel;
 use grin_scene::RenderSettings;
 
 use crate::field::GpuGrid;
-use crate::gpu_data::{
-    FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC, FrameParams,
-};
+use crate::gpu_data::{FIELD_FLAGS, FLAG_MACRO_CELLS, FrameParams};
 use crate::pack::{copy_uploaded, frame_params};
 use crate::pipelines::pipeline_constants;
 use crate::stages::{self, MarchOut, RayIn, StageKit, StagePipeline};
@@ -173,7 +171,7 @@ impl<'a> GpuRayTracer<'a> {
     ) -> Result<(Vec<GpuRay>, f64), GpuError> {
         let mut params = frame_params(&ray_scene(&self.field, settings)?)?;
         copy_uploaded(&mut params, &self.uploaded);
-        params.flags |= self.uploaded.flags & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE);
+        params.flags |= self.uploaded.flags & FIELD_FLAGS;
         if self.uploaded.flags & FLAG_MACRO_CELLS == 0 {
             params.flags &= !FLAG_MACRO_CELLS;
         }

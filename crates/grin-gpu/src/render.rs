@@ -538,8 +538,7 @@ impl<'a> GpuRenderer<'a> {
                 readback,
                 rows_per_band,
                 band_capacity: s.width * rows_per_band,
-                scene_flags: params.flags
-                    & (FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_MEDIUM_OBJECTS | FLAG_SPARSE),
+                scene_flags: params.flags & (FIELD_FLAGS | FLAG_MEDIUM_OBJECTS),
                 field,
                 warnings,
                 timer: PassTimer::new(ctx),

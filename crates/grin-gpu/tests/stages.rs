@@ -739,11 +739,18 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
 }
 
 /// A sparse bake (grin_field::sparse) on the GPU: `sample_field` reads its brick table
-/// and voxels (one linear texture) and the straight-flight walk crosses its empty bricks
-/// (the top grid as macro cells), as SparseField does on the CPU; points inside active
-/// bricks of every level, and all over the box.
+/// (the macro-cell texture) and voxels (one linear texture, f32 or rgba16snorm) and the
+/// straight-flight walk crosses its empty bricks, as SparseField does on the CPU; points
+/// inside active bricks of every level, and all over the box; f32 and i16 voxels.
 #[test]
 fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
+    use grin_field::baked::Storage;
+    for storage in [Storage::F32, Storage::I16] {
+        sparse_twin(storage);
+    }
+}
+
+fn sparse_twin(storage: grin_field::baked::Storage) {
     use grin_field::sparse::bake::{SparseOptions, bake_sparse};
     let text = std::fs::read_to_string(scene_path("plume")).unwrap();
     let start = text.find("field = { kind = \"plume\"").unwrap();
@@ -761,11 +768,13 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
     let source = grin_field::build_field(scene.medium.as_ref().unwrap(), dir).unwrap();
     let opts = SparseOptions {
         top_bricks: Some(24),
+        storage: Some(storage),
         ..Default::default()
     };
     let (sparse, report) = bake_sparse(source.as_ref(), &opts, &|_, _, _| {}).unwrap();
     let levels = report.levels.iter().filter(|&&n| n > 0).count();
     assert!(levels >= 3, "bricks of several levels: {:?}", report.levels);
+    assert_eq!(sparse.storage(), storage);
     let sparse = Arc::new(sparse);
     let rs = RenderScene::new(
         &scene,
@@ -776,6 +785,28 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
     let Some(ctx) = harness::context("stage sparse") else {
         return;
     };
+    // i16 voxels stay 16-bit on a device with rgba16snorm (lavapipe has it): half the bytes.
+    let mut params = <grin_gpu::gpu_data::FrameParams as bytemuck::Zeroable>::zeroed();
+    let up = grin_gpu::field::upload_sparse(&ctx, &sparse, &mut params).unwrap();
+    let snorm = params.flags & grin_gpu::gpu_data::FLAG_SPARSE_I16 != 0;
+    assert_eq!(
+        snorm,
+        storage == grin_field::baked::Storage::I16 && ctx.has_snorm16(),
+        "{storage:?} voxels"
+    );
+    let texel = if snorm { 8 } else { 16 };
+    assert!(
+        up.bytes >= sparse.pool().len() as u64 * texel
+            && up.bytes
+                < (sparse.pool().len() as u64 + 65536) * texel + sparse.table().len() as u64 * 32,
+        "{storage:?}: {} bytes for {} voxels",
+        up.bytes,
+        sparse.pool().len()
+    );
+    eprintln!(
+        "sparse {storage:?}: {} bytes on the device (snorm texels: {snorm})",
+        up.bytes
+    );
     // Half the points inside active bricks, half anywhere in the box.
     let mut rng = Rng(31);
     let (lo, hi) = sparse.bounds().aabb();
@@ -813,7 +844,7 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
         }
     }
     eprintln!(
-        "sparse sample: {varying} of {BATCH} points off ambient, worst |n| {worst_n:.2e}, worst rel grad {worst_g:.2e}"
+        "sparse {storage:?} sample: {varying} of {BATCH} points off ambient, worst |n| {worst_n:.2e}, worst rel grad {worst_g:.2e}"
     );
     assert!(
         (BATCH / 3..BATCH).contains(&varying),
@@ -850,7 +881,9 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
             _ => problems.push(format!("state {i}: span GPU {gpu:?} vs CPU {cpu:?}")),
         }
     }
-    eprintln!("sparse flights: {flights} of {BATCH} fly on both, worst rel span {worst:.2e}");
+    eprintln!(
+        "sparse {storage:?} flights: {flights} of {BATCH} fly on both, worst rel span {worst:.2e}"
+    );
     assert!(flights >= BATCH / 4, "too few flights to test: {flights}");
     assert!(
         problems.len() as f64 <= FLIP_FRACTION * BATCH as f64,
