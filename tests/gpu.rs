@@ -294,7 +294,8 @@ fn bench_speed_quick_reports_both_backends() {
     assert_eq!(sparse.len(), 3, "{r}");
     for row in sparse {
         let f = |k: &str| row[k].as_f64().unwrap_or(f64::NAN);
-        assert!(f("sparse_error") <= f("error"), "{row}");
+        // The same error: within 1% (grin_bench::cases::SAME_ERROR).
+        assert!(f("sparse_error") <= f("error") * 1.01, "{row}");
         assert!(f("sparse_bytes") > 0.0 && f("dense_bytes") > 0.0, "{row}");
         assert!(
             f("gpu_time_ratio") > 0.0 && f("cpu_time_ratio") > 0.0,

@@ -39,8 +39,8 @@ pub struct Args {
     #[arg(long)]
     pub no_crop: bool,
     /// Bake sparsely: bricks only where the index differs from ambient, each at the
-    /// coarsest of its levels that meets --error (a version-2 .grinf, trilinear; the CPU
-    /// backend renders it, the GPU backend not yet).
+    /// coarsest of its levels that meets --error (a version-2 .grinf, trilinear; both
+    /// backends render it).
     #[arg(long, conflicts_with_all = ["resolution", "interp", "no_crop"])]
     pub sparse: bool,
     /// With --sparse: bricks along the medium's longest axis (default: chosen, bricks of

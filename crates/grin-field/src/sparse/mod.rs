@@ -129,8 +129,12 @@ impl TopGrid {
     /// The brick holding top-grid point `g` (world point minus origin, over the edge):
     /// the nearest brick where `g` is beyond the grid (saturating casts: NaN and negatives
     /// to the first, past the end to the last; the far face belongs to the last brick).
+    ///
+    /// A float's `as usize` is its floor for the non-negative ones and saturates (NaN and
+    /// negatives to 0), so no floor is called (a libm call on baseline x86-64).
+    #[inline]
     pub fn brick_holding(&self, g: DVec3) -> [usize; 3] {
-        std::array::from_fn(|a| (g[a].floor().max(0.0) as usize).min(self.dims[a] - 1))
+        std::array::from_fn(|a| (g[a] as usize).min(self.dims[a] - 1))
     }
     /// World box of brick `at`.
     pub fn brick_box(&self, at: [usize; 3]) -> (DVec3, DVec3) {
@@ -170,6 +174,10 @@ pub struct SparseField {
     /// Per top-grid brick: the most cells a side of the active bricks among it and its 26
     /// neighbours (0: none active), the local step cap's feature.
     near_cells: Vec<u16>,
+    /// The finest level of any active brick (`None` when none is).
+    finest_level: Option<u8>,
+    /// 1 / the top grid's edge: top-grid coordinates are a product, as on the GPU.
+    inv_edge: f64,
 }
 
 /// Why a sparse field's parts do not fit together.
@@ -285,8 +293,11 @@ impl SparseField {
                 threshold: 0.5,
             },
             near_cells: Vec::new(),
+            finest_level: None,
+            inv_edge: 1.0 / top.edge,
         };
         field.near_cells = field.neighbourhood_cells();
+        field.finest_level = field.bricks.iter().map(|b| b.level).max();
         let (mut lo, mut hi, mut g) = (0.0f64, 0.0f64, 0.0f64);
         for (bi, b) in field.bricks.iter().enumerate() {
             for v in b.offset..b.offset + b.voxel_count() {
@@ -345,10 +356,14 @@ impl SparseField {
     /// features unseen: the local step cap ([`IndexField::step_cap`]), the GPU's too
     /// (the table texel's fourth channel).
     pub fn near_cells(&self, p: DVec3) -> u16 {
-        let at = self
-            .top
-            .brick_holding((p - self.top.origin) / self.top.edge);
+        let at = self.top.brick_holding(self.top_coords(p));
         self.near_cells[self.top.index(at)]
+    }
+
+    /// World point `p` in top-grid coordinates (bricks from the origin).
+    #[inline]
+    fn top_coords(&self, p: DVec3) -> DVec3 {
+        (p - self.top.origin) * self.inv_edge
     }
 
     /// The near-cells of table entry `i` (what the GPU upload stores).
@@ -391,11 +406,7 @@ impl SparseField {
     }
     /// The finest spacing any brick has (the top grid's edge when none is active).
     pub fn finest_spacing(&self) -> f64 {
-        self.bricks
-            .iter()
-            .map(|b| b.level)
-            .max()
-            .map_or(self.top.edge, |l| self.spacing(l))
+        self.finest_level.map_or(self.top.edge, |l| self.spacing(l))
     }
     /// Active bricks per level.
     pub fn level_counts(&self) -> [usize; MAX_LEVEL as usize + 1] {
@@ -445,7 +456,7 @@ impl SparseField {
     /// where `p` is beyond the top grid or in an empty brick.
     #[inline]
     fn locate(&self, p: DVec3) -> Option<(&Brick, DVec3)> {
-        let g = (p - self.top.origin) / self.top.edge;
+        let g = self.top_coords(p);
         for a in 0..3 {
             if !(g[a] >= 0.0 && g[a] <= self.top.dims[a] as f64) {
                 return None;
@@ -537,7 +548,7 @@ impl IndexField for SparseField {
     /// Empty bricks are exactly ambient: a ray in one flies straight to the next active
     /// brick (the top grid is the macro-cell grid).
     fn homogeneous_span(&self, p: DVec3, dir: DVec3) -> Option<f64> {
-        let g = (p - self.top.origin) / self.top.edge;
+        let g = self.top_coords(p);
         let d = DVec3::new(
             self.top.dims[0] as f64,
             self.top.dims[1] as f64,
@@ -547,7 +558,7 @@ impl IndexField for SparseField {
             return None;
         }
         let node_dims = self.top.dims.map(|n| n + 1);
-        self.macro_grid.span(g, dir / self.top.edge, node_dims)
+        self.macro_grid.span(g, dir * self.inv_edge, node_dims)
     }
     /// Twice the spacing of the finest brick in and next to the brick holding `p`
     /// ([`SparseField::near_cells`]): a step that long passes over no node of a finer
