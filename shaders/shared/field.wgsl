@@ -49,7 +49,11 @@ fn trilinear(g: vec3<f32>) -> vec4<f32> {
     let x10 = mix(c010, c110, t.x);
     let x01 = mix(c001, c101, t.x);
     let x11 = mix(c011, c111, t.x);
-    return mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+    let v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+    if (FLAGS & FLAG_FIELD_SNORM) != 0u {
+        return v * params.field_scale;
+    }
+    return v;
 }
 
 // Uniform cubic B-spline weights at fraction t (bspline::weights).
@@ -126,7 +130,7 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
 // macro_tex is the brick table, one texel per top brick: (cells a brick edge, first voxel
 // / 65536, first voxel % 65536, most cells a side among it and its 26 neighbours), with 0
 // cells for an empty brick (so the macro-cell test flies over it). Where the voxels are
-// i16 (FLAG_SPARSE_I16), a second block of as many texels follows in z: each brick's
+// i16 (FLAG_FIELD_SNORM), a second block of as many texels follows in z: each brick's
 // scales (delta_n, gradient), times 32767.
 // field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: every active
 // brick's (cells + 1)^3 nodes, x fastest, in f32 or rgba16snorm (q / 32767).
@@ -183,7 +187,7 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let x01 = mix(c001, c101, t.x);
     let x11 = mix(c011, c111, t.x);
     var v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
-    if (FLAGS & FLAG_SPARSE_I16) != 0u {
+    if (FLAGS & FLAG_FIELD_SNORM) != 0u {
         let bricks = params.grid_dims - vec3<u32>(1u);
         let s = textureLoad(macro_tex, vec3<i32>(b + vec3<u32>(0u, 0u, bricks.z)), 0);
         v = v * s.xyyy;

@@ -69,6 +69,8 @@ struct FrameParams {
     accuracy: f32,
     estimate_limit: f32,
     _pad3: f32,
+    // A dense rgba16snorm field's scales (FLAG_FIELD_SNORM): delta_n and grad n, x 32767.
+    field_scale: vec4<f32>,
 }
 
 struct GpuObject {
@@ -131,7 +133,7 @@ const FLAG_EXIT_HERMITE: u32 = 64u;
 const FLAG_MEDIUM_OBJECTS: u32 = 128u;
 const FLAG_HAS_OBJECTS: u32 = 256u;
 const FLAG_SPARSE: u32 = 512u;
-const FLAG_SPARSE_I16: u32 = 1024u;
+const FLAG_FIELD_SNORM: u32 = 1024u;
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_PLANE: u32 = 1u;
 const SHAPE_BOX: u32 = 2u;

@@ -1,7 +1,8 @@
-//! Baked fields on the GPU: the (delta_n, grad n) grid as an rgba32float 3D texture, the
-//! macro-cell grid as an r32float 3D texture, and their placement in `FrameParams`.
+//! Baked fields on the GPU: the (delta_n, grad n) grid as a 3D texture (rgba32float, or
+//! rgba16snorm for i16 voxels), the macro-cell grid as an r32float 3D texture (a sparse
+//! bake's brick table as rgba32float), and their placement in `FrameParams`.
 //!
-//! Format choice: rgba32float read with textureLoad and interpolated in the shader.
+//! Format choice: texels read with textureLoad and interpolated in the shader.
 //! rgba16float cannot hold n itself, and even delta_n of air (~1e-5) is a half-float
 //! subnormal there (spacing 6e-8: ~0.6% error, worse for heat haze's gradients);
 //! float32 filtering needs the optional FLOAT32_FILTERABLE feature, and filter hardware
@@ -9,14 +10,16 @@
 //! Manual trilinear costs 8 loads per sample but uses the CPU's weights exactly, so GPU
 //! and CPU march the same field: the GPU-vs-CPU tests measure p99 pixel differences
 //! <= 2e-5 with it. Its speed on lavapipe (`grin bench speed`, docs/benchmarks.md) is
-//! ~100 M trilinear samples/s on a 2-core VM. A dense i16 file is decoded to f32 on upload;
-//! a sparse one's voxels stay 16-bit as rgba16snorm where the device has that format
-//! ([`upload_sparse`]).
+//! ~100 M trilinear samples/s on a 2-core VM. i16 voxels (`grin bake`'s storage where its
+//! rounding fits the budget) stay 16-bit where the device has rgba16snorm
+//! ([`GpuContext::has_snorm16`]): half the memory, the same integers the CPU blends,
+//! scaled after the blend (a dense grid by `FrameParams::field_scale`, a sparse bake per
+//! brick); elsewhere, and for tricubic coefficients, f32.
 
 use std::sync::Arc;
 
 use grin_field::IndexField;
-use grin_field::baked::{BakedField, Interp, Outside};
+use grin_field::baked::{BakedField, Interp, Outside, Voxels};
 use grin_field::sparse::{Pool, SparseField};
 
 /// The policy for baking a field the GPU marches is grin-field's (its `bake::device`);
@@ -27,7 +30,7 @@ pub use grin_field::bake::device::{
 };
 
 use crate::gpu_data::{
-    FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_SPARSE_I16, FLAG_TRICUBIC,
+    FLAG_FIELD_SNORM, FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC,
     FrameParams,
 };
 use crate::{GpuContext, GpuError};
@@ -161,16 +164,35 @@ pub fn upload_field(
     let geometry = baked.geometry();
     let dims = dims_u32(geometry.dims, "baked grid")?;
     check_dims(ctx, "baked grid", dims)?;
-    // The spline coefficients are uploaded as they are (no copy); node samples as f32.
+    // The spline coefficients are uploaded as they are (no copy); i16 node samples as
+    // rgba16snorm where the device has it (scaled in the shader), else decoded to f32.
     let samples;
-    let texels: &[[f32; 4]] = match (baked.interp(), baked.spline_coefficients()) {
-        (Interp::Tricubic, Some(c)) => c,
-        _ => {
-            samples = baked.voxels().to_f32();
-            &samples
-        }
-    };
-    let bytes = texels.len() as u64 * FIELD_TEXEL_BYTES;
+    let (data, format, texel_bytes): (&[u8], _, _) =
+        match (baked.interp(), baked.spline_coefficients(), baked.voxels()) {
+            (Interp::Tricubic, Some(c), _) => (
+                bytemuck::cast_slice(c),
+                wgpu::TextureFormat::Rgba32Float,
+                FIELD_TEXEL_BYTES,
+            ),
+            (Interp::Trilinear, _, Voxels::I16 { data, scale }) if ctx.has_snorm16() => {
+                params.flags |= FLAG_FIELD_SNORM;
+                params.field_scale = scale.map(|s| s * f32::from(i16::MAX));
+                (
+                    bytemuck::cast_slice(data),
+                    wgpu::TextureFormat::Rgba16Snorm,
+                    SNORM_TEXEL_BYTES,
+                )
+            }
+            (_, _, v) => {
+                samples = v.to_f32();
+                (
+                    bytemuck::cast_slice(&samples),
+                    wgpu::TextureFormat::Rgba32Float,
+                    FIELD_TEXEL_BYTES,
+                )
+            }
+        };
+    let bytes = data.len() as u64;
     let max_buffer = ctx.limits().max_buffer_size;
     if bytes > max_buffer {
         return Err(GpuError::TooLarge {
@@ -180,14 +202,7 @@ pub fn upload_field(
             adapter: ctx.adapter_name(),
         });
     }
-    let field = texture_3d(
-        ctx,
-        "baked field",
-        dims,
-        wgpu::TextureFormat::Rgba32Float,
-        FIELD_TEXEL_BYTES as u32,
-        bytemuck::cast_slice(texels),
-    )?;
+    let field = texture_3d(ctx, "baked field", dims, format, texel_bytes as u32, data)?;
     let grid = baked.macro_grid();
     let mdims = dims_u32(grid.dims, "macro-cell grid")?;
     let macro_cells = texture_3d(
@@ -435,7 +450,7 @@ pub fn upload_sparse(
     params.n_uncertainty = grin_field::IndexField::n_uncertainty(sparse) as f32;
     params.flags |= FLAG_OUTSIDE_AMBIENT | FLAG_SPARSE;
     if snorm {
-        params.flags |= FLAG_SPARSE_I16;
+        params.flags |= FLAG_FIELD_SNORM;
     }
     if !table.contains(&grin_field::sparse::EMPTY) {
         params.flags &= !FLAG_MACRO_CELLS;

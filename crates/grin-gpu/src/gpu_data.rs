@@ -42,10 +42,11 @@ pub const FLAG_HAS_OBJECTS: u32 = 256;
 /// `macro_tex` its brick table (crate::field::upload_sparse), the grid parameters place
 /// its top grid.
 pub const FLAG_SPARSE: u32 = 512;
-/// The sparse voxels are rgba16snorm, scaled per brick by the table's second block.
-pub const FLAG_SPARSE_I16: u32 = 1024;
+/// The field's voxels are rgba16snorm (i16 / 32767): a dense grid's scaled by
+/// `FrameParams::field_scale`, a sparse one's per brick by its table's second block.
+pub const FLAG_FIELD_SNORM: u32 = 1024;
 /// The flags a field's upload sets (crate::field): how the field is sampled.
-pub const FIELD_FLAGS: u32 = FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE | FLAG_SPARSE_I16;
+pub const FIELD_FLAGS: u32 = FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE | FLAG_FIELD_SNORM;
 
 /// Passes of a frame (the `PASS` pipeline constant, shaders/shared/types.wgsl).
 pub const PASS_ALL: u32 = 0;
@@ -203,8 +204,11 @@ pub struct FrameParams {
     pub accuracy: f32,
     pub estimate_limit: f32,
     pub _pad3: f32,
+    /// A dense rgba16snorm field's scales (`FLAG_FIELD_SNORM`): delta_n and the gradient's
+    /// components, times 32767.
+    pub field_scale: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameParams>() == 24 * 16);
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 25 * 16);
 
 /// One scene object. Keep in sync with `GpuObject` in shaders/shared/types.wgsl.
 #[repr(C)]
@@ -404,6 +408,7 @@ pub(crate) mod tests {
             accuracy,
             estimate_limit,
             _pad3,
+            field_scale,
         );
         same_layout!(
             RENDER_WGSL,

@@ -162,6 +162,7 @@ pub(crate) fn copy_uploaded(p: &mut FrameParams, uploaded: &FrameParams) {
     p.macro_cell_voxels = uploaded.macro_cell_voxels;
     p.macro_threshold = uploaded.macro_threshold;
     p.n_uncertainty = uploaded.n_uncertainty;
+    p.field_scale = uploaded.field_scale;
     p.medium_objects_first = uploaded.medium_objects_first;
     p.medium_objects_count = uploaded.medium_objects_count;
 }

@@ -66,7 +66,7 @@ fn mirrored_constants_have_the_same_values() {
         ("FLAG_MEDIUM_OBJECTS", u(g::FLAG_MEDIUM_OBJECTS)),
         ("FLAG_HAS_OBJECTS", u(g::FLAG_HAS_OBJECTS)),
         ("FLAG_SPARSE", u(g::FLAG_SPARSE)),
-        ("FLAG_SPARSE_I16", u(g::FLAG_SPARSE_I16)),
+        ("FLAG_FIELD_SNORM", u(g::FLAG_FIELD_SNORM)),
         ("SPARSE_ROW", grin_gpu::field::SPARSE_ROW as f64),
         ("PASS_ALL", u(g::PASS_ALL)),
         ("PASS_FIRST", u(g::PASS_FIRST)),
