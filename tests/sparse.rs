@@ -325,8 +325,8 @@ fn hostile_sparse_files_are_clear_errors() {
 /// BOS of the eight plumes, dots on the plane behind the cube.
 const BOS: &str = "\n[optics]\nmode = \"bos\"\nplane = { point = [0.0, 0.0, 1300.0], normal = [0.0, 0.0, -1.0] }\ndots = { diameter = 6.0, density = 0.4, seed = 3 }\n[render]\nwidth = 160\nheight = 120\n";
 
-/// The sparse bake on the GPU (its brick table and voxels in one texture, the top grid as
-/// macro cells): the true BOS displacement of every pixel agrees with the CPU's march of
+/// The sparse bake on the GPU (its voxels in one linear texture, its brick table the
+/// macro-cell texture): the true BOS displacement of every pixel agrees with the CPU's march of
 /// the same bake, and both with the CPU's march of the analytic source.
 #[test]
 fn sparse_renders_agree_on_both_backends() {

@@ -7,9 +7,10 @@
 @group(0) @binding(1) var<storage, read> objects: array<GpuObject>;
 @group(0) @binding(2) var<storage, read> lights: array<GpuLight>;
 // (delta_n, dn/dx, dn/dy, dn/dz) per grid node (or their B-spline coefficients),
-// rgba32float, read with textureLoad (manual trilinear: see field.wgsl).
+// rgba32float or rgba16snorm (FLAG_FIELD_SNORM), read with textureLoad (manual
+// trilinear: see field.wgsl); a sparse bake's voxels as one linear array.
 @group(0) @binding(3) var field_tex: texture_3d<f32>;
-// max |grad n| per macro cell, r32float.
+// max |grad n| per macro cell, r32float; a sparse bake's brick table, rgba32float.
 @group(0) @binding(4) var macro_tex: texture_3d<f32>;
 // Equirectangular environment map, rgba32float (1x1 when the sky is a gradient).
 @group(0) @binding(5) var env_tex: texture_2d<f32>;

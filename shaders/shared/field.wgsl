@@ -2,7 +2,8 @@
 // CPU twin: grin_field::baked::BakedField::{sample, homogeneous_span} and
 // grin_field::baked::MacroGrid::span.
 //
-// Texels hold (delta_n, dn/dx, dn/dy, dn/dz) in f32 at the grid nodes (rgba32float).
+// Texels hold (delta_n, dn/dx, dn/dy, dn/dz) at the grid nodes: f32 (rgba32float), or
+// i16 / 32767 (rgba16snorm, FLAG_FIELD_SNORM) scaled by params.field_scale after the blend.
 // Interpolation is done here with textureLoad, not by the sampler: float32 filtering
 // needs the optional FLOAT32_FILTERABLE feature, and hardware filter weights may have
 // only 8 fractional bits; manual trilinear matches the CPU's weights exactly.

@@ -203,8 +203,8 @@ pub struct SparseRow {
     /// The dense bake's measured relative error: what the sparse bake's may not exceed
     /// (by more than 1%, `cases::SAME_ERROR`).
     pub error: f64,
-    /// The sparse bake's own measured relative error (the coarsest of the budgets tried
-    /// at or under `error`: `cases::sparse_matching`).
+    /// The sparse bake's own measured relative error (the bake of fewest bytes among the
+    /// budgets tried that measured within 1% of `error`: `cases::sparse_matching`).
     pub sparse_error: f64,
     pub dense_bytes: u64,
     pub sparse_bytes: u64,

@@ -465,7 +465,11 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<BakedField, GrinfError> {
         Storage::I16 => Voxels::I16 {
             data: data
                 .chunks_exact(8)
-                .map(|v| std::array::from_fn(|c| i16::from_le_bytes([v[2 * c], v[2 * c + 1]])))
+                .map(|v| {
+                    std::array::from_fn(|c| {
+                        i16::from_le_bytes([v[2 * c], v[2 * c + 1]]).max(-i16::MAX)
+                    })
+                })
                 .collect(),
             scale: h.scale,
         },

@@ -37,7 +37,7 @@ use crate::{GpuContext, GpuError};
 
 /// Bytes per texel of the field texture (rgba32float).
 pub const FIELD_TEXEL_BYTES: u64 = 16;
-/// Bytes per texel of an i16 sparse field's texture (rgba16snorm).
+/// Bytes per texel of an i16 field's texture (rgba16snorm), dense or sparse.
 pub const SNORM_TEXEL_BYTES: u64 = 8;
 
 /// The field's textures on the device.
@@ -328,7 +328,8 @@ pub fn upload(
 /// Texels per row and rows per layer of a sparse field's linear texture (field.wgsl's
 /// `SPARSE_ROW`).
 pub const SPARSE_ROW: usize = 256;
-/// Layers of the sparse field's texture written at a time (64 MiB of f32 texels).
+/// Layers of the sparse field's texture written at a time (64 MiB of f32 texels, 32 MiB
+/// of rgba16snorm ones).
 const SPARSE_UPLOAD_LAYERS: usize = 64;
 
 /// Upload a sparse bake (layout in shaders/shared/field.wgsl): its voxels in one linear
@@ -346,7 +347,14 @@ pub fn upload_sparse(
     let top = sparse.top();
     let table = sparse.table();
     let bricks = sparse.bricks();
-    let snorm = matches!(sparse.pool(), Pool::I16(_)) && ctx.has_snorm16();
+    // The table's scale block doubles its depth: f32 texels where that would not fit.
+    let snorm = matches!(sparse.pool(), Pool::I16(_))
+        && ctx.has_snorm16()
+        && 2 * top.dims[2] as u64 <= u64::from(ctx.limits().max_texture_dimension_3d);
+    let table_bytes = top.brick_count() as u64 * FIELD_TEXEL_BYTES * if snorm { 2 } else { 1 };
+    let mdims = dims_u32(top.dims, "sparse top grid")?;
+    let table_dims = [mdims[0], mdims[1], mdims[2] * if snorm { 2 } else { 1 }];
+    check_dims(ctx, "sparse brick table", table_dims)?;
     let (format, texel_bytes) = if snorm {
         (wgpu::TextureFormat::Rgba16Snorm, SNORM_TEXEL_BYTES)
     } else {
@@ -359,10 +367,14 @@ pub fn upload_sparse(
     check_dims(ctx, "sparse field", dims)?;
     let bytes = (layer * depth) as u64 * texel_bytes;
     let max_buffer = ctx.limits().max_buffer_size;
-    if bytes > max_buffer {
+    if bytes.max(table_bytes) > max_buffer {
         return Err(GpuError::TooLarge {
-            what: format!("sparse field of {} bricks", bricks.len()),
-            needed: format!("{bytes} bytes"),
+            what: format!(
+                "sparse field of {} bricks in a top grid of {}",
+                bricks.len(),
+                top.brick_count()
+            ),
+            needed: format!("{} bytes", bytes.max(table_bytes)),
             limit: format!("{max_buffer} bytes (max_buffer_size)"),
             adapter: ctx.adapter_name(),
         });
@@ -404,7 +416,6 @@ pub fn upload_sparse(
             })?
         }
     }
-    let mdims = dims_u32(top.dims, "sparse top grid")?;
     let entries = table.iter().enumerate().map(|(t, &e)| {
         let near = f32::from(sparse.near_cells_at(t));
         match bricks.get(e as usize) {
@@ -432,7 +443,6 @@ pub fn upload_sparse(
     } else {
         entries.collect()
     };
-    let table_dims = [mdims[0], mdims[1], mdims[2] * if snorm { 2 } else { 1 }];
     let macro_cells = texture_3d(
         ctx,
         "sparse brick table",

@@ -227,3 +227,22 @@ fn crafted_files_with_valid_checksums_are_refused() {
     let e = resealed(&|b| f64s(b, 48, [o[0] + 0.5, o[1], o[2]]));
     assert!(e.contains("does not cover the bounds"), "{e}");
 }
+
+/// i16 voxels are -32767..32767 times their scale: a file's -32768 (grin writes none) reads
+/// as -32767, as a GPU's rgba16snorm texel does, so both backends read the same integers.
+#[test]
+fn an_i16_voxel_of_minus_32768_reads_as_minus_32767() {
+    let f = baked(Storage::I16, Interp::Trilinear);
+    let mut b = to_bytes(&f);
+    let data = u32::from_le_bytes([b[12], b[13], b[14], b[15]]) as usize;
+    // Voxel 0's dn/dx.
+    b[data + 2..data + 4].copy_from_slice(&i16::MIN.to_le_bytes());
+    let n = b.len() - 4;
+    let crc = crc32fast::hash(&b[..n]);
+    b[n..].copy_from_slice(&crc.to_le_bytes());
+    let g = from_bytes(&b, "min.grinf").expect("an i16 file with -32768");
+    match g.voxels() {
+        Voxels::I16 { data, .. } => assert_eq!(data[0][1], -i16::MAX),
+        other => panic!("storage {:?}", other.storage()),
+    }
+}
