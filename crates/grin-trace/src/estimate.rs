@@ -187,18 +187,25 @@ impl ErrorEstimate {
     /// length the path's curvature changes on (every Luneburg ray heads out and bends
     /// back towards the centre, and half way out its parabola "grazed" the surface the ray
     /// crosses at 58 degrees; the step ends near the surface decide).
+    ///
+    /// The test needs 0 < v <= kappa |h|, so v^2 / (2 kappa) <= |h| v / 2 <= |h| / 2 (v a
+    /// cosine): deeper than |h| past the position error's margin it cannot hold, and the
+    /// normal is not asked for (a NaN depth fails that test and is checked as before).
+    #[inline]
     pub fn check_approach(
         &mut self,
         depth: f64,
-        normal: DVec3,
+        normal: impl FnOnce() -> DVec3,
         t: DVec3,
         n: f64,
         d: DVec3,
         h: f64,
     ) {
-        if self.near_miss || n.is_nan() || n <= 0.0 {
+        if self.near_miss || n.is_nan() || n <= 0.0 || depth - h.abs() > POSITION_SAFETY * self.pos
+        {
             return;
         }
+        let normal = normal();
         let v = t.normalize_or_zero().dot(normal);
         let kappa = -d.dot(normal) / (n * n);
         if v > 0.0 && kappa > 0.0 && v <= kappa * h.abs() {

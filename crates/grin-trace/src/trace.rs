@@ -560,7 +560,7 @@ impl<R: Real> March<R> {
             let p = next.r.to_dvec3();
             estimate.check_approach(
                 -bounds.signed_distance(p),
-                bounds.normal(p),
+                || bounds.normal(p),
                 next.t.to_dvec3(),
                 s1.n.to_f64(),
                 d1,

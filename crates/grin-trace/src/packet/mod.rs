@@ -561,12 +561,7 @@ fn finish_steps(s: &mut Soa, bounds: &Bounds, stepped: &[bool; LANES], sd0: &mut
     let pos_new = s.pos + (local_r + direction * h * n0);
     let vsum_new = s.vsum + local.over(n0);
     let sum_new = s.sum + feedback / n0;
-    // ErrorEstimate::check_approach at the new point.
     let sd_new = signed_distance(bounds, nr);
-    let normals = normal(bounds, nr);
-    let v = nt.normalize_or_zero().dot(normals);
-    let kappa = -d1.dot(normals) / (n1 * n1);
-    let closest = -sd_new - v * v / (L::splat(2.0) * kappa);
     let m = Mask::of(*stepped);
     s.r = m.select_v(nr, s.r);
     s.t = m.select_v(nt, s.t);
@@ -587,6 +582,19 @@ fn finish_steps(s: &mut Soa, bounds: &Bounds, stepped: &[bool; LANES], sd0: &mut
     *sd0 = m.select(sd_new, *sd0);
     s.n0 = m.select(n1, s.n0);
     s.g0 = m.select_v(g1, s.g0);
+    // ErrorEstimate::check_approach at the new point. Its test needs 0 < v <= kappa |h|,
+    // so v^2 / (2 kappa) <= |h| v / 2 <= |h| / 2 (v a cosine) and closest >= -sd - |h| / 2:
+    // where every lane is deeper than |h| past POSITION_SAFETY pos, no lane's test can hold
+    // (NaNs fail the depth test, so their lanes are tested), and the normals are skipped.
+    let deep = |i: usize| -sd_new.0[i] - h.0[i].abs() > POSITION_SAFETY * s.pos.0[i];
+    let (v, kappa, closest) = if (0..LANES).any(|i| stepped[i] && !deep(i)) {
+        let normals = normal(bounds, nr);
+        let v = nt.normalize_or_zero().dot(normals);
+        let kappa = -d1.dot(normals) / (n1 * n1);
+        (v, kappa, -sd_new - v * v / (L::splat(2.0) * kappa))
+    } else {
+        (L::splat(0.0), L::splat(0.0), L::splat(f64::INFINITY))
+    };
     for i in 0..LANES {
         if !stepped[i] {
             continue;
