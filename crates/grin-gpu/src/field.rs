@@ -59,9 +59,23 @@ impl FieldTextures {
     }
 }
 
+/// The texels a dense grid is uploaded as, and their bytes: rgba16snorm for trilinear i16
+/// voxels where the device has it, else rgba32float (f32 voxels, i16 ones decoded, or
+/// tricubic coefficients).
+fn dense_texels(ctx: &GpuContext, baked: &BakedField) -> (wgpu::TextureFormat, u64) {
+    if baked.interp() == Interp::Trilinear
+        && matches!(baked.voxels(), Voxels::I16 { .. })
+        && ctx.has_snorm16()
+    {
+        (wgpu::TextureFormat::Rgba16Snorm, SNORM_TEXEL_BYTES)
+    } else {
+        (wgpu::TextureFormat::Rgba32Float, FIELD_TEXEL_BYTES)
+    }
+}
+
 /// Whether `baked` fits the device as it is: its node counts within
-/// `max_texture_dimension_3d` and its f32 texels within `max_buffer_size`. `Err` says
-/// what is over which limit.
+/// `max_texture_dimension_3d` and its texels (as [`upload_field`] makes them) within
+/// `max_buffer_size`. `Err` says what is over which limit.
 pub fn fits_device(ctx: &GpuContext, baked: &BakedField) -> Result<(), String> {
     let limits = ctx.limits();
     let d = baked.geometry().dims;
@@ -72,10 +86,11 @@ pub fn fits_device(ctx: &GpuContext, baked: &BakedField) -> Result<(), String> {
             d[0], d[1], d[2]
         ));
     }
-    let bytes = d.iter().map(|&n| n as u64).product::<u64>() * FIELD_TEXEL_BYTES;
+    let (format, texel_bytes) = dense_texels(ctx, baked);
+    let bytes = d.iter().map(|&n| n as u64).product::<u64>() * texel_bytes;
     if bytes > limits.max_buffer_size {
         return Err(format!(
-            "grid {}x{}x{} needs {bytes} bytes as f32 texels, more than the adapter's max_buffer_size of {}",
+            "grid {}x{}x{} needs {bytes} bytes as {format:?} texels, more than the adapter's max_buffer_size of {}",
             d[0], d[1], d[2], limits.max_buffer_size
         ));
     }
@@ -167,31 +182,19 @@ pub fn upload_field(
     // The spline coefficients are uploaded as they are (no copy); i16 node samples as
     // rgba16snorm where the device has it (scaled in the shader), else decoded to f32.
     let samples;
-    let (data, format, texel_bytes): (&[u8], _, _) =
-        match (baked.interp(), baked.spline_coefficients(), baked.voxels()) {
-            (Interp::Tricubic, Some(c), _) => (
-                bytemuck::cast_slice(c),
-                wgpu::TextureFormat::Rgba32Float,
-                FIELD_TEXEL_BYTES,
-            ),
-            (Interp::Trilinear, _, Voxels::I16 { data, scale }) if ctx.has_snorm16() => {
-                params.flags |= FLAG_FIELD_SNORM;
-                params.field_scale = scale.map(|s| s * f32::from(i16::MAX));
-                (
-                    bytemuck::cast_slice(data),
-                    wgpu::TextureFormat::Rgba16Snorm,
-                    SNORM_TEXEL_BYTES,
-                )
-            }
-            (_, _, v) => {
-                samples = v.to_f32();
-                (
-                    bytemuck::cast_slice(&samples),
-                    wgpu::TextureFormat::Rgba32Float,
-                    FIELD_TEXEL_BYTES,
-                )
-            }
-        };
+    let (format, texel_bytes) = dense_texels(ctx, baked);
+    let data: &[u8] = match (baked.spline_coefficients(), baked.voxels()) {
+        (Some(c), _) if baked.interp() == Interp::Tricubic => bytemuck::cast_slice(c),
+        (_, Voxels::I16 { data, scale }) if format == wgpu::TextureFormat::Rgba16Snorm => {
+            params.flags |= FLAG_FIELD_SNORM;
+            params.field_scale = scale.map(|s| s * f32::from(i16::MAX));
+            bytemuck::cast_slice(data)
+        }
+        (_, v) => {
+            samples = v.to_f32();
+            bytemuck::cast_slice(&samples)
+        }
+    };
     let bytes = data.len() as u64;
     let max_buffer = ctx.limits().max_buffer_size;
     if bytes > max_buffer {
