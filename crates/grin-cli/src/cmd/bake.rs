@@ -300,8 +300,49 @@ fn summary_text(out: &Path, source: &str, r: &BakeReport) -> String {
     lines.join("\n")
 }
 
+/// Add report `$r`'s measured errors against the budget to JSON object `$v`, as both
+/// bake summaries list them (their reports name the fields alike).
+macro_rules! add_errors {
+    ($v:expr, $r:expr) => {
+        if let Some(o) = $v.as_object_mut() {
+            o.extend(errors_json(
+                &$r.errors,
+                $r.delta_n_range,
+                $r.relative_error,
+                $r.budget,
+                ($r.meets_budget, $r.source_limited),
+            ));
+        }
+    };
+}
+
+/// The measured errors against the budget (see `add_errors`).
+fn errors_json(
+    e: &grin_field::bake::ErrorStats,
+    delta_n_range: f64,
+    relative_error: f64,
+    budget: f64,
+    met: (bool, bool),
+) -> serde_json::Map<String, serde_json::Value> {
+    let serde_json::Value::Object(map) = serde_json::json!({
+        "max_err_n": e.max_err_n,
+        "rms_err_n": e.rms_err_n,
+        "max_err_grad": e.max_err_grad,
+        "rms_err_grad": e.rms_err_grad,
+        "error_points": e.points,
+        "delta_n_range": delta_n_range,
+        "relative_error": relative_error,
+        "budget": budget,
+        "meets_budget": met.0,
+        "source_limited": met.1,
+    }) else {
+        unreachable!("a JSON object literal")
+    };
+    map
+}
+
 fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
-    serde_json::json!({
+    let mut v = serde_json::json!({
         "output": out.display().to_string(),
         "source": source,
         "resolution": r.resolution,
@@ -312,16 +353,6 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
         "storage": r.storage.name(),
         "interp": r.interp.name(),
         "bytes": r.bytes,
-        "max_err_n": r.errors.max_err_n,
-        "rms_err_n": r.errors.rms_err_n,
-        "max_err_grad": r.errors.max_err_grad,
-        "rms_err_grad": r.errors.rms_err_grad,
-        "error_points": r.errors.points,
-        "delta_n_range": r.delta_n_range,
-        "relative_error": r.relative_error,
-        "budget": r.budget,
-        "meets_budget": r.meets_budget,
-        "source_limited": r.source_limited,
         "memory_capped": r.memory_capped,
         "trials": r.trials.iter().map(|t| serde_json::json!({
             "resolution": t.resolution,
@@ -333,7 +364,9 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
         "seconds": r.seconds,
         "source_evals": r.source_evals,
         "homogeneous_cells": r.homogeneous_cells,
-    })
+    });
+    add_errors!(v, r);
+    v
 }
 
 /// A progress bar for a bake's stages and the callback that drives it (a stage's name,
@@ -391,7 +424,7 @@ fn bake_sparse(
             r.limited_bricks
         );
     }
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "output": output.display().to_string(),
         "source": field.describe(),
         "sparse": true,
@@ -406,21 +439,12 @@ fn bake_sparse(
         "bytes": r.bytes,
         "memory_bytes": r.memory_bytes,
         "dense_bytes": r.dense_bytes,
-        "max_err_n": r.errors.max_err_n,
-        "rms_err_n": r.errors.rms_err_n,
-        "max_err_grad": r.errors.max_err_grad,
-        "rms_err_grad": r.errors.rms_err_grad,
-        "error_points": r.errors.points,
-        "delta_n_range": r.delta_n_range,
-        "relative_error": r.relative_error,
-        "budget": r.budget,
-        "meets_budget": r.meets_budget,
-        "source_limited": r.source_limited,
         "limited_bricks": r.limited_bricks,
         "proven_empty": r.proven_empty,
         "seconds": r.seconds,
         "source_evals": r.source_evals,
     });
+    add_errors!(summary, r);
     let to_stream = crate::is_stream(output);
     if json {
         crate::report(to_stream, serde_json::to_string_pretty(&summary)?);
