@@ -130,10 +130,19 @@ impl TracePlan {
 
     /// Trace `rows` in parallel (rayon), in the plan's precision.
     pub fn trace(&self, rows: &[RayRow]) -> Vec<RayResult> {
+        let mut out = Vec::new();
+        self.trace_into(rows, &mut out);
+        out
+    }
+
+    /// [`Self::trace`] into `out` (one result a row after): a table traced batch by
+    /// batch reuses one vector.
+    pub fn trace_into(&self, rows: &[RayRow], out: &mut Vec<RayResult>) {
+        let (field, settings) = (self.field.as_ref(), &self.settings);
         if self.f32 {
-            grin_trace::table::trace_rows::<f32>(self.field.as_ref(), &self.settings, rows)
+            grin_trace::table::trace_rows_into::<f32>(field, settings, rows, out);
         } else {
-            grin_trace::table::trace_rows::<f64>(self.field.as_ref(), &self.settings, rows)
+            grin_trace::table::trace_rows_into::<f64>(field, settings, rows, out);
         }
     }
 }

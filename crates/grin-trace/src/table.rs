@@ -365,8 +365,11 @@ pub fn parse_rays(text: &str, path: &Path) -> Result<RayTable, TableError> {
     RayReader::new(text.as_bytes(), path)?.read_all()
 }
 
-/// Rows a packet tracer takes from the table at a time (crate::packet).
-const PACKET_CHUNK: usize = 256;
+/// Rows a packet tracer takes from the table at a time (crate::packet): a quarter of
+/// each thread's share, within these bounds. Its lanes idle while the last rays of a
+/// chunk finish, so larger chunks waste less (1024 rows trace the rod table about 5 %
+/// faster than 256), and four chunks a thread keep the threads evenly busy.
+const PACKET_CHUNK: std::ops::RangeInclusive<usize> = 64..=1024;
 
 /// Trace every row in parallel (rayon) in precision `R`: in packets
 /// ([`crate::packet::trace_packets`], the same results) where the settings and the
@@ -376,19 +379,36 @@ pub fn trace_rows<R: Real>(
     settings: &TraceSettings,
     rows: &[RayRow],
 ) -> Vec<RayResult> {
+    let mut out = Vec::new();
+    trace_rows_into::<R>(field, settings, rows, &mut out);
+    out
+}
+
+/// [`trace_rows`] into `out`, which ends with one result a row: a caller tracing batch
+/// after batch passes the same vector, and no batch allocates or gathers its results
+/// (each chunk of rows writes its own slice in place).
+pub fn trace_rows_into<R: Real>(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    rows: &[RayRow],
+    out: &mut Vec<RayResult>,
+) {
+    out.resize(rows.len(), crate::packet::unreachable_result());
     if crate::packet::traced_in_packets::<R>(settings) {
-        return rows
-            .par_chunks(PACKET_CHUNK)
-            .flat_map_iter(|chunk| {
+        let share = rows.len() / (4 * rayon::current_num_threads());
+        let chunk = share.clamp(*PACKET_CHUNK.start(), *PACKET_CHUNK.end());
+        out.par_chunks_mut(chunk)
+            .zip(rows.par_chunks(chunk))
+            .for_each(|(out, chunk)| {
                 let rays: Vec<(DVec3, DVec3)> =
                     chunk.iter().map(|row| (row.origin, row.dir)).collect();
-                crate::packet::trace_packets(field, settings, &rays)
-            })
-            .collect();
+                crate::packet::trace_packets_into(field, settings, &rays, out);
+            });
+    } else {
+        out.par_iter_mut().zip(rows).for_each(|(out, row)| {
+            *out = trace_ray::<R>(field, settings, row.origin, row.dir);
+        });
     }
-    rows.par_iter()
-        .map(|row| trace_ray::<R>(field, settings, row.origin, row.dir))
-        .collect()
 }
 
 /// Counts and means over a traced table.

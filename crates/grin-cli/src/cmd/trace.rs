@@ -179,9 +179,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut failed: Option<table::TableError> = None;
     let written = grin_output::write_file(&args.output, |w| {
         let mut out = table::TableWriter::new(format, reader.extra_columns());
+        let mut results = Vec::new();
         loop {
             let start = Instant::now();
-            let results = plan.trace(&rows);
+            plan.trace_into(&rows, &mut results);
             seconds += start.elapsed().as_secs_f64();
             s.add(&results);
             out.rows(w, &rows, &results)?;

@@ -102,6 +102,25 @@ pub fn trace_packets(
     trace_packets_counted(field, settings, rays).0
 }
 
+/// [`trace_packets`] into `out` (one result a ray, in order; `out.len() == rays.len()`),
+/// with what the packets did: a caller tracing a table writes each chunk's results in
+/// place, with no vector of its own to gather and copy.
+pub fn trace_packets_into(
+    field: &dyn IndexField,
+    settings: &TraceSettings,
+    rays: &[(DVec3, DVec3)],
+    out: &mut [RayResult],
+) -> PacketCounts {
+    assert_eq!(rays.len(), out.len(), "one result a ray");
+    if !packets_apply(settings) {
+        for (o, &(origin, dir)) in out.iter_mut().zip(rays) {
+            *o = crate::trace::trace_ray::<f64>(field, settings, origin, dir);
+        }
+        return PacketCounts::default();
+    }
+    trace_packets_with(field, settings, rays, out, packet_step(settings, false))
+}
+
 /// What the packets did of a trace: the plain steps they took, and the exits they found
 /// (the step that leaves, searched in the packet; the march only records it). The rest
 /// was the scalar tracer's.
@@ -117,24 +136,21 @@ pub fn trace_packets_counted(
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
 ) -> (Vec<RayResult>, PacketCounts) {
-    if !packets_apply(settings) {
-        let results = rays
-            .iter()
-            .map(|&(o, d)| crate::trace::trace_ray::<f64>(field, settings, o, d))
-            .collect();
-        return (results, PacketCounts::default());
-    }
-    trace_packets_with(field, settings, rays, packet_step(settings, false))
+    let mut out = vec![unreachable_result(); rays.len()];
+    let counts = trace_packets_into(field, settings, rays, &mut out);
+    (out, counts)
 }
 
+/// The packets' trace of `rays` into `out` (the same length): every ray's result is set
+/// before the queue and the lanes run dry.
 fn trace_packets_with(
     field: &dyn IndexField,
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
+    out: &mut [RayResult],
     march_packet: PacketStep,
-) -> (Vec<RayResult>, PacketCounts) {
+) -> PacketCounts {
     let mut counts = PacketCounts::default();
-    let mut out: Vec<Option<RayResult>> = vec![None; rays.len()];
     let mut queue = 0..rays.len();
     let mut lanes: [Option<(usize, March<f64>)>; LANES] = array::from_fn(|_| None);
     // The lanes' state stays in lane vectors between packet calls; a lane moves back
@@ -151,7 +167,7 @@ fn trace_packets_with(
                         soa.load(i, &m);
                         *slot = Some((k, m));
                     }
-                    Err(done) => out[k] = Some(done),
+                    Err(done) => out[k] = done,
                 }
             }
         }
@@ -176,22 +192,20 @@ fn trace_packets_with(
             };
             match done {
                 Some(done) => {
-                    out[*k] = Some(done);
+                    out[*k] = done;
                     *slot = None;
                 }
                 None => soa.load(i, m),
             }
         }
     }
-    let results = out
-        .into_iter()
-        .map(|r| r.unwrap_or_else(unreachable_result))
-        .collect();
-    (results, counts)
+    counts
 }
 
-/// Never used: every ray's result is set before the queue and the lanes run dry.
-fn unreachable_result() -> RayResult {
+/// What a result slot holds before its ray is traced: an `error` with no estimate it
+/// could vouch for (every slot is overwritten; a slot that were not would not pass for
+/// a traced ray).
+pub(crate) fn unreachable_result() -> RayResult {
     RayResult {
         error_estimate: f64::INFINITY,
         ..RayResult::at(crate::trace::RayStatus::Error, DVec3::ZERO, DVec3::ZERO)
