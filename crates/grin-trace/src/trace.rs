@@ -296,9 +296,9 @@ impl<R: Real> March<R> {
                 res.position = p;
                 return Err(res);
             }
-            surface.error +=
-                refraction_uncertainty(d, bounds.normal(p), n_amb, n_in, n_in, surface.dn);
-            match refract(d, bounds.normal(p), n_amb, n_in) {
+            let normal = bounds.normal(p);
+            surface.error += refraction_uncertainty(d, normal, n_amb, n_in, n_in, surface.dn);
+            match refract(d, normal, n_amb, n_in) {
                 Interface::Transmitted { dir, reflectance } => {
                     res.transmittance *= 1.0 - reflectance;
                     (p, dir, Some(entry))
@@ -636,16 +636,13 @@ fn leave<R: Real>(
     let d_in = state.t.to_dvec3().normalize_or_zero();
     // A total reflection the index error could have turned into a transmission (or the
     // reverse) makes the rest of the ray uncertain too: it is kept in `surface.error`.
-    surface.error += refraction_uncertainty(d_in, bounds.normal(p), n_in, n_amb, n_in, surface.dn);
-    match refract(d_in, bounds.normal(p), n_in, n_amb) {
+    let normal = bounds.normal(p);
+    surface.error += refraction_uncertainty(d_in, normal, n_in, n_amb, n_in, surface.dn);
+    match refract(d_in, normal, n_in, n_amb) {
         Interface::Transmitted { dir, reflectance } => {
             res.transmittance *= 1.0 - reflectance;
-            res.error_estimate = estimate.value(
-                state.t.to_dvec3(),
-                n_in,
-                bounds.normal(p),
-                s.n_grad_n().to_dvec3(),
-            );
+            res.error_estimate =
+                estimate.value(state.t.to_dvec3(), n_in, normal, s.n_grad_n().to_dvec3());
             res.crossing_uncertainty = surface.error;
             res.status = if res.error_estimate > surface.estimate_limit
                 || surface.error > CROSSING_FACTOR * surface.accuracy
@@ -662,7 +659,7 @@ fn leave<R: Real>(
             estimate.break_sequence();
             // Mirror T itself (not n times the unit direction), so |T| and the components
             // along the surface are kept exactly.
-            let normal = R::V3::from_dvec3(bounds.normal(p));
+            let normal = R::V3::from_dvec3(normal);
             state.t = state.t - normal * (R::from_f64(2.0) * state.t.dot(normal));
             None
         }

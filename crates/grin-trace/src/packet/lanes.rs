@@ -196,14 +196,30 @@ pub(super) fn signed_distance(bounds: &Bounds, p: V) -> L {
 pub(super) fn sample(field: &dyn IndexField, p: V) -> (L, V) {
     let mut out = [[0.0; LANES]; 4];
     field.sample4([p.x.0, p.y.0, p.z.0], &mut out);
+    let lanes = |k: usize| L(read_halves(&out[k]));
     (
-        L(out[0]),
+        lanes(0),
         V {
-            x: L(out[1]),
-            y: L(out[2]),
-            z: L(out[3]),
+            x: lanes(1),
+            y: lanes(2),
+            z: lanes(3),
         },
     )
+}
+
+/// Four lanes read as two halves. A compiled expression (crate grin_field's JIT) stores
+/// its results two lanes at a time, and a four-lane read of two stores cannot take its
+/// value from them until both have retired (a store-forwarding stall after every field
+/// sample); each half read alone is forwarded from its store.
+#[inline(always)]
+#[allow(unsafe_code)]
+fn read_halves(v: &[f64; 4]) -> [f64; 4] {
+    let half = (v as *const [f64; 4]).cast::<[f64; 2]>();
+    // SAFETY: `half` and `half.add(1)` are the two aligned, initialised halves of the
+    // borrowed `v` ([f64; 4] is laid out as [[f64; 2]; 2]). Volatile only so that the
+    // compiler keeps them two reads rather than merging them into one.
+    let (lo, hi) = unsafe { (half.read_volatile(), half.add(1).read_volatile()) };
+    [lo[0], lo[1], hi[0], hi[1]]
 }
 
 /// The outward unit normal of the bounds nearest each lane's point (Bounds::normal's
