@@ -220,6 +220,42 @@ pub fn trace_ray_jittered<R: Real>(
     }
 }
 
+/// What every ray's march through one field, with one set of settings and in one
+/// precision, starts from: asked of the field once for a table, not once a ray.
+#[derive(Debug, Clone)]
+pub(crate) struct MarchStart {
+    bounds: Bounds,
+    /// No crossing yet.
+    surface: Surface,
+    /// Not jittered.
+    ctrl: StepController,
+    estimate: ErrorEstimate,
+    exit_tol: f64,
+    min_flight: f64,
+}
+
+impl MarchStart {
+    /// For rays through `field` with `settings`, in precision `R`.
+    pub(crate) fn new<R: Real>(field: &dyn IndexField, settings: &TraceSettings) -> Self {
+        let bounds = field.bounds();
+        MarchStart {
+            bounds,
+            surface: Surface {
+                n_amb: field.ambient_index(),
+                dn: field.n_uncertainty(),
+                error: 0.0,
+                accuracy: settings.accuracy,
+                estimate_limit: settings.estimate_limit,
+            },
+            ctrl: StepController::new(settings.step, settings.integrator, field),
+            estimate: ErrorEstimate::for_integrator(settings.integrator),
+            exit_tol: exit_tolerance::<R>(&bounds),
+            min_flight: (MIN_SPAN_REL * bounds.radius())
+                .max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0)),
+        }
+    }
+}
+
 /// A ray on its way through the medium: everything the step loop carries from one step
 /// to the next. [`March::begin`] enters the medium, [`March::advance`] takes one step (or
 /// straight flight) and says when the ray is done; the packet tracer
@@ -252,6 +288,21 @@ impl<R: Real> March<R> {
         dir: DVec3,
         first_step_scale: f64,
     ) -> Result<Self, RayResult> {
+        let init = MarchStart::new::<R>(field, settings);
+        Self::begin_from(&init, field, settings, origin, dir, first_step_scale)
+    }
+
+    /// [`Self::begin`] from what every ray of the trace starts with (`init`, made for
+    /// this `field`, these `settings` and precision `R`).
+    #[allow(clippy::result_large_err)]
+    pub(crate) fn begin_from(
+        init: &MarchStart,
+        field: &dyn IndexField,
+        settings: &TraceSettings,
+        origin: DVec3,
+        dir: DVec3,
+        first_step_scale: f64,
+    ) -> Result<Self, RayResult> {
         let mut res = RayResult::at(RayStatus::Error, origin, DVec3::ZERO);
         let len2 = dir.length_squared();
         if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
@@ -264,18 +315,11 @@ impl<R: Real> March<R> {
         }
         let d = dir / len2.sqrt();
         res.direction = d;
-        let bounds = field.bounds();
-        let n_amb = field.ambient_index();
-
+        let bounds = init.bounds;
         // Direction error the crossings of the bounds add (the field's n uncertainty,
         // amplified at grazing angles): the entry's here, the exit's in `leave`.
-        let mut surface = Surface {
-            n_amb,
-            dn: field.n_uncertainty(),
-            error: 0.0,
-            accuracy: settings.accuracy,
-            estimate_limit: settings.estimate_limit,
-        };
+        let mut surface = init.surface;
+        let n_amb = surface.n_amb;
         // Entry (the field sampled where the ray enters is the march's first sample).
         let (start, d_in, s_entry) = if bounds.signed_distance(origin) < 0.0 {
             (origin, d, None)
@@ -334,26 +378,17 @@ impl<R: Real> March<R> {
             r,
             t: R::V3::from_dvec3(d_in) * s0.n + s0.grad_n * R::from_f64(skip),
         };
-        let comp = RayState::<R>::zero();
-        let ctrl = StepController::new(settings.step, settings.integrator, field)
-            .with_jitter(first_step_scale);
-        let len_scale = bounds.radius();
-        let exit_tol = exit_tolerance::<R>(&bounds);
-        let estimate = ErrorEstimate::for_integrator(settings.integrator);
-        let min_flight = (MIN_SPAN_REL * len_scale)
-            .max(MIN_FLIGHT_VOXELS * field.source_spacing().unwrap_or(0.0));
-
         Ok(March {
             res,
             state,
             s0,
-            comp,
-            ctrl,
-            estimate,
+            comp: RayState::<R>::zero(),
+            ctrl: init.ctrl.clone().with_jitter(first_step_scale),
+            estimate: init.estimate,
             surface,
             bounds,
-            exit_tol,
-            min_flight,
+            exit_tol: init.exit_tol,
+            min_flight: init.min_flight,
         })
     }
 

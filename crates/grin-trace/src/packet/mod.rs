@@ -42,7 +42,7 @@ use crate::estimate::POSITION_SAFETY;
 use crate::exit_search::{ExitSearch, Phase};
 use crate::integrate::RayState;
 use crate::step::StepController;
-use crate::trace::{Control, March, RayResult};
+use crate::trace::{Control, March, MarchStart, RayResult};
 use grin_render::settings::TraceSettings;
 
 /// Rays a packet advances together.
@@ -157,12 +157,13 @@ fn trace_packets_with(
     // into its march only for the march's own steps (and moves in again after them).
     let mut soa = Soa::new();
     let mut cont = |_: &Segment| Control::Continue;
+    let init = MarchStart::new::<f64>(field, settings);
     loop {
         for (i, slot) in lanes.iter_mut().enumerate() {
             while slot.is_none() {
                 let Some(k) = queue.next() else { break };
                 let (o, d) = rays[k];
-                match March::<f64>::begin(field, settings, o, d, 1.0) {
+                match March::<f64>::begin_from(&init, field, settings, o, d, 1.0) {
                     Ok(m) => {
                         soa.load(i, &m);
                         *slot = Some((k, m));
