@@ -63,10 +63,16 @@ impl FieldTextures {
 /// voxels where the device has it, else rgba32float (f32 voxels, i16 ones decoded, or
 /// tricubic coefficients).
 fn dense_texels(ctx: &GpuContext, baked: &BakedField) -> (wgpu::TextureFormat, u64) {
-    if baked.interp() == Interp::Trilinear
-        && matches!(baked.voxels(), Voxels::I16 { .. })
-        && ctx.has_snorm16()
-    {
+    field_texels(
+        baked.interp() == Interp::Trilinear
+            && matches!(baked.voxels(), Voxels::I16 { .. })
+            && ctx.has_snorm16(),
+    )
+}
+
+/// A field texture's texel format and bytes: rgba16snorm where `snorm`, else rgba32float.
+fn field_texels(snorm: bool) -> (wgpu::TextureFormat, u64) {
+    if snorm {
         (wgpu::TextureFormat::Rgba16Snorm, SNORM_TEXEL_BYTES)
     } else {
         (wgpu::TextureFormat::Rgba32Float, FIELD_TEXEL_BYTES)
@@ -354,15 +360,13 @@ pub fn upload_sparse(
     let snorm = matches!(sparse.pool(), Pool::I16(_))
         && ctx.has_snorm16()
         && 2 * top.dims[2] as u64 <= u64::from(ctx.limits().max_texture_dimension_3d);
-    let table_bytes = top.brick_count() as u64 * FIELD_TEXEL_BYTES * if snorm { 2 } else { 1 };
+    // The table's blocks: the entries, then for snorm voxels the scales.
+    let blocks: u32 = if snorm { 2 } else { 1 };
+    let table_bytes = top.brick_count() as u64 * FIELD_TEXEL_BYTES * u64::from(blocks);
     let mdims = dims_u32(top.dims, "sparse top grid")?;
-    let table_dims = [mdims[0], mdims[1], mdims[2] * if snorm { 2 } else { 1 }];
+    let table_dims = [mdims[0], mdims[1], mdims[2] * blocks];
     check_dims(ctx, "sparse brick table", table_dims)?;
-    let (format, texel_bytes) = if snorm {
-        (wgpu::TextureFormat::Rgba16Snorm, SNORM_TEXEL_BYTES)
-    } else {
-        (wgpu::TextureFormat::Rgba32Float, FIELD_TEXEL_BYTES)
-    };
+    let (format, texel_bytes) = field_texels(snorm);
     let voxels = sparse.pool().len();
     let layer = SPARSE_ROW * SPARSE_ROW;
     let depth = voxels.div_ceil(layer).max(1);
@@ -403,15 +407,14 @@ pub fn upload_sparse(
             upload_linear(ctx, &field, dims, |t| p.get(t).copied().unwrap_or_default())?
         }
         _ => {
-            // The brick holding the last texel asked for: texels are asked for in order.
+            // The brick holding the last texel asked for: `upload_linear` asks for the
+            // texels in order, so the brick only moves on.
             let mut brick = 0;
             upload_linear(ctx, &field, dims, |v| {
                 if v >= voxels {
                     return [0.0; 4];
                 }
-                if bricks[brick].offset > v {
-                    brick = 0;
-                }
+                debug_assert!(bricks[brick].offset <= v, "texels asked for in order");
                 while brick + 1 < bricks.len() && bricks[brick + 1].offset <= v {
                     brick += 1;
                 }

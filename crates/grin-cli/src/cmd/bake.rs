@@ -300,31 +300,18 @@ fn summary_text(out: &Path, source: &str, r: &BakeReport) -> String {
     lines.join("\n")
 }
 
-/// Add report `$r`'s measured errors against the budget to JSON object `$v`, as both
-/// bake summaries list them (their reports name the fields alike).
-macro_rules! add_errors {
-    ($v:expr, $r:expr) => {
-        if let Some(o) = $v.as_object_mut() {
-            o.extend(errors_json(
-                &$r.errors,
-                $r.delta_n_range,
-                $r.relative_error,
-                $r.budget,
-                ($r.meets_budget, $r.source_limited),
-            ));
-        }
-    };
-}
-
-/// The measured errors against the budget (see `add_errors`).
-fn errors_json(
+/// Add a bake's measured errors against the budget to the JSON object `v`, as both bake
+/// summaries list them: the error statistics `e`, the range of delta n, the error
+/// relative to it, the budget, and (met, source-limited).
+fn add_errors(
+    v: &mut serde_json::Value,
     e: &grin_field::bake::ErrorStats,
     delta_n_range: f64,
     relative_error: f64,
     budget: f64,
     met: (bool, bool),
-) -> serde_json::Map<String, serde_json::Value> {
-    let serde_json::Value::Object(map) = serde_json::json!({
+) {
+    let errors = serde_json::json!({
         "max_err_n": e.max_err_n,
         "rms_err_n": e.rms_err_n,
         "max_err_grad": e.max_err_grad,
@@ -335,10 +322,10 @@ fn errors_json(
         "budget": budget,
         "meets_budget": met.0,
         "source_limited": met.1,
-    }) else {
-        unreachable!("a JSON object literal")
-    };
-    map
+    });
+    if let (Some(o), serde_json::Value::Object(errors)) = (v.as_object_mut(), errors) {
+        o.extend(errors);
+    }
 }
 
 fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
@@ -365,7 +352,15 @@ fn summary_json(out: &Path, source: &str, r: &BakeReport) -> serde_json::Value {
         "source_evals": r.source_evals,
         "homogeneous_cells": r.homogeneous_cells,
     });
-    add_errors!(v, r);
+    let met = (r.meets_budget, r.source_limited);
+    add_errors(
+        &mut v,
+        &r.errors,
+        r.delta_n_range,
+        r.relative_error,
+        r.budget,
+        met,
+    );
     v
 }
 
@@ -444,7 +439,15 @@ fn bake_sparse(
         "seconds": r.seconds,
         "source_evals": r.source_evals,
     });
-    add_errors!(summary, r);
+    let met = (r.meets_budget, r.source_limited);
+    add_errors(
+        &mut summary,
+        &r.errors,
+        r.delta_n_range,
+        r.relative_error,
+        r.budget,
+        met,
+    );
     let to_stream = crate::is_stream(output);
     if json {
         crate::report(to_stream, serde_json::to_string_pretty(&summary)?);
