@@ -367,8 +367,8 @@ pub fn parse_rays(text: &str, path: &Path) -> Result<RayTable, TableError> {
 
 /// Rows a packet tracer takes from the table at a time (crate::packet): a quarter of
 /// each thread's share, within these bounds. Its lanes idle while the last rays of a
-/// chunk finish, so larger chunks waste less (1024 rows trace the rod table about 5 %
-/// faster than 256), and four chunks a thread keep the threads evenly busy.
+/// chunk finish, so larger chunks waste less, and four chunks a thread keep the threads
+/// evenly busy.
 const PACKET_CHUNK: std::ops::RangeInclusive<usize> = 64..=1024;
 
 /// Trace every row in parallel (rayon) in precision `R`: in packets

@@ -221,7 +221,8 @@ pub fn trace_ray_jittered<R: Real>(
 }
 
 /// What every ray's march through one field, with one set of settings and in one
-/// precision, starts from: asked of the field once for a table, not once a ray.
+/// precision, starts from: the packets ask it of the field once per chunk of a table;
+/// [`March::begin`] asks it for its one ray.
 #[derive(Debug, Clone)]
 pub(crate) struct MarchStart {
     bounds: Bounds,

@@ -203,9 +203,9 @@ fn trace_packets_with(
     counts
 }
 
-/// What a result slot holds before its ray is traced: an `error` with no estimate it
-/// could vouch for (every slot is overwritten; a slot that were not would not pass for
-/// a traced ray).
+/// What a new result slot holds until its ray is traced: an `error` with no estimate it
+/// could vouch for. Every ray's result is written, the packets' and the one-ray
+/// tracer's alike (the test `traced_rows_fill_a_reused_vector_as_a_fresh_one`).
 pub(crate) fn unreachable_result() -> RayResult {
     RayResult {
         error_estimate: f64::INFINITY,

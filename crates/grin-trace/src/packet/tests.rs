@@ -295,3 +295,55 @@ fn packets_are_the_scalar_tracer_bit_for_bit() {
         }
     }
 }
+
+/// `trace_rows_into` leaves in a vector that held a longer batch, and then a shorter one,
+/// what a fresh trace gives, in packets (f64 rk4) and ray by ray (f32): no slot keeps a
+/// result of the batch before.
+#[test]
+fn traced_rows_fill_a_reused_vector_as_a_fresh_one() {
+    use crate::table::{RayRow, trace_rows, trace_rows_into};
+    let ball = Bounds::Sphere {
+        center: DVec3::ZERO,
+        radius: 1.0,
+    };
+    let lens = Luneburg::new(ball, 1.0, None).expect("lens");
+    let row = |(k, &(origin, dir)): (usize, &(DVec3, DVec3))| RayRow {
+        line: k + 2,
+        origin,
+        dir,
+        extra: Vec::new(),
+    };
+    let batch = |center: DVec3, count: usize| -> Vec<RayRow> {
+        rays(center, 0.6, count)
+            .iter()
+            .enumerate()
+            .map(row)
+            .collect()
+    };
+    // A long batch, then a shorter one over other rays, then a longer one again.
+    let batches = [
+        batch(DVec3::ZERO, 700),
+        batch(DVec3::new(0.3, -0.2, 0.0), 150),
+        batch(DVec3::new(-0.4, 0.1, 0.0), 400),
+    ];
+    let s = settings(0.05, 100_000, ExitMethod::Hermite);
+    let bits = |r: &RayResult| result_values(r).map(f64::to_bits);
+    let mut packed = Vec::new();
+    let mut single = Vec::new();
+    for rows in &batches {
+        trace_rows_into::<f64>(&lens, &s, rows, &mut packed);
+        trace_rows_into::<f32>(&lens, &s, rows, &mut single);
+        let fresh = (
+            trace_rows::<f64>(&lens, &s, rows),
+            trace_rows::<f32>(&lens, &s, rows),
+        );
+        assert_eq!(packed.len(), rows.len());
+        assert_eq!(single.len(), rows.len());
+        for (got, want) in [(&packed, &fresh.0), (&single, &fresh.1)] {
+            for (i, (g, w)) in got.iter().zip(want).enumerate() {
+                assert_eq!(g.status, w.status, "ray {i}");
+                assert_eq!(bits(g), bits(w), "ray {i}");
+            }
+        }
+    }
+}
