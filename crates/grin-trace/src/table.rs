@@ -393,15 +393,15 @@ pub fn trace_rows_into<R: Real>(
     rows: &[RayRow],
     out: &mut Vec<RayResult>,
 ) {
-    out.resize(rows.len(), crate::packet::unreachable_result());
+    out.resize(rows.len(), crate::packet::untraced_result());
     if crate::packet::traced_in_packets::<R>(settings) {
         let share = rows.len() / (4 * rayon::current_num_threads());
         let chunk = share.clamp(*PACKET_CHUNK.start(), *PACKET_CHUNK.end());
         out.par_chunks_mut(chunk)
             .zip(rows.par_chunks(chunk))
-            .for_each(|(out, chunk)| {
+            .for_each(|(out, rows)| {
                 let rays: Vec<(DVec3, DVec3)> =
-                    chunk.iter().map(|row| (row.origin, row.dir)).collect();
+                    rows.iter().map(|row| (row.origin, row.dir)).collect();
                 crate::packet::trace_packets_into(field, settings, &rays, out);
             });
     } else {

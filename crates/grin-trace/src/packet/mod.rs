@@ -136,7 +136,7 @@ pub fn trace_packets_counted(
     settings: &TraceSettings,
     rays: &[(DVec3, DVec3)],
 ) -> (Vec<RayResult>, PacketCounts) {
-    let mut out = vec![unreachable_result(); rays.len()];
+    let mut out = vec![untraced_result(); rays.len()];
     let counts = trace_packets_into(field, settings, rays, &mut out);
     (out, counts)
 }
@@ -206,7 +206,7 @@ fn trace_packets_with(
 /// What a new result slot holds until its ray is traced: an `error` with no estimate it
 /// could vouch for. Every ray's result is written, the packets' and the one-ray
 /// tracer's alike (the test `traced_rows_fill_a_reused_vector_as_a_fresh_one`).
-pub(crate) fn unreachable_result() -> RayResult {
+pub(crate) fn untraced_result() -> RayResult {
     RayResult {
         error_estimate: f64::INFINITY,
         ..RayResult::at(crate::trace::RayStatus::Error, DVec3::ZERO, DVec3::ZERO)

@@ -225,7 +225,7 @@ fn packets_are_the_scalar_tracer_bit_for_bit() {
         let table = rays(*center, *spread, 301);
         // The widest lane vectors the CPU has, and the target's own.
         for portable in [false, true] {
-            let mut packed = vec![unreachable_result(); table.len()];
+            let mut packed = vec![untraced_result(); table.len()];
             let counts =
                 trace_packets_with(*field, s, &table, &mut packed, packet_step(s, portable));
             let mut steps = 0;
