@@ -410,6 +410,7 @@ fn ray_through_vdb_field_matches_the_analytic_field_it_sampled() {
         macro_cells: false,
         accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
         estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+        opl_control: false,
     };
     let (mut max_dp, mut max_dd, mut max_bend) = (0.0f64, 0.0f64, 0.0f64);
     for k in 0..7 {

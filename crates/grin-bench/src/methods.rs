@@ -135,6 +135,7 @@ impl Method {
             macro_cells: true,
             accuracy,
             estimate_limit: accuracy,
+            opl_control: false,
         }
     }
 

@@ -49,6 +49,7 @@ fn settings(integrator: IntegratorKind, step: StepSpec, exit: ExitMethod) -> Tra
         macro_cells: true,
         accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
         estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+        opl_control: false,
     }
 }
 

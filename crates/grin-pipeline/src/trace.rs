@@ -64,6 +64,8 @@ impl TracePlan {
         let field = grin_field::build_field(medium, scene_dir)
             .with_context(|| format!("{label}: [medium]"))?;
         let mut settings = TraceSettings::from_render(&scene.render);
+        // The table's opl column is an output: dopri holds its error as the position's.
+        settings.opl_control = true;
         if let Some(k) = overrides.integrator {
             settings.integrator = k;
         }

@@ -25,6 +25,10 @@ pub struct TraceSettings {
     /// or, where the pilots chose the method and measured it within `accuracy`,
     /// `grin_trace::auto::VOUCH_FACTOR` x `accuracy`.
     pub estimate_limit: f64,
+    /// dopri's error control also holds each step's optical-path error to its tolerance
+    /// (ray tables, whose `opl` column is an output; an image's pixels are not made of
+    /// the path, so its steps are not shortened for it).
+    pub opl_control: bool,
 }
 
 /// Settings that cannot drive a trace.
@@ -51,6 +55,7 @@ impl TraceSettings {
             macro_cells: render.macro_cells,
             accuracy: render.accuracy(),
             estimate_limit: render.estimate_limit(),
+            opl_control: false,
         }
     }
 

@@ -73,6 +73,7 @@ fn bench_field<R: Real>(c: &mut Criterion, name: &str, f: &dyn IndexField, preci
             macro_cells: false,
             accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
             estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+            opl_control: false,
         };
         group.bench_function(BenchmarkId::new(kind.name(), policy), |b| {
             b.iter(|| {
@@ -110,6 +111,7 @@ fn bench_packets(c: &mut Criterion, name: &str, f: &dyn IndexField) {
         macro_cells: true,
         accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
         estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+        opl_control: false,
     };
     let dopri = TraceSettings {
         integrator: IntegratorKind::Adaptive,

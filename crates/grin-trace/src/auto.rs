@@ -116,8 +116,13 @@ pub struct Candidate {
 /// What a pilot's error is measured in: the knob's unit for this output.
 #[derive(Debug, Clone)]
 pub enum Metric {
-    /// The exit direction, radians (images, ray tables, schlieren, the shadowgraph).
+    /// The exit direction, radians (images, schlieren, the shadowgraph).
     Direction,
+    /// A ray table's: the exit direction, radians, and the optical path to the exit in
+    /// world length over the medium's radius (the table's `opl` column held to the
+    /// asked radians times the radius, the mapping [`Metric::Waves`] makes for error
+    /// control).
+    Table { radius: f64 },
     /// Where the ray lands on `plane` (at infinity: its direction) as `cam` sees it, in
     /// image pixels: what displacement, ST maps and BOS are made of.
     Pixels {
@@ -138,7 +143,7 @@ impl Metric {
     /// The unit's name in summaries.
     pub fn unit(&self) -> &'static str {
         match self {
-            Metric::Direction => "rad",
+            Metric::Direction | Metric::Table { .. } => "rad",
             Metric::Pixels { .. } | Metric::Screen(_) => "px",
             Metric::Waves { .. } => "waves",
         }
@@ -150,7 +155,7 @@ impl Metric {
     /// `radius` (an OPL error accumulates along the path).
     fn as_radians(&self, asked: f64, radius: f64) -> f64 {
         match self {
-            Metric::Direction => asked,
+            Metric::Direction | Metric::Table { .. } => asked,
             Metric::Pixels { cam, .. } => {
                 asked * 2.0 * cam.tan_half_fov_y.atan() / f64::from(cam.height.max(1))
             }
@@ -184,7 +189,7 @@ impl Metric {
                 Some(grin_render::optics::landing_px(cam, plane.as_ref(), p, d))
             }
             Metric::Screen(beam) => Some(beam.landing_bins(p, d)),
-            Metric::Direction | Metric::Waves { .. } => None,
+            Metric::Direction | Metric::Table { .. } | Metric::Waves { .. } => None,
         }
     }
 
@@ -200,6 +205,8 @@ impl Metric {
     ) -> f64 {
         match self {
             Metric::Direction => angle(run.direction, reference.direction),
+            Metric::Table { radius } => angle(run.direction, reference.direction)
+                .max((run.opl - reference.opl).abs() / radius.max(f64::MIN_POSITIVE)),
             Metric::Pixels { .. } | Metric::Screen(_) => {
                 let seen = |r: &RayResult| self.landing(r.position, r.direction).flatten();
                 match (seen(run), seen(reference)) {
@@ -371,7 +378,13 @@ fn measure(
             let err = metric.error(r, e, *ray, far, n_amb);
             worst = worst.max(if err.is_nan() { f64::INFINITY } else { err });
             if r.error_estimate.is_finite() {
-                let real = (err * to_rad).max(floor_rad);
+                // A ray's own estimate is of its direction: a table's is calibrated
+                // against the direction's error alone.
+                let estimated = match metric {
+                    Metric::Table { .. } => angle(r.direction, e.direction),
+                    _ => err,
+                };
+                let real = (estimated * to_rad).max(floor_rad);
                 least = least.min(r.error_estimate / real);
             }
         }
@@ -411,7 +424,14 @@ pub fn choose<R: Real>(
     free_integrator: bool,
     pilots: &[(DVec3, DVec3)],
 ) -> Option<AutoChoice> {
-    choose_direction::<R>(field, settings, free_integrator, pilots, false)
+    choose_own::<R>(
+        field,
+        settings,
+        free_integrator,
+        pilots,
+        &Metric::Direction,
+        false,
+    )
 }
 
 /// [`choose`] for an error of `asked` in `metric`'s unit (the step's own `auto` value is
@@ -444,15 +464,19 @@ pub fn choose_for_table<R: Real>(
     free_integrator: bool,
     pilots: &[(DVec3, DVec3)],
 ) -> Option<AutoChoice> {
-    choose_direction::<R>(field, settings, free_integrator, pilots, true)
+    let metric = Metric::Table {
+        radius: field.bounds().radius(),
+    };
+    choose_own::<R>(field, settings, free_integrator, pilots, &metric, true)
 }
 
-/// The exit direction held to the step's own `auto` value, for a ray table or not.
-fn choose_direction<R: Real>(
+/// `metric` held to the step's own `auto` value, for a ray table or not.
+fn choose_own<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
     free_integrator: bool,
     pilots: &[(DVec3, DVec3)],
+    metric: &Metric,
     table: bool,
 ) -> Option<AutoChoice> {
     let StepSpec::Auto(asked) = settings.step else {
@@ -463,7 +487,7 @@ fn choose_direction<R: Real>(
         settings,
         free_integrator,
         pilots,
-        &Metric::Direction,
+        metric,
         asked,
         table,
     )
@@ -1033,6 +1057,7 @@ mod tests {
             macro_cells: true,
             accuracy: 1e-6,
             estimate_limit: 1e-6,
+            opl_control: false,
         };
         let table = choose_for_table::<f64>(&rod, &settings, true, &pilots).expect("table");
         let render = choose::<f64>(&rod, &settings, true, &pilots).expect("render");

@@ -82,6 +82,8 @@ pub(crate) struct DopriControl {
     pub tol: Option<Tolerance>,
     pub ds_max: f64,
     pub len_scale: f64,
+    /// The optical path's error is in the norm ([`StepController::with_opl_control`]).
+    pub opl: bool,
 }
 
 /// Chooses step lengths along one ray (error control keeps its state between steps).
@@ -105,6 +107,9 @@ pub struct StepController {
     /// Factor on the next fixed or heuristic step (the renderer's per-pixel jitter of a
     /// passage's first step, then 1).
     jitter: f64,
+    /// dopri's error control also holds the optical path's embedded error to the
+    /// tolerance (where the output has the path: ray tables).
+    weigh_opl: bool,
 }
 
 /// An accepted step with the t-length it covered.
@@ -148,7 +153,15 @@ impl StepController {
             ds_max,
             ds_adapt,
             jitter: 1.0,
+            weigh_opl: false,
         }
+    }
+
+    /// Hold the optical path's error, as well as the position's and direction's, to
+    /// dopri's tolerance (`TraceSettings::opl_control`).
+    pub fn with_opl_control(mut self, on: bool) -> Self {
+        self.weigh_opl = on;
+        self
     }
 
     /// Scale the first fixed or heuristic step by `jitter` in (0, 1] (turns the banding
@@ -217,6 +230,7 @@ impl StepController {
             tol,
             ds_max,
             len_scale: self.len_scale,
+            opl: self.weigh_opl,
         })
     }
 
@@ -325,6 +339,12 @@ impl StepController {
             let (step, err) = if self.kind == IntegratorKind::Adaptive {
                 let st = integrate::dopri_step(field, s, d0, h);
                 let err = st.error.map_or(0.0, |(er, et)| self.norm::<R>(er, et, n0));
+                let err = match st.quad {
+                    Some(q) if self.weigh_opl => {
+                        err.max(q.opl_error_with_start(n0, h.to_f64()).abs())
+                    }
+                    _ => err,
+                };
                 (st, err)
             } else {
                 self.doubled(field, s, d0, h, p)

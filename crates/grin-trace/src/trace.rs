@@ -248,7 +248,8 @@ impl MarchStart {
                 accuracy: settings.accuracy,
                 estimate_limit: settings.estimate_limit,
             },
-            ctrl: StepController::new(settings.step, settings.integrator, field),
+            ctrl: StepController::new(settings.step, settings.integrator, field)
+                .with_opl_control(settings.opl_control),
             estimate: ErrorEstimate::for_integrator(settings.integrator),
             exit_tol: exit_tolerance::<R>(&bounds),
             min_flight: (MIN_SPAN_REL * bounds.radius())

@@ -43,7 +43,8 @@ pub struct Args {
     #[arg(long, value_parser = grin_pipeline::trace::parse_integrator)]
     pub integrator: Option<IntegratorKind>,
     /// Step policy, overriding the scene's: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] |
-    /// adaptive=TOL | auto=RAD (error control for an exit-direction error of RAD radians).
+    /// adaptive=TOL | auto=RAD (an exit-direction error of RAD radians, and an optical-path
+    /// error of RAD times the medium's radius).
     #[arg(long, value_parser = grin_pipeline::trace::parse_step)]
     pub step: Option<StepSpec>,
     /// Per-ray step cap, overriding the scene's max_steps.

@@ -61,6 +61,8 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
     // The quadrature of n^2, n and n u over the stages 2..6 (the first is the caller's;
     // the seventh has weight 0), in f64.
     let (mut opl, mut length, mut swept) = (0.0, 0.0, DVec3::ZERO);
+    // The embedded error of the optical path (the stages' n^2 by E), first stage's left out.
+    let mut opl_error = 0.0;
     for i in 1..7 {
         let row = &A[i - 1];
         let mut dr = s.t * c::<R>(row[0]);
@@ -78,6 +80,8 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
         let sample = R::sample_field(field, ri);
         ds[i] = sample.n_grad_n();
         // The fifth-order weights b_i are the last row of A (b_7 = 0).
+        let n_i = sample.n.to_f64();
+        opl_error += E[i] * n_i * n_i;
         let b = A[5].get(i).copied().unwrap_or(0.0);
         if b != 0.0 {
             let n = sample.n.to_f64();
@@ -108,6 +112,7 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
             opl: opl * h.to_f64(),
             length: length * h.to_f64(),
             swept: swept * h.to_f64(),
+            opl_error: opl_error * h.to_f64(),
         }),
     }
 }

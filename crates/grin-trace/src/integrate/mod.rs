@@ -66,9 +66,16 @@ pub struct Quad {
     pub opl: f64,
     pub length: f64,
     pub swept: glam::DVec3,
+    /// The embedded (fifth- less fourth-order) error of `opl`, first stage's term left out.
+    pub opl_error: f64,
 }
 
 impl Quad {
+    /// The step's embedded optical-path error, the first stage's term (n0, over `h`) added.
+    pub fn opl_error_with_start(self, n0: f64, h: f64) -> f64 {
+        self.opl_error + adaptive::E[0] * h * n0 * n0
+    }
+
     /// The whole step's integrals: the first stage's term (n0, T0, over `h`) added.
     pub fn with_start(self, n0: f64, t0: glam::DVec3, h: f64) -> (f64, f64, glam::DVec3) {
         let w = self.b0 * h;

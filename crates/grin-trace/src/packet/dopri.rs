@@ -160,6 +160,8 @@ pub(super) fn march_dopri_in(
         let mut r_end = r;
         let (mut n_end, mut g_end) = (s.n0, s.g0);
         let (mut q_opl, mut q_length, mut q_swept) = (L::splat(0.0), L::splat(0.0), V::zero());
+        // The optical path's embedded error (dopri_step's Quad::opl_error).
+        let mut q_err = L::splat(0.0);
         for k in 1..7 {
             let row = &A[k - 1];
             let mut dr = t.scale(L::splat(row[0]));
@@ -174,6 +176,7 @@ pub(super) fn march_dopri_in(
             ts[k] = t + delta_t;
             let (n, g) = sample(field, rk);
             dd[k] = g.scale(n);
+            q_err = q_err + L::splat(E[k]) * n * n;
             let b = A[5].get(k).copied().unwrap_or(0.0);
             if b != 0.0 {
                 let u = ts[k].normalize_or_zero();
@@ -196,7 +199,15 @@ pub(super) fn march_dopri_in(
         // The controller's error norm, tolerance and next step (take_adaptive).
         let pos = er.length();
         let dir = et.length() / s.n0.map(|n| n.abs().max(f64::MIN_POSITIVE)) * len_scale;
-        let err = pos.zip(dir, f64::max);
+        let mut err = pos.zip(dir, f64::max);
+        let q_err = q_err * h;
+        for i in 0..LANES {
+            if control[i].is_some_and(|c| c.opl) {
+                // Quad::opl_error_with_start.
+                let opl = (q_err.0[i] + E[0] * h.0[i] * s.n0.0[i] * s.n0.0[i]).abs();
+                err.0[i] = err.0[i].max(opl);
+            }
+        }
         let mut accepted = [false; LANES];
         for i in 0..LANES {
             if !active[i] {
@@ -229,6 +240,7 @@ pub(super) fn march_dopri_in(
                     opl: q_opl.0[i] * h.0[i],
                     length: q_length.0[i] * h.0[i],
                     swept: q_swept.lane(i) * h.0[i],
+                    opl_error: q_err.0[i],
                 };
                 let (end, _) = lane_step((r, t), (r_end, t_end), h, i);
                 s.exits[i].restepped(&bounds, exit_tol, end, Some(quad));

@@ -17,6 +17,7 @@ fn settings(ds: f64, max_steps: u32, exit: ExitMethod) -> TraceSettings {
         macro_cells: true,
         accuracy: grin_scene::DEFAULT_AUTO_ACCURACY,
         estimate_limit: grin_scene::DEFAULT_AUTO_ACCURACY,
+        opl_control: false,
     }
 }
 
@@ -108,7 +109,7 @@ fn packets_are_the_scalar_tracer_bit_for_bit() {
         tolerance,
         initial: None,
     };
-    let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 18] = [
+    let cases: [(&dyn IndexField, DVec3, f64, TraceSettings); 20] = [
         (
             &rod,
             DVec3::new(0.0, 0.0, 1.0),
@@ -205,6 +206,25 @@ fn packets_are_the_scalar_tracer_bit_for_bit() {
             settings(0.03, 1_000_000, ExitMethod::Hermite),
         ),
         (&slab, DVec3::ZERO, 0.6, dopri(adaptive(1e-8), 1_000_000)),
+        // The optical path's error under control too (ray tables).
+        (
+            &lens,
+            DVec3::ZERO,
+            0.5,
+            TraceSettings {
+                opl_control: true,
+                ..dopri(adaptive(1e-6), 1_000_000)
+            },
+        ),
+        (
+            &rod,
+            DVec3::new(0.0, 0.0, 1.0),
+            1.0,
+            TraceSettings {
+                opl_control: true,
+                ..dopri(StepSpec::Auto(1e-7), 1_000_000)
+            },
+        ),
     ];
     // The cases on the slab, and the rays there that reflect totally at least once.
     const REFLECTING: [usize; 2] = [16, 17];
