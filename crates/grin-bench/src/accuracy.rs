@@ -66,15 +66,18 @@ pub fn choose_auto(
     }
 }
 
-/// Settings of the numerical reference.
+/// Settings of the numerical reference (its optical path under error control too).
 pub fn reference_settings(scale: f64) -> TraceSettings {
-    Method {
+    let method = Method {
         integrator: IntegratorKind::Adaptive,
         policy: Policy::Adaptive,
         exit: ExitMethod::Bisection,
         precision: Precision::F64,
+    };
+    TraceSettings {
+        opl_control: true,
+        ..method.settings(REFERENCE_TOL, scale)
     }
-    .settings(REFERENCE_TOL, scale)
 }
 
 /// Compute the reference of `case`: exact where known (the numerical one fills in the

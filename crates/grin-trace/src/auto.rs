@@ -205,8 +205,12 @@ impl Metric {
     ) -> f64 {
         match self {
             Metric::Direction => angle(run.direction, reference.direction),
-            Metric::Table { radius } => angle(run.direction, reference.direction)
-                .max((run.opl - reference.opl).abs() / radius.max(f64::MIN_POSITIVE)),
+            Metric::Table { radius } => {
+                let path = (run.opl - reference.opl).abs() / radius.max(f64::MIN_POSITIVE);
+                // A path that cannot be compared fails the pilot (max would drop a NaN).
+                let path = if path.is_nan() { f64::INFINITY } else { path };
+                angle(run.direction, reference.direction).max(path)
+            }
             Metric::Pixels { .. } | Metric::Screen(_) => {
                 let seen = |r: &RayResult| self.landing(r.position, r.direction).flatten();
                 match (seen(run), seen(reference)) {
@@ -467,7 +471,13 @@ pub fn choose_for_table<R: Real>(
     let metric = Metric::Table {
         radius: field.bounds().radius(),
     };
-    choose_own::<R>(field, settings, free_integrator, pilots, &metric, true)
+    // A table's path is an output: its error control holds it too (the pilots trace as
+    // the table will).
+    let settings = TraceSettings {
+        opl_control: true,
+        ..*settings
+    };
+    choose_own::<R>(field, &settings, free_integrator, pilots, &metric, true)
 }
 
 /// `metric` held to the step's own `auto` value, for a ray table or not.

@@ -262,12 +262,13 @@ fn rod_rays() -> Vec<(DVec3, DVec3)> {
         .collect()
 }
 
-/// The optical path on [`rod`] against its exact value ([`rod_exact`]). With the table's
-/// control (`opl_control`) dopri holds each step's optical-path error to the tolerance as
-/// it does the position's: at each tolerance both the path and the exit position are
-/// within twice it (the tolerance is a step's; tens of steps add up), the path within 3x
-/// the position's error (measured: 2.6e-8 and 1.1e-8 at 1e-6, 1.3e-9 and 1.3e-9 at 1e-9,
-/// 1.2e-12 and 1.4e-12 at 1e-12).
+/// The optical path on [`rod`] against its exact value ([`rod_exact`]), traced as a ray
+/// table traces it (`opl_control`; on the rod the position's and direction's errors bound
+/// the steps before the path's does): at each tolerance both the path and the exit
+/// position are within twice it (the tolerance is a step's; tens of steps add up), the
+/// path within 3x the position's error (measured: 2.6e-8 and 1.1e-8 at 1e-6, 1.3e-9 and
+/// 1.3e-9 at 1e-9, 1.2e-12 and 1.4e-12 at 1e-12). The path summed by the cubic Hermite
+/// rule at dopri's steps was 20-370x less accurate than the exit.
 #[test]
 fn grin_rod_optical_path_is_as_accurate_as_the_exit() {
     let field = rod();

@@ -44,7 +44,7 @@ pub struct Args {
     pub integrator: Option<IntegratorKind>,
     /// Step policy, overriding the scene's: fixed=DS | heuristic=MIN,MAX[,AMPLITUDE] |
     /// adaptive=TOL | auto=RAD (an exit-direction error of RAD radians, and an optical-path
-    /// error of RAD times the medium's radius).
+    /// error of RAD times the bounds' radius, as measured on the pilot rays).
     #[arg(long, value_parser = grin_pipeline::trace::parse_step)]
     pub step: Option<StepSpec>,
     /// Per-ray step cap, overriding the scene's max_steps.

@@ -243,6 +243,22 @@ fn packets_are_the_scalar_tracer_bit_for_bit() {
     const FLIGHTS: [usize; 2] = [13, 14];
     for (k, (field, center, spread, s)) in cases.iter().enumerate() {
         let table = rays(*center, *spread, 301);
+        if s.opl_control {
+            // The path's error shortens some of these rays' steps.
+            let without = TraceSettings {
+                opl_control: false,
+                ..*s
+            };
+            let shortened = table
+                .iter()
+                .filter(|&&(o, d)| {
+                    trace_ray::<f64>(*field, s, o, d).evals
+                        != trace_ray::<f64>(*field, &without, o, d).evals
+                })
+                .count();
+            eprintln!("case {k}: the path's error changes {shortened} rays' steps");
+            assert!(shortened > 0, "case {k}: the path's error changes no step");
+        }
         // The widest lane vectors the CPU has, and the target's own.
         for portable in [false, true] {
             let mut packed = vec![untraced_result(); table.len()];
