@@ -419,23 +419,17 @@ fn trace_all<R: Real>(
 }
 
 /// Resolve `settings` (whose step is `auto`) on `pilots`, tracing in precision `R`.
-/// `free_integrator`: the scene named no integrator, so every one is a candidate; else
+/// `free`: the scene named no integrator, so every one is a candidate; else
 /// only `settings.integrator`. `None` when the step is not `auto` or no pilot meets the
 /// medium (then the tracer's error control runs: it needs no pilots).
 pub fn choose<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
-    free_integrator: bool,
+    free: bool,
     pilots: &[(DVec3, DVec3)],
 ) -> Option<AutoChoice> {
-    choose_own::<R>(
-        field,
-        settings,
-        free_integrator,
-        pilots,
-        &Metric::Direction,
-        false,
-    )
+    let metric = Metric::Direction;
+    choose_with::<R>(field, settings, free, pilots, &metric, None, false)
 }
 
 /// [`choose`] for an error of `asked` in `metric`'s unit (the step's own `auto` value is
@@ -443,20 +437,12 @@ pub fn choose<R: Real>(
 pub fn choose_in<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
-    free_integrator: bool,
+    free: bool,
     pilots: &[(DVec3, DVec3)],
     metric: &Metric,
     asked: f64,
 ) -> Option<AutoChoice> {
-    choose_with::<R>(
-        field,
-        settings,
-        free_integrator,
-        pilots,
-        metric,
-        asked,
-        false,
-    )
+    choose_with::<R>(field, settings, free, pilots, metric, Some(asked), false)
 }
 
 /// [`choose`] for a ray table: the job traces in packets where the candidate's settings
@@ -465,7 +451,7 @@ pub fn choose_in<R: Real>(
 pub fn choose_for_table<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
-    free_integrator: bool,
+    free: bool,
     pilots: &[(DVec3, DVec3)],
 ) -> Option<AutoChoice> {
     let metric = Metric::Table {
@@ -477,44 +463,24 @@ pub fn choose_for_table<R: Real>(
         opl_control: true,
         ..*settings
     };
-    choose_own::<R>(field, &settings, free_integrator, pilots, &metric, true)
+    choose_with::<R>(field, &settings, free, pilots, &metric, None, true)
 }
 
-/// `metric` held to the step's own `auto` value, for a ray table or not.
-fn choose_own<R: Real>(
-    field: &dyn IndexField,
-    settings: &TraceSettings,
-    free_integrator: bool,
-    pilots: &[(DVec3, DVec3)],
-    metric: &Metric,
-    table: bool,
-) -> Option<AutoChoice> {
-    let StepSpec::Auto(asked) = settings.step else {
-        return None;
-    };
-    choose_with::<R>(
-        field,
-        settings,
-        free_integrator,
-        pilots,
-        metric,
-        asked,
-        table,
-    )
-}
-
+/// The choice for an error of `asked` in `metric`'s unit (`None`: the step's own `auto`
+/// value), for a ray table or not.
 fn choose_with<R: Real>(
     field: &dyn IndexField,
     settings: &TraceSettings,
     free_integrator: bool,
     pilots: &[(DVec3, DVec3)],
     metric: &Metric,
-    asked: f64,
+    asked: Option<f64>,
     table: bool,
 ) -> Option<AutoChoice> {
-    let StepSpec::Auto(_) = settings.step else {
+    let StepSpec::Auto(own) = settings.step else {
         return None;
     };
+    let asked = asked.unwrap_or(own);
     let radius = field.bounds().radius();
     let asked_rad = metric.as_radians(asked, radius);
     // The reference flags only rays whose own estimate is above VOUCH_FACTOR x the asked
