@@ -537,3 +537,42 @@ fn a_narrow_bump_in_an_expression_is_not_stepped_over() {
         "{statuses:?}"
     );
 }
+
+/// `--step auto=RAD` holds a table's rays to RAD, as a scene asking `auto = RAD` does,
+/// also where the table is too small for pilot rays: the limit above which a ray is
+/// `degraded` is RAD, not the scene's own (it was the scene's, so `auto=1e-12` vouched for
+/// f32 rays 1e5x less accurate, and `auto=1e-2` on a scene asking 1e-9 degraded them all).
+#[test]
+fn a_step_override_holds_the_rays_to_its_own_accuracy() {
+    let d = Dir::new();
+    let scene_text = LUNEBURG_SCENE.replace(
+        "integrator = \"sharma\"\nstep = { fixed = 0.004 }\n",
+        "step = { auto = 1e-9 }\n",
+    );
+    let scene = d.write("lens.toml", &scene_text);
+    let rays = d.write("rays.csv", &beam_rows(24));
+    let out = d.path("out.csv");
+    let o = run(
+        &[&scene, &rays, &out],
+        &["--json", "--f32", "--step", "auto=1e-2"],
+    );
+    let summary = json(&o);
+    assert_eq!(summary["estimate_limit"], 1e-2, "{summary}");
+    assert_eq!(
+        (summary["exited"].as_u64(), summary["degraded"].as_u64()),
+        (Some(24), Some(0)),
+        "{summary}"
+    );
+    let o = run(
+        &[&scene, &rays, &out],
+        &["--json", "--f32", "--step", "auto=1e-12"],
+    );
+    let summary = json(&o);
+    assert_eq!(summary["estimate_limit"], 1e-12, "{summary}");
+    assert_eq!(summary["degraded"], 24, "{summary}");
+    assert!(
+        stderr(&o).contains("24 rays ended `degraded`"),
+        "{}",
+        stderr(&o)
+    );
+}

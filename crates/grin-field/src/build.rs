@@ -228,6 +228,29 @@ mod tests {
                 .contains("inside the medium; n must be positive"),
             "{e}"
         );
+        // n beyond any material's: a formula, and an atmosphere whose scale height puts
+        // an infinite index at the bottom of its bounds (its rays ended with NaN).
+        let e = build_field(
+            &medium("{ kind = \"expr\", n = \"1 + 3e3 * (1 + x)\" }"),
+            Path::new("."),
+        )
+        .expect_err("n up to 6e3");
+        assert!(
+            e.to_string()
+                .contains("inside the medium is above the largest index grin takes, 1e3"),
+            "{e}"
+        );
+        let e = build_field(
+            &medium("{ kind = \"exponential-atmosphere\", e = 0.1, scale_height = 1e-300 }"),
+            Path::new("."),
+        )
+        .expect_err("n = inf at the bottom");
+        assert!(
+            e.to_string().starts_with(
+                "exponential-atmosphere: invalid parameter `scale_height`: n = 1 + e exp(-h / H) reaches inf"
+            ),
+            "{e}"
+        );
     }
 
     /// Every example scene parses, validates and builds. Kinds whose builder is not wired

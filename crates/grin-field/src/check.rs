@@ -72,6 +72,16 @@ pub fn sample_stats(
                 z: p.z,
             });
         }
+        if s.n > grin_scene::MAX_INDEX {
+            return Err(FieldError::Other(format!(
+                "{label}: n = {:e} at ({}, {}, {}) inside the medium is above the largest index grin takes, {:e}",
+                s.n,
+                p.x,
+                p.y,
+                p.z,
+                grin_scene::MAX_INDEX
+            )));
+        }
         if !s.grad_n.is_finite() {
             return Err(FieldError::Other(format!(
                 "{label}: grad n is not finite ({}) at ({}, {}, {})",

@@ -72,7 +72,10 @@ impl TracePlan {
         if let Some(s) = overrides.step {
             settings.step = s;
             if let StepSpec::Auto(a) = s {
+                // As a scene asking `auto = a` is held to it (the pilots, where they run,
+                // set the limit they vouch for).
                 settings.accuracy = a;
+                settings.estimate_limit = a;
             }
         }
         if let Some(m) = overrides.max_steps {

@@ -258,6 +258,27 @@ fn medium_errors() {
         m,
         "scene.toml:16:1: medium.ambient_index: must be > 0, got inf"
     );
+    let m = error_of("ambient_index = 1.0", "ambient_index = 1e300");
+    assert_eq!(
+        m,
+        "scene.toml:16:1: medium.ambient_index: must be at most 1e3, got 1e300"
+    );
+    // Absurdly small media: a sphere of 1e-300 and a box 2e-12 thin.
+    let m = error_of("radius = 0.6 }", "radius = 1e-300 }");
+    assert_eq!(
+        m,
+        "scene.toml:15:49: medium.bounds.sphere.radius: must be at least 1e-9 world units, got 1e-300"
+    );
+    let m = error_of(
+        "bounds = { sphere = { center = [0.0, 0.5, 0.0], radius = 0.6 } }",
+        "bounds = { box = { min = [0.0, 0.0, -1e-12], max = [1.0, 1.0, 1e-12] } }",
+    );
+    assert!(
+        m.starts_with(
+            "scene.toml:15:46: medium.bounds.box.max: must be at least 1e-9 world units beyond min"
+        ),
+        "{m}"
+    );
     // "auto" is the index of a VDB grid's background: refused for a formula field.
     let m = error_of("ambient_index = 1.0", "ambient_index = \"auto\"");
     assert!(
@@ -331,6 +352,14 @@ fn field_parameter_errors() {
         (
             "{ kind = \"uniform\", n = 0.0 }",
             "scene.toml:17:29: medium.field.n: must be > 0, got 0",
+        ),
+        (
+            "{ kind = \"uniform\", n = 1e300 }",
+            "scene.toml:17:29: medium.field.n: must be at most 1e3, got 1e300",
+        ),
+        (
+            "{ kind = \"grin-rod\", n0 = 2e3, a = 0.1 }",
+            "scene.toml:17:30: medium.field.n0: must be at most 1e3, got 2e3",
         ),
         (
             "{ kind = \"grin-rod\", n0 = 1.5, a = -0.1 }",

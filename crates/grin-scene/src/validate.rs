@@ -16,6 +16,14 @@ pub const MAX_IMAGE_SIDE: u32 = 16_384;
 /// (6.4e6) fits; beyond, the GPU's f32 positions resolve less than one world unit, and a
 /// medium at 1e300 made the bake's grid arithmetic overflow and spin.
 pub const MAX_WORLD_COORDINATE: f64 = 1e7;
+/// Smallest world size accepted (world units): a radius, or a box's extent along an axis.
+/// A nanometre in metres; a sphere of radius 1e-300 squared its radius to 0 and missed
+/// the ray aimed at its centre.
+pub const MIN_WORLD_SIZE: f64 = 1e-9;
+/// Largest refractive index accepted, of a field anywhere inside its medium or of the
+/// ambient: well above any material's (germanium ~4, the highest metamaterials ~40); at
+/// 1e300 the path's n^2 overflowed and every ray ended with a NaN optical path.
+pub const MAX_INDEX: f64 = 1e3;
 /// Largest `render.max_steps` accepted: the GPU bounds its march loop by 2 * max_steps + 2
 /// in u32 arithmetic, which 2^31 would overflow (every medium pixel then stopped at once).
 pub const MAX_STEPS: u32 = 1 << 30;
@@ -87,6 +95,18 @@ fn finite3(key: &str, v: [f64; 3]) -> Check {
     Ok(())
 }
 
+/// The medium's radius: a [`size`] of at least [`MIN_WORLD_SIZE`].
+fn medium_size(key: &str, v: f64) -> Check {
+    size(key, v)?;
+    if v < MIN_WORLD_SIZE {
+        return fail(
+            key,
+            format!("must be at least {MIN_WORLD_SIZE:e} world units, got {v:e}"),
+        );
+    }
+    Ok(())
+}
+
 /// A radius or other world size: positive, finite, at most [`MAX_WORLD_COORDINATE`].
 fn size(key: &str, v: f64) -> Check {
     positive(key, v)?;
@@ -122,14 +142,30 @@ fn colour(key: &str, v: [f64; 3]) -> Check {
 fn min_max(key: &str, min: [f64; 3], max: [f64; 3]) -> Check {
     finite3(&format!("{key}.min"), min)?;
     finite3(&format!("{key}.max"), max)?;
-    if (0..3).all(|i| min[i] < max[i]) {
-        Ok(())
-    } else {
-        fail(
+    if !(0..3).all(|i| min[i] < max[i]) {
+        return fail(
             format!("{key}.max"),
             format!("must be > min in every component, got min {min:?}, max {max:?}"),
-        )
+        );
     }
+    if (0..3).any(|i| max[i] - min[i] < MIN_WORLD_SIZE) {
+        return fail(
+            format!("{key}.max"),
+            format!(
+                "must be at least {MIN_WORLD_SIZE:e} world units beyond min in every component, got min {min:?}, max {max:?}"
+            ),
+        );
+    }
+    Ok(())
+}
+
+/// A refractive index: finite, > 0 and at most [`MAX_INDEX`].
+fn index(key: &str, v: f64) -> Check {
+    positive(key, v)?;
+    if v > MAX_INDEX {
+        return fail(key, format!("must be at most {MAX_INDEX:e}, got {v:e}"));
+    }
+    Ok(())
 }
 
 fn non_empty(key: &str, s: &str) -> Check {
@@ -484,12 +520,12 @@ fn medium(m: &MediumSpec) -> Check {
     match m.bounds {
         BoundsSpec::Sphere { center, radius } => {
             finite3("medium.bounds.sphere.center", center)?;
-            size("medium.bounds.sphere.radius", radius)?;
+            medium_size("medium.bounds.sphere.radius", radius)?;
         }
         BoundsSpec::Box { min, max } => min_max("medium.bounds.box", min, max)?,
     }
     match m.ambient_index {
-        AmbientIndex::Value(v) => positive("medium.ambient_index", v)?,
+        AmbientIndex::Value(v) => index("medium.ambient_index", v)?,
         AmbientIndex::Auto if !matches!(m.field, FieldSpec::Vdb(_)) => fail(
             "medium.ambient_index",
             "\"auto\" takes the index a VDB grid's background maps to; give a number for \
@@ -504,18 +540,18 @@ fn field(f: &FieldSpec) -> Check {
     const K: &str = "medium.field";
     let k = |p: &str| format!("{K}.{p}");
     match f {
-        FieldSpec::Uniform { n } => positive(&k("n"), *n),
+        FieldSpec::Uniform { n } => index(&k("n"), *n),
         FieldSpec::LinearN2 { n0, k: slope, .. } => {
-            positive(&k("n0"), *n0)?;
+            index(&k("n0"), *n0)?;
             finite(&k("k"), *slope)
         }
         FieldSpec::GrinRod { n0, a, .. } => {
-            positive(&k("n0"), *n0)?;
+            index(&k("n0"), *n0)?;
             positive(&k("a"), *a)
         }
         FieldSpec::Luneburg { radius } => radius.map_or(Ok(()), |r| positive(&k("radius"), r)),
         FieldSpec::MaxwellFishEye { n0, a } => {
-            positive(&k("n0"), *n0)?;
+            index(&k("n0"), *n0)?;
             positive(&k("a"), *a)
         }
         FieldSpec::Eaton { radius, core } => {

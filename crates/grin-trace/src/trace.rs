@@ -334,7 +334,10 @@ impl<R: Real> March<R> {
                 res.status = RayStatus::Missed;
                 return Err(res);
             }
-            let p = origin + d * s_in.max(0.0);
+            // On the surface: `origin + d s_in` is off it by the rounding of the origin's
+            // coordinates (1e-10 from 1e6 away), more than the entry nudge's few ulps of
+            // the medium, and a ray begun outside would leave at once.
+            let p = project_to_surface(&bounds, origin + d * s_in.max(0.0));
             let entry = R::sample_field(field, R::V3::from_dvec3(p));
             let n_in = entry.n.to_f64();
             res.evals += 1;

@@ -982,3 +982,57 @@ fn a_flight_that_reflects_totally_goes_on_from_the_surface() {
         r.direction
     );
 }
+
+/// A ray from far away enters where it meets the surface: the entry point is put on the
+/// surface, so the rounding of `origin + d s_in` (1e-10 from 1e6 away, more than the
+/// entry nudge's few ulps of the medium) does not leave the ray outside, where it used to
+/// "exit" at its entry point unbent (`exited`, opl ~1e-32). The Luneburg lens focuses a
+/// ray from 1e7 away as one from 2 away; a box 2e-6 thin is crossed whole from 3 away.
+#[test]
+fn a_ray_from_far_away_enters_the_medium() {
+    let field = luneburg();
+    let s = settings(
+        IntegratorKind::Adaptive,
+        StepSpec::Adaptive {
+            tolerance: 1e-10,
+            initial: None,
+        },
+        ExitMethod::Hermite,
+    );
+    let focus = DVec3::new(0.0, 0.0, 1.0);
+    for z in [-2.0, -1e5, -3e5, -1e6, -5e6, -1e7] {
+        for o in [DVec3::new(0.3, 0.0, z), DVec3::new(0.0, 0.5, z)] {
+            let r = trace_ray::<f64>(&field, &s, o, DVec3::Z);
+            assert_eq!(r.status, RayStatus::Exited, "{o}");
+            // The origin's own rounding at 1e7 (1.9e-9) moves the ray by as much.
+            assert!(
+                (r.position - focus).length() < 1e-8,
+                "{o}: exit {}",
+                r.position
+            );
+            let rho2 = o.x * o.x + o.y * o.y;
+            let total = (1.0 - (1.0 - rho2).sqrt()) + r.opl;
+            assert!(
+                (total - (1.0 + PI / 2.0)).abs() < 1e-8,
+                "{o}: opl {}",
+                r.opl
+            );
+        }
+    }
+    let thin = grin_field::expr::ExprField::new(
+        "1.5",
+        grin_field::Bounds::Box {
+            min: DVec3::new(-1.0, -1.0, -1e-6),
+            max: DVec3::new(1.0, 1.0, 1e-6),
+        },
+        1.0,
+        0.0,
+    )
+    .expect("thin slab");
+    for z in [-0.1, -3.0, -1e4] {
+        let r = trace_ray::<f64>(&thin, &s, DVec3::new(0.2, 0.1, z), DVec3::Z);
+        assert_eq!(r.status, RayStatus::Exited);
+        assert_eq!(r.position.z, 1e-6, "from {z}: exit {}", r.position);
+        assert!((r.opl - 3e-6).abs() < 1e-15, "from {z}: opl {}", r.opl);
+    }
+}

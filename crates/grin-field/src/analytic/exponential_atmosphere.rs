@@ -66,6 +66,18 @@ impl ExponentialAtmosphere {
                 ),
             ));
         }
+        let n_max = f.n_range().1;
+        if n_max.is_nan() || n_max > grin_scene::MAX_INDEX {
+            return Err(param_error(
+                "exponential-atmosphere",
+                "scale_height",
+                format!(
+                    "n = 1 + e exp(-h / H) reaches {n_max:e} at the bottom of the bounds (h = {:e}, H = {scale_height:e}); n must be at most {:e}: a larger H, or a base at the bottom of the medium",
+                    h_range.0,
+                    grin_scene::MAX_INDEX
+                ),
+            ));
+        }
         Ok(f)
     }
 
