@@ -235,6 +235,17 @@ fn bad_inputs_are_clear_errors_without_output() {
     );
     assert_err(&o, "cannot meet the error budget");
     assert_eq!(d.names(), ["src.toml"]);
+    // A grid the user fixed that misses the budget is kept, with a warning (it was said
+    // only in the summary on stdout).
+    let o = bake(&src, &d.path("coarse.grinf"), &["--resolution", "2"]);
+    let summary = json(&o);
+    assert_eq!(summary["meets_budget"], false, "{summary}");
+    assert!(
+        stderr(&o).contains("src.toml: the budget 1.0e-3 is not met (relative error"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_file(d.path("coarse.grinf")).expect("coarse bake written");
 
     json(&bake(&src, &d.path("good.grinf"), &["--resolution", "24"]));
     let good = std::fs::read(d.path("good.grinf")).expect("good");

@@ -576,3 +576,78 @@ fn a_step_override_holds_the_rays_to_its_own_accuracy() {
         stderr(&o)
     );
 }
+
+/// Rows a table cannot trace are named: `#` lines after the header (read as comments, so
+/// an unquoted value starting with `#` drops its row) and rays that end `error` get a
+/// warning with their lines; an input column named as a result is replaced by the result
+/// (it was written twice in CSV, and the input's lost in JSON), with a warning; directions whose squared length
+/// overflows or underflows are traced as the unit direction they point along.
+#[test]
+fn a_tables_untraceable_rows_are_named() {
+    let d = Dir::new();
+    let scene = d.write("lens.toml", LUNEBURG_SCENE);
+    let out = d.path("out.csv");
+    let rays = d.write(
+        "rays.csv",
+        "id,ox,oy,oz,dx,dy,dz\n#1,0.0,0.3,-3,1,0,0\n\"#2\",0.0,0.3,0,1,0,0\n\
+         3,nan,0.3,0,1,0,0\n4,-3,0.3,0,0,0,0\n5,-3,0.3,0,1e308,0,0\n6,-3,0.3,0,1e-320,0,0\n",
+    );
+    let o = run(&[&scene, &rays, &out], &[]);
+    assert_ok(&o);
+    let err = stderr(&o);
+    assert!(
+        err.contains("rays.csv: `#` comment lines after the header skipped: 1 (line 2)"),
+        "{err}"
+    );
+    assert!(
+        err.contains("rays.csv: rays that ended `error`: 2 (lines 4 and 5)"),
+        "{err}"
+    );
+    let text = std::fs::read_to_string(&out).expect("output");
+    let rows: Vec<&str> = text.lines().skip(1).collect();
+    assert_eq!(rows.len(), 5, "{text}");
+    assert!(rows[0].starts_with("0,0.3,0,1,0,0,#2,"), "{text}");
+    // 1e308 and 1e-320 along +x: the same exit as a unit direction along +x.
+    let unit = run(
+        &[
+            &scene,
+            &d.write("unit.csv", "ox,oy,oz,dx,dy,dz\n-3,0.3,0,1,0,0\n"),
+            &d.path("unit_out.csv"),
+        ],
+        &[],
+    );
+    assert_ok(&unit);
+    let exit = std::fs::read_to_string(d.path("unit_out.csv")).expect("unit output");
+    let want: Vec<&str> = exit
+        .lines()
+        .nth(1)
+        .expect("row")
+        .split(',')
+        .skip(6)
+        .collect();
+    for row in &rows[3..5] {
+        let got: Vec<&str> = row.split(',').skip(7).collect();
+        assert_eq!(got, want, "{row}");
+    }
+    // An earlier trace's output traced again: its result columns are replaced, once each.
+    let again = d.path("again.csv");
+    let o = run(&[&scene, &out, &again], &[]);
+    assert_ok(&o);
+    assert!(
+        stderr(&o).contains(
+            "out.csv: input columns named as results (status, px, py, pz, qx, qy, qz, opl, length, steps, evals) are replaced by this trace's"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    let again = std::fs::read_to_string(&again).expect("again");
+    assert_eq!(
+        again.lines().next(),
+        Some("ox,oy,oz,dx,dy,dz,id,status,px,py,pz,qx,qy,qz,opl,length,steps,evals")
+    );
+    assert_eq!(
+        again.lines().nth(1),
+        text.lines().nth(1),
+        "the same ray, traced again"
+    );
+}

@@ -84,9 +84,14 @@ impl TracePlan {
         if let Some(e) = overrides.exit {
             settings.exit = e;
         }
-        settings
-            .validate_for(&field.bounds())
-            .with_context(|| format!("{label}: [render]"))?;
+        let overridden = overrides.step.is_some() || overrides.max_steps.is_some();
+        settings.validate_for(&field.bounds()).with_context(|| {
+            if overridden {
+                format!("{label}: [render] as the command line sets it")
+            } else {
+                format!("{label}: [render]")
+            }
+        })?;
         // `step = { auto = ... }`: pilot rays (some of the table's own) choose the method.
         // A small table pays for few pilots: at most ~20 % of its work (none below
         // MIN_PILOTS: error control per length then keeps the asked error on its own).

@@ -28,6 +28,8 @@ pub const INPUT_COLUMNS: [&str; 6] = ["ox", "oy", "oz", "dx", "dy", "dz"];
 pub const OUTPUT_COLUMNS: [&str; 11] = [
     "status", "px", "py", "pz", "qx", "qy", "qz", "opl", "length", "steps", "evals",
 ];
+/// How many lines a warning about a table's rows names.
+pub const LINES_NAMED: usize = 5;
 /// Rows read, traced and written at a time by a streaming trace.
 pub const BATCH_ROWS: usize = 1 << 16;
 
@@ -38,6 +40,7 @@ pub enum TableError {
     Read { path: PathBuf, err: io::Error },
     #[error("{path}: empty ray table: expected the header `ox,oy,oz,dx,dy,dz`")]
     Empty { path: PathBuf },
+
     #[error(
         "{path}:{line}: header must name the columns ox,oy,oz,dx,dy,dz (other columns are passed through), found `{found}`"
     )]
@@ -112,6 +115,11 @@ struct LineFilter<R> {
     /// File line of each passed line, from passed line `first_passed` (1-based) on.
     lines: VecDeque<usize>,
     first_passed: usize,
+    /// Lines passed on so far (the first is the header).
+    passed: usize,
+    /// `#` lines skipped after the header, and the first few of their file lines.
+    comments_after_header: usize,
+    comment_lines: Vec<usize>,
 }
 
 impl<R: BufRead> LineFilter<R> {
@@ -125,6 +133,9 @@ impl<R: BufRead> LineFilter<R> {
             in_quotes: false,
             lines: VecDeque::new(),
             first_passed: 1,
+            passed: 0,
+            comments_after_header: 0,
+            comment_lines: Vec::new(),
         }
     }
 
@@ -162,10 +173,20 @@ impl<R: BufRead> LineFilter<R> {
             self.in_quotes ^= quotes % 2 == 1;
             if !starts_quoted {
                 let text = self.line.trim_ascii();
-                if text.is_empty() || text.starts_with(b"#") {
+                if text.is_empty() {
+                    continue;
+                }
+                if text.starts_with(b"#") {
+                    if self.passed > 0 {
+                        self.comments_after_header += 1;
+                        if self.comment_lines.len() < LINES_NAMED {
+                            self.comment_lines.push(self.read_lines);
+                        }
+                    }
                     continue;
                 }
             }
+            self.passed += 1;
             self.lines.push_back(self.read_lines);
             return Ok(true);
         }
@@ -198,6 +219,7 @@ pub struct RayReader<R: io::Read> {
     extra_at: Vec<usize>,
     width: usize,
     extra_columns: Vec<String>,
+    replaced_columns: Vec<String>,
     record: csv::StringRecord,
 }
 
@@ -234,6 +256,7 @@ impl<R: io::Read> RayReader<R> {
             extra_at: Vec::new(),
             width: 0,
             extra_columns: Vec::new(),
+            replaced_columns: Vec::new(),
             record: csv::StringRecord::new(),
         };
         if !got.map_err(|e| reader.csv_err(e))? {
@@ -258,7 +281,16 @@ impl<R: io::Read> RayReader<R> {
             });
         };
         reader.index.copy_from_slice(&index);
-        reader.extra_at = (0..names.len()).filter(|i| !index.contains(i)).collect();
+        // A column named as a result (an earlier trace's output read back) is replaced by
+        // this trace's result, not passed through: each column is written once.
+        let result = |i: &usize| OUTPUT_COLUMNS.contains(&names[*i]);
+        reader.replaced_columns = (0..names.len())
+            .filter(|i| !index.contains(i) && result(i))
+            .map(|i| names[i].to_owned())
+            .collect();
+        reader.extra_at = (0..names.len())
+            .filter(|i| !index.contains(i) && !result(i))
+            .collect();
         reader.extra_columns = reader
             .extra_at
             .iter()
@@ -273,9 +305,22 @@ impl<R: io::Read> RayReader<R> {
         &self.extra_columns
     }
 
+    /// The input's columns named as results ([`OUTPUT_COLUMNS`]): not passed through, this
+    /// trace's results replace them.
+    pub fn replaced_columns(&self) -> &[String] {
+        &self.replaced_columns
+    }
+
     /// Bytes of the input read so far (for progress).
     pub fn bytes_read(&self) -> u64 {
         self.csv.get_ref().read_bytes
+    }
+
+    /// The `#` lines skipped after the header so far, and the file lines of the first few
+    /// ([`LINES_NAMED`]): a row whose first value starts with `#` reads as a comment.
+    pub fn comments_after_header(&self) -> (usize, &[usize]) {
+        let f = self.csv.get_ref();
+        (f.comments_after_header, &f.comment_lines)
     }
 
     fn line_of(&self, record: &csv::StringRecord) -> usize {

@@ -306,6 +306,16 @@ impl<R: Real> March<R> {
         first_step_scale: f64,
     ) -> Result<Self, RayResult> {
         let mut res = RayResult::at(RayStatus::Error, origin, DVec3::ZERO);
+        // A direction whose squared length overflows (1e308) or underflows (1e-320) is
+        // scaled to its largest component first; any other is used as given.
+        let len2 = dir.length_squared();
+        let big = dir.abs().max_element();
+        let dir =
+            if (len2.is_infinite() || len2 < f64::MIN_POSITIVE) && big.is_finite() && big > 0.0 {
+                dir / big
+            } else {
+                dir
+            };
         let len2 = dir.length_squared();
         if !origin.is_finite() || !dir.is_finite() || len2 == 0.0 || !len2.is_finite() {
             res.direction = if dir.is_finite() && len2 > 0.0 {

@@ -235,6 +235,15 @@ fn bake_one(
             report.interp.name(),
         );
     }
+    if !report.meets_budget && !report.source_limited {
+        eprintln!(
+            "grin: warning: {}: the budget {:.1e} is not met (relative error {:.2e} at {} nodes on the longest axis); the bake is kept: without --resolution grin chooses the grid that meets it",
+            args.scene.display(),
+            report.budget,
+            report.relative_error,
+            report.resolution,
+        );
+    }
     let summary = summary_json(output, &field.describe(), &report);
     // `-o -`: the binary is stdout's; the summary goes to stderr.
     let to_stream = crate::is_stream(output);
@@ -417,6 +426,13 @@ fn bake_sparse(
             r.budget,
             r.relative_error,
             r.limited_bricks
+        );
+    } else if !r.meets_budget {
+        eprintln!(
+            "grin: warning: {}: the budget {:.1e} is not met (relative error {:.2e}); the bake is kept",
+            args.scene.display(),
+            r.budget,
+            r.relative_error,
         );
     }
     let mut summary = serde_json::json!({

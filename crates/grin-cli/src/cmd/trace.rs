@@ -178,6 +178,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut seconds = 0.0;
     let mut s = TableSummary::default();
     let mut failed: Option<table::TableError> = None;
+    // Rays that ended `error`, and the input lines of the first few.
+    let (mut errors, mut error_lines) = (0usize, Vec::new());
     let written = grin_output::write_file(&args.output, |w| {
         let mut out = table::TableWriter::new(format, reader.extra_columns());
         let mut results = Vec::new();
@@ -186,6 +188,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             plan.trace_into(&rows, &mut results);
             seconds += start.elapsed().as_secs_f64();
             s.add(&results);
+            for (row, r) in rows.iter().zip(&results) {
+                if r.status == grin_trace::RayStatus::Error {
+                    errors += 1;
+                    if error_lines.len() < table::LINES_NAMED {
+                        error_lines.push(row.line);
+                    }
+                }
+            }
             out.rows(w, &rows, &results)?;
             bar.set_message(s.rays.to_string());
             bar.set_position(reader.bytes_read());
@@ -235,6 +245,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "exited rays' own error estimates: at most {:.1e} rad (asked {:.1e})",
         s.worst_estimate, settings.accuracy
     );
+    if !reader.replaced_columns().is_empty() {
+        eprintln!(
+            "grin: warning: {}: input columns named as results ({}) are replaced by this trace's, not passed through",
+            args.rays.display(),
+            reader.replaced_columns().join(", ")
+        );
+    }
+    let (comments, comment_lines) = reader.comments_after_header();
+    if comments > 0 {
+        eprintln!(
+            "grin: warning: {}: `#` comment lines after the header skipped: {comments} ({}); a row whose first value starts with `#` must quote it",
+            args.rays.display(),
+            name_lines(comment_lines, comments)
+        );
+    }
+    if errors > 0 {
+        eprintln!(
+            "grin: warning: {}: rays that ended `error`: {errors} ({}): a NaN or infinite value or a zero direction in the row, or the ray met n <= 0 or a non-finite field",
+            args.rays.display(),
+            name_lines(&error_lines, errors)
+        );
+    }
     if s.degraded > 0 {
         eprintln!(
             "grin: warning: {} rays ended `degraded`: their own error estimate is above the {:.1e} rad they are held to (asked {:.1e}) (steps too coarse for the field there, a grazing exit or near miss of the surface, or a bake's n error amplified at a grazing crossing); shorter steps or step = {{ auto = ... }} without an integrator resolve the first",
@@ -278,4 +310,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `line 4`, `lines 4, 7 and 9`, `lines 4, 7, 9, 12, 15 and 3 more`: the first `lines` of
+/// `count`.
+fn name_lines(lines: &[usize], count: usize) -> String {
+    let listed: Vec<String> = lines.iter().map(usize::to_string).collect();
+    let more = count.saturating_sub(lines.len());
+    match (listed.as_slice(), more) {
+        ([one], 0) => format!("line {one}"),
+        (_, 0) if listed.len() > 1 => {
+            let (last, rest) = listed.split_last().expect("two or more");
+            format!("lines {} and {last}", rest.join(", "))
+        }
+        _ => format!("lines {} and {more} more", listed.join(", ")),
+    }
 }
