@@ -235,7 +235,7 @@ fn bake_one(
             report.interp.name(),
         );
     }
-    if !report.meets_budget && !report.source_limited {
+    if !report.meets_budget && !report.source_limited && !json_on_stderr(args, output) {
         eprintln!(
             "grin: warning: {}: the budget {:.1e} is not met (relative error {:.2e} at {} nodes on the longest axis); the bake is kept: without --resolution grin chooses the grid that meets it",
             args.scene.display(),
@@ -427,7 +427,7 @@ fn bake_sparse(
             r.relative_error,
             r.limited_bricks
         );
-    } else if !r.meets_budget {
+    } else if !r.meets_budget && !json_on_stderr(args, output) {
         eprintln!(
             "grin: warning: {}: the budget {:.1e} is not met (relative error {:.2e}); the bake is kept",
             args.scene.display(),
@@ -522,4 +522,10 @@ fn bake_sparse(
         crate::report(to_stream, text);
     }
     Ok(summary)
+}
+
+/// With `-o - --json` stderr carries the JSON summary alone (its `meets_budget` says what
+/// a warning would).
+fn json_on_stderr(args: &Args, output: &Path) -> bool {
+    args.json && crate::is_stream(output)
 }
