@@ -150,6 +150,12 @@ pub enum Control {
     Stop,
 }
 
+/// How far [`nudge_inside`] moves a point on the surface at `start` inwards: a few ulps
+/// of the medium's size and the point's coordinates in precision `R`.
+fn entry_nudge<R: Real>(bounds: &Bounds, start: DVec3) -> f64 {
+    ENTRY_NUDGE_EPS * R::EPS.to_f64() * (len_scale_of(bounds) + start.abs().max_element())
+}
+
 /// The entry point `start` rounded to R and, when that lands outside the bounds (the
 /// first step would then "exit" where the ray entered), moved inside by a few units of R's
 /// roundoff: along the refracted ray `d_in` (its own line; a move along the normal
@@ -161,8 +167,7 @@ fn nudge_inside<R: Real>(bounds: &Bounds, start: DVec3, d_in: DVec3) -> (R::V3, 
     if bounds.signed_distance(r.to_dvec3()) < 0.0 {
         return (r, 0.0);
     }
-    let nudge =
-        ENTRY_NUDGE_EPS * R::EPS.to_f64() * (len_scale_of(bounds) + start.abs().max_element());
+    let nudge = entry_nudge::<R>(bounds, start);
     let normal = bounds.normal(start);
     let cos_in = -d_in.dot(normal);
     if cos_in > ENTRY_NUDGE_MIN_COS {
@@ -344,10 +349,16 @@ impl<R: Real> March<R> {
                 res.status = RayStatus::Missed;
                 return Err(res);
             }
-            // On the surface: `origin + d s_in` is off it by the rounding of the origin's
-            // coordinates (1e-10 from 1e6 away), more than the entry nudge's few ulps of
-            // the medium, and a ray begun outside would leave at once.
-            let p = project_to_surface(&bounds, origin + d * s_in.max(0.0));
+            // `origin + d s_in` is off the surface by the rounding of the origin's
+            // coordinates: from far away (1e-10 from 1e6 away) by more than the entry
+            // nudge's few ulps of the medium can bring inside, and a ray begun outside
+            // would leave at once. Such a point is put on the surface.
+            let p = origin + d * s_in.max(0.0);
+            let p = if bounds.signed_distance(p) > entry_nudge::<R>(&bounds, p) {
+                project_to_surface(&bounds, p)
+            } else {
+                p
+            };
             let entry = R::sample_field(field, R::V3::from_dvec3(p));
             let n_in = entry.n.to_f64();
             res.evals += 1;
