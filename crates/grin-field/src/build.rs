@@ -184,6 +184,11 @@ mod tests {
                 "{ kind = \"exponential-atmosphere\", e = 3e-4, scale_height = 0.5 }",
                 "exponential-atmosphere e=0.0003 H=0.5 base=0 axis=y",
             ),
+            // Beyond 1e-4 ..= 1e6 in exponent form (1e-300 printed as 300 digits).
+            (
+                "{ kind = \"exponential-atmosphere\", e = -5e-5, scale_height = 2.0, base = -1e-12 }",
+                "exponential-atmosphere e=-5e-5 H=2 base=-1e-12 axis=y",
+            ),
             (
                 "{ kind = \"plume\", plumes = [{ a = 1e-4, center = [0.0, 0.0, 0.0], s = 0.3 }] }",
                 "plume (1 blobs)",

@@ -11,7 +11,7 @@
 
 use glam::DVec3;
 
-use super::{from_n2, max_radius, param_error, require_positive};
+use super::{Num, from_n2, max_radius, param_error, require_positive};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
@@ -130,7 +130,7 @@ impl IndexField for Eaton {
             .max(self.grad_at(self.r_max))
     }
     fn describe(&self) -> String {
-        format!("eaton R={} core={}", self.radius, self.core)
+        format!("eaton R={} core={}", Num(self.radius), Num(self.core))
     }
     fn has_local_step_limits(&self) -> bool {
         false

@@ -12,7 +12,7 @@
 use glam::DVec3;
 use grin_scene::Axis;
 
-use super::{N2_FLOOR, axis_name, axis_vector, param_error, require_finite, require_positive};
+use super::{N2_FLOOR, Num, axis_name, axis_vector, param_error, require_finite, require_positive};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
@@ -141,9 +141,9 @@ impl IndexField for ExponentialAtmosphere {
     fn describe(&self) -> String {
         format!(
             "exponential-atmosphere e={} H={} base={} axis={}",
-            self.e,
-            self.scale_height,
-            self.base,
+            Num(self.e),
+            Num(self.scale_height),
+            Num(self.base),
             axis_name(self.axis)
         )
     }

@@ -9,7 +9,9 @@
 use glam::DVec3;
 use grin_scene::Axis;
 
-use super::{axis_name, axis_vector, from_n2, max_axis_distance, param_error, require_positive};
+use super::{
+    Num, axis_name, axis_vector, from_n2, max_axis_distance, param_error, require_positive,
+};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
@@ -133,8 +135,8 @@ impl IndexField for GrinRod {
     fn describe(&self) -> String {
         format!(
             "grin-rod n0={} a={} axis={}",
-            self.n0,
-            self.a,
+            Num(self.n0),
+            Num(self.a),
             axis_name(self.axis)
         )
     }

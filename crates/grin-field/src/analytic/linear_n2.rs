@@ -7,7 +7,7 @@ use glam::DVec3;
 use grin_scene::Axis;
 
 use super::{
-    axis_name, axis_vector, from_n2, half_extent_along, param_error, require_finite,
+    Num, axis_name, axis_vector, from_n2, half_extent_along, param_error, require_finite,
     require_positive,
 };
 use crate::bounds::Bounds;
@@ -103,8 +103,8 @@ impl IndexField for LinearN2 {
     fn describe(&self) -> String {
         format!(
             "linear-n2 n0={} k={} axis={}",
-            self.n0,
-            self.k,
+            Num(self.n0),
+            Num(self.k),
             axis_name(self.axis)
         )
     }

@@ -8,7 +8,7 @@
 
 use glam::DVec3;
 
-use super::{from_n2, max_radius, param_error, require_positive};
+use super::{Num, from_n2, max_radius, param_error, require_positive};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
@@ -97,7 +97,7 @@ impl IndexField for Luneburg {
         self.r_max / (self.radius * self.radius * n_min)
     }
     fn describe(&self) -> String {
-        format!("luneburg R={}", self.radius)
+        format!("luneburg R={}", Num(self.radius))
     }
     fn has_local_step_limits(&self) -> bool {
         false

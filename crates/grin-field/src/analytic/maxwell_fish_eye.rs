@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use super::{max_radius, require_positive};
+use super::{Num, max_radius, require_positive};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
@@ -81,7 +81,7 @@ impl IndexField for MaxwellFishEye {
         2.0 * self.n0 / self.a * u / (1.0 + u * u).powi(2)
     }
     fn describe(&self) -> String {
-        format!("maxwell-fish-eye n0={} a={}", self.n0, self.a)
+        format!("maxwell-fish-eye n0={} a={}", Num(self.n0), Num(self.a))
     }
     fn has_local_step_limits(&self) -> bool {
         false

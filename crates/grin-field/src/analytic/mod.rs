@@ -47,6 +47,22 @@ pub fn axis_vector(axis: Axis) -> DVec3 {
     }
 }
 
+/// A parameter as a description prints it: as written for ordinary magnitudes, in
+/// exponent form beyond 1e-4 ..= 1e6 (1e-300 printed as 300 digits).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Num(pub f64);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let a = self.0.abs();
+        if a != 0.0 && a.is_finite() && !(1e-4..1e6).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
+}
+
 /// Name of an axis as written in scene files.
 pub(crate) fn axis_name(axis: Axis) -> &'static str {
     axis.into()

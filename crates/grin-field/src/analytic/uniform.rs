@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 
-use super::require_positive;
+use super::{Num, require_positive};
 use crate::bounds::Bounds;
 use crate::field::{FieldError, FieldSample, IndexField};
 
@@ -48,7 +48,7 @@ impl IndexField for Uniform {
         0.0
     }
     fn describe(&self) -> String {
-        format!("uniform n={}", self.n)
+        format!("uniform n={}", Num(self.n))
     }
     fn has_local_step_limits(&self) -> bool {
         false
