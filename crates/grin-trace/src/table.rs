@@ -40,7 +40,6 @@ pub enum TableError {
     Read { path: PathBuf, err: io::Error },
     #[error("{path}: empty ray table: expected the header `ox,oy,oz,dx,dy,dz`")]
     Empty { path: PathBuf },
-
     #[error(
         "{path}:{line}: header must name the columns ox,oy,oz,dx,dy,dz (other columns are passed through), found `{found}`"
     )]
@@ -115,8 +114,6 @@ struct LineFilter<R> {
     /// File line of each passed line, from passed line `first_passed` (1-based) on.
     lines: VecDeque<usize>,
     first_passed: usize,
-    /// Lines passed on so far (the first is the header).
-    passed: usize,
     /// `#` lines skipped after the header, and the first few of their file lines.
     comments_after_header: usize,
     comment_lines: Vec<usize>,
@@ -133,7 +130,6 @@ impl<R: BufRead> LineFilter<R> {
             in_quotes: false,
             lines: VecDeque::new(),
             first_passed: 1,
-            passed: 0,
             comments_after_header: 0,
             comment_lines: Vec::new(),
         }
@@ -177,7 +173,8 @@ impl<R: BufRead> LineFilter<R> {
                     continue;
                 }
                 if text.starts_with(b"#") {
-                    if self.passed > 0 {
+                    // After the header: some line was passed on already.
+                    if !self.lines.is_empty() || self.first_passed > 1 {
                         self.comments_after_header += 1;
                         if self.comment_lines.len() < LINES_NAMED {
                             self.comment_lines.push(self.read_lines);
@@ -186,7 +183,6 @@ impl<R: BufRead> LineFilter<R> {
                     continue;
                 }
             }
-            self.passed += 1;
             self.lines.push_back(self.read_lines);
             return Ok(true);
         }

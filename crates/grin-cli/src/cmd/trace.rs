@@ -178,8 +178,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut seconds = 0.0;
     let mut s = TableSummary::default();
     let mut failed: Option<table::TableError> = None;
-    // Rays that ended `error`, and the input lines of the first few.
-    let (mut errors, mut error_lines) = (0usize, Vec::new());
+    // The input lines of the first few rays that ended `error` (the summary counts them).
+    let mut error_lines = Vec::new();
     let written = grin_output::write_file(&args.output, |w| {
         let mut out = table::TableWriter::new(format, reader.extra_columns());
         let mut results = Vec::new();
@@ -188,14 +188,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             plan.trace_into(&rows, &mut results);
             seconds += start.elapsed().as_secs_f64();
             s.add(&results);
-            for (row, r) in rows.iter().zip(&results) {
-                if r.status == grin_trace::RayStatus::Error {
-                    errors += 1;
-                    if error_lines.len() < table::LINES_NAMED {
-                        error_lines.push(row.line);
-                    }
-                }
-            }
+            let errors = rows.iter().zip(&results);
+            let errors = errors.filter(|(_, r)| r.status == grin_trace::RayStatus::Error);
+            let room = table::LINES_NAMED - error_lines.len();
+            error_lines.extend(errors.take(room).map(|(row, _)| row.line));
             out.rows(w, &rows, &results)?;
             bar.set_message(s.rays.to_string());
             bar.set_position(reader.bytes_read());
@@ -260,11 +256,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             name_lines(comment_lines, comments)
         );
     }
-    if errors > 0 {
+    if s.error > 0 {
         eprintln!(
-            "grin: warning: {}: rays that ended `error`: {errors} ({}): a NaN or infinite value or a zero direction in the row, or the ray met n <= 0 or a non-finite field",
+            "grin: warning: {}: rays that ended `error`: {} ({}): a NaN or infinite value or a zero direction in the row, or the ray met n <= 0 or a non-finite field",
             args.rays.display(),
-            name_lines(&error_lines, errors)
+            s.error,
+            name_lines(&error_lines, s.error)
         );
     }
     if s.degraded > 0 {

@@ -50,6 +50,14 @@ pub(crate) const E: [f64; 7] = [
     -1.0 / 40.0,
 ];
 
+/// The embedded error of a step's optical path over `h`: `rest` (the stages after the
+/// first, already times `h`) and the first stage's term, of the index `n0` at the start.
+/// The one-ray step ([`super::Quad::opl_error_with_start`]) and the packets share it.
+#[inline]
+pub(crate) fn opl_error_with_start(rest: f64, n0: f64, h: f64) -> f64 {
+    rest + E[0] * h * n0 * n0
+}
+
 /// One Dormand-Prince 5(4) step; 6 evaluations beyond the start sample, the last at the
 /// new point (returned as `end`).
 pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h: R) -> Step<R> {
@@ -80,11 +88,10 @@ pub fn dopri_step<R: Real>(field: &dyn IndexField, s: RayState<R>, d0: R::V3, h:
         let sample = R::sample_field(field, ri);
         ds[i] = sample.n_grad_n();
         // The fifth-order weights b_i are the last row of A (b_7 = 0).
-        let n_i = sample.n.to_f64();
-        opl_error += E[i] * n_i * n_i;
+        let n = sample.n.to_f64();
+        opl_error += E[i] * n * n;
         let b = A[5].get(i).copied().unwrap_or(0.0);
         if b != 0.0 {
-            let n = sample.n.to_f64();
             let u = ts[i].to_dvec3().normalize_or_zero();
             opl += b * n * n;
             length += b * n;

@@ -73,7 +73,7 @@ pub struct Quad {
 impl Quad {
     /// The step's embedded optical-path error, the first stage's term (n0, over `h`) added.
     pub fn opl_error_with_start(self, n0: f64, h: f64) -> f64 {
-        self.opl_error + adaptive::E[0] * h * n0 * n0
+        adaptive::opl_error_with_start(self.opl_error, n0, h)
     }
 
     /// The whole step's integrals: the first stage's term (n0, T0, over `h`) added.

@@ -26,7 +26,7 @@ use super::{
 use crate::boundary::{EXCURSION_SLACK_TOLS, exit_tolerance};
 use crate::exit_search::{ExitSearch, Phase};
 use crate::integrate::Quad;
-use crate::integrate::adaptive::{A, E};
+use crate::integrate::adaptive::{A, E, opl_error_with_start};
 use crate::step::{
     ADAPTIVE_MIN_DS_EPS, ADAPTIVE_MIN_DS_REL, ADAPTIVE_TOL_FLOOR_EPS, MAX_REJECTIONS,
     StepController, step_factor,
@@ -203,8 +203,7 @@ pub(super) fn march_dopri_in(
         let q_err = q_err * h;
         for i in 0..LANES {
             if control[i].is_some_and(|c| c.opl) {
-                // Quad::opl_error_with_start.
-                let opl = (q_err.0[i] + E[0] * h.0[i] * s.n0.0[i] * s.n0.0[i]).abs();
+                let opl = opl_error_with_start(q_err.0[i], s.n0.0[i], h.0[i]).abs();
                 err.0[i] = err.0[i].max(opl);
             }
         }
