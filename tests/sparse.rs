@@ -306,7 +306,8 @@ fn hostile_sparse_files_are_clear_errors() {
             .expect("info");
         assert_eq!(stderr(&o).lines().count(), 1, "{name}: {}", stderr(&o));
     }
-    // A sparse bake is trilinear: asking for tricubic is refused, not ignored.
+    // A trilinear sparse bake is sampled as it was baked: asking for tricubic is refused,
+    // not ignored.
     let tricubic = d.write(
         "tri.toml",
         "[camera]\nposition = [0.0, 0.0, -6.0]\nlook_at = [0.0, 0.0, 0.0]\n[medium]\nbounds = { box = { min = [-2.0, -2.0, -2.0], max = [2.0, 2.0, 2.0] } }\nfield = { kind = \"baked\", path = \"p.grinf\", interpolation = \"tricubic\" }\n",
@@ -318,7 +319,10 @@ fn hostile_sparse_files_are_clear_errors() {
         .arg(d.path("t.exr"))
         .output()
         .expect("render");
-    assert_err(&o, "sampled trilinearly only");
+    assert_err(
+        &o,
+        "this sparse bake is trilinear (sampled as it was baked); `interpolation = \"tricubic\"` needs a sparse bake made with `grin bake --sparse --interp tricubic`",
+    );
     assert!(!d.path("t.exr").exists());
 }
 
@@ -327,7 +331,8 @@ const BOS: &str = "\n[optics]\nmode = \"bos\"\nplane = { point = [0.0, 0.0, 1300
 
 /// The sparse bake on the GPU (its voxels in one linear texture, its brick table the
 /// macro-cell texture): the true BOS displacement of every pixel agrees with the CPU's march of
-/// the same bake, and both with the CPU's march of the analytic source.
+/// the same bake, and both with the CPU's march of the analytic source; trilinear and
+/// tricubic Catmull-Rom bakes (bricks with an apron).
 #[test]
 fn sparse_renders_agree_on_both_backends() {
     if !gpu_or_skip() {
@@ -335,34 +340,55 @@ fn sparse_renders_agree_on_both_backends() {
     }
     let d = Dir::new();
     let src = scenes().join("eight-plumes.toml");
-    let v = json(&bake_with(
-        &src,
-        &d.path("sparse.grinf"),
-        &["--sparse", "--json"],
-    ));
-    assert_eq!(v["meets_budget"], true);
     let text = std::fs::read_to_string(&src).expect("scene");
     let src_bos = d.write("src.toml", &format!("{text}{BOS}"));
-    let sparse_bos = eight_plumes_with(
-        &d,
-        "sparse.toml",
-        "field = { kind = \"baked\", path = \"sparse.grinf\" }",
-    );
-    let sparse_text = std::fs::read_to_string(&sparse_bos).expect("scene");
-    std::fs::write(&sparse_bos, format!("{sparse_text}{BOS}")).expect("write");
-    let displacement = |scene: &Path, backend: &str, name: &str| {
-        let out = d.path(name);
-        let summary = render_json(scene, &out, backend);
-        assert_eq!(summary["backend"], backend, "{summary}");
-        let c = exr_channels(&out).1;
-        [
-            c["displacement_px.X"].clone(),
-            c["displacement_px.Y"].clone(),
-        ]
+    let mut reference = None;
+    for interp in ["trilinear", "tricubic"] {
+        let grinf = format!("{interp}.grinf");
+        let v = json(&bake_with(
+            &src,
+            &d.path(&grinf),
+            &["--sparse", "--interp", interp, "--json"],
+        ));
+        assert_eq!(v["meets_budget"], true);
+        assert_eq!(v["interp"], interp);
+        let sparse_bos = eight_plumes_with(
+            &d,
+            &format!("{interp}.toml"),
+            &format!("field = {{ kind = \"baked\", path = \"{grinf}\" }}"),
+        );
+        let sparse_text = std::fs::read_to_string(&sparse_bos).expect("scene");
+        std::fs::write(&sparse_bos, format!("{sparse_text}{BOS}")).expect("write");
+        let reference =
+            reference.get_or_insert_with(|| bos_displacement(&d, &src_bos, "cpu", "src.exr"));
+        sparse_agree(
+            &d,
+            interp,
+            &sparse_bos,
+            reference,
+            v["bytes"].as_u64().unwrap_or(0),
+        );
+    }
+}
+
+/// The two channels of a BOS render's true displacement (px).
+fn bos_displacement(d: &Dir, scene: &Path, backend: &str, name: &str) -> [Vec<f64>; 2] {
+    let out = d.path(name);
+    let summary = render_json(scene, &out, backend);
+    assert_eq!(summary["backend"], backend, "{summary}");
+    let c = exr_channels(&out).1;
+    [
+        c["displacement_px.X"].clone(),
+        c["displacement_px.Y"].clone(),
+    ]
+}
+
+/// The sparse bake's BOS on both backends against each other and the source's.
+fn sparse_agree(d: &Dir, interp: &str, sparse_bos: &Path, reference: &[Vec<f64>; 2], bytes: u64) {
+    let displacement = |backend: &str| {
+        bos_displacement(d, sparse_bos, backend, &format!("{interp}-{backend}.exr"))
     };
-    let reference = displacement(&src_bos, "cpu", "src.exr");
-    let cpu = displacement(&sparse_bos, "cpu", "cpu.exr");
-    let gpu = displacement(&sparse_bos, "gpu", "gpu.exr");
+    let (cpu, gpu) = (displacement("cpu"), displacement("gpu"));
     let p99 = |a: &[Vec<f64>; 2], b: &[Vec<f64>; 2]| {
         let mut diffs: Vec<f64> = (0..2)
             .flat_map(|k| a[k].iter().zip(&b[k]).map(|(x, y)| (x - y).abs()))
@@ -375,10 +401,10 @@ fn sparse_renders_agree_on_both_backends() {
         .chain(&reference[1])
         .fold(0.0f64, |m, v| m.max(v.abs()));
     let (gpu_cpu, gpu_cpu_max) = p99(&gpu, &cpu);
-    let (cpu_src, cpu_src_max) = p99(&cpu, &reference);
-    let (gpu_src, gpu_src_max) = p99(&gpu, &reference);
+    let (cpu_src, cpu_src_max) = p99(&cpu, reference);
+    let (gpu_src, gpu_src_max) = p99(&gpu, reference);
     eprintln!(
-        "eight plumes BOS 160x120, displacement up to {largest:.2} px: sparse GPU vs sparse CPU p99 {gpu_cpu:.2e} (max {gpu_cpu_max:.2e}) px, sparse CPU vs source p99 {cpu_src:.2e} (max {cpu_src_max:.2e}), sparse GPU vs source p99 {gpu_src:.2e} (max {gpu_src_max:.2e})"
+        "eight plumes BOS 160x120, {interp} sparse bake of {bytes} bytes, displacement up to {largest:.2} px: sparse GPU vs sparse CPU p99 {gpu_cpu:.2e} (max {gpu_cpu_max:.2e}) px, sparse CPU vs source p99 {cpu_src:.2e} (max {cpu_src_max:.2e}), sparse GPU vs source p99 {gpu_src:.2e} (max {gpu_src_max:.2e})"
     );
     assert!(largest > 1.0, "the plumes show: {largest} px");
     // Measured: GPU vs CPU p99 9.8e-6 px (max 3.0e-5); against the source p99 5.6e-4

@@ -134,7 +134,9 @@ fn tricubic(g: vec3<f32>) -> vec4<f32> {
 // i16 (FLAG_FIELD_SNORM), a second block of as many texels follows in z: each brick's
 // scales (delta_n, gradient), times 32767.
 // field_tex is a linear array of texels, SPARSE_ROW x SPARSE_ROW a layer: every active
-// brick's (cells + 1)^3 nodes, x fastest, in f32 or rgba16snorm (q / 32767).
+// brick's (cells + 1)^3 nodes, x fastest, in f32 or rgba16snorm (q / 32767); with
+// FLAG_TRICUBIC (Catmull-Rom) (cells + 3)^3, one node beyond each face (the apron), node
+// i of the brick's cells stored at i + 1.
 // The grid parameters place the top grid: grid_origin its corner, grid_inv_spacing 1 /
 // brick edge, grid_dims bricks + 1.
 
@@ -170,11 +172,29 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
         return ambient;
     }
     let cells = u32(entry.x);
-    let m = cells + 1u;
+    let tricubic = (FLAGS & FLAG_TRICUBIC) != 0u;
+    let m = select(cells + 1u, cells + 3u, tricubic);
     let u = clamp((g - vec3<f32>(b)) * f32(cells), vec3<f32>(0.0), vec3<f32>(f32(cells)));
     let i = min(vec3<u32>(u), vec3<u32>(cells - 1u));
     let t = u - vec3<f32>(i);
+    // Trilinear: node i; Catmull-Rom: node i - 1, stored at i.
     let first = u32(entry.y) * 65536u + u32(entry.z) + i.x + m * (i.y + m * i.z);
+    var v: vec4<f32>;
+    if tricubic {
+        v = sparse_catmull_rom(first, m, t);
+    } else {
+        v = sparse_trilinear(first, m, t);
+    }
+    if (FLAGS & FLAG_FIELD_SNORM) != 0u {
+        let bricks = params.grid_dims - vec3<u32>(1u);
+        let s = textureLoad(macro_tex, vec3<i32>(b + vec3<u32>(0u, 0u, bricks.z)), 0);
+        v = v * s.xyyy;
+    }
+    return FieldSample(ambient_index() + v.x, v.yzw, v.x);
+}
+
+// Trilinear blend of a brick's 8 nodes from `first` (m nodes a row).
+fn sparse_trilinear(first: u32, m: u32, t: vec3<f32>) -> vec4<f32> {
     let c000 = linear_texel(first);
     let c100 = linear_texel(first + 1u);
     let c010 = linear_texel(first + m);
@@ -187,13 +207,49 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     let x10 = mix(c010, c110, t.x);
     let x01 = mix(c001, c101, t.x);
     let x11 = mix(c011, c111, t.x);
-    var v = mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
-    if (FLAGS & FLAG_FIELD_SNORM) != 0u {
-        let bricks = params.grid_dims - vec3<u32>(1u);
-        let s = textureLoad(macro_tex, vec3<i32>(b + vec3<u32>(0u, 0u, bricks.z)), 0);
-        v = v * s.xyyy;
-    }
-    return FieldSample(ambient_index() + v.x, v.yzw, v.x);
+    return mix(mix(x00, x10, t.y), mix(x01, x11, t.y), t.z);
+}
+
+// Catmull-Rom weights at fraction t (grin_field::sparse::catmull_rom_weights).
+fn catmull_rom_weights(t: f32) -> vec4<f32> {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    return vec4<f32>(0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2));
+}
+
+// One line of 4 nodes along x from `first`, weighted.
+fn sparse_cr_line(first: u32, wx: vec4<f32>) -> vec4<f32> {
+    var line = linear_texel(first) * wx.x;
+    line += linear_texel(first + 1u) * wx.y;
+    line += linear_texel(first + 2u) * wx.z;
+    line += linear_texel(first + 3u) * wx.w;
+    return line;
+}
+
+// The 4 lines of one z plane from `first`, each times its y-z weight, added to `acc`.
+fn sparse_cr_plane(acc: vec4<f32>, first: u32, m: u32, wz: f32, wx: vec4<f32>, wy: vec4<f32>) -> vec4<f32> {
+    var out = acc;
+    out += sparse_cr_line(first, wx) * (wz * wy.x);
+    out += sparse_cr_line(first + m, wx) * (wz * wy.y);
+    out += sparse_cr_line(first + 2u * m, wx) * (wz * wy.z);
+    out += sparse_cr_line(first + 3u * m, wx) * (wz * wy.w);
+    return out;
+}
+
+// Tricubic Catmull-Rom of a brick's 4 x 4 x 4 nodes from `first` (m nodes a row), in the
+// CPU twin's order (SparseField::catmull_rom: z planes, then y lines), written out without
+// loops (lavapipe's loop-iteration limit: see `tricubic`).
+fn sparse_catmull_rom(first: u32, m: u32, t: vec3<f32>) -> vec4<f32> {
+    let wx = catmull_rom_weights(t.x);
+    let wy = catmull_rom_weights(t.y);
+    let wz = catmull_rom_weights(t.z);
+    let plane = m * m;
+    var v = vec4<f32>(0.0);
+    v = sparse_cr_plane(v, first, m, wz.x, wx, wy);
+    v = sparse_cr_plane(v, first + plane, m, wz.y, wx, wy);
+    v = sparse_cr_plane(v, first + 2u * plane, m, wz.z, wx, wy);
+    v = sparse_cr_plane(v, first + 3u * plane, m, wz.w, wx, wy);
+    return v;
 }
 
 // The local step cap (SparseField::step_cap): twice the spacing of the finest brick in

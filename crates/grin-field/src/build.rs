@@ -132,15 +132,25 @@ pub fn build_field_capped(
                 Some(i) => baked.with_interp(Interp::from(*i)),
                 None => baked,
             }),
-            crate::grinf::Grinf::Sparse(_)
-                if interpolation == &Some(grin_scene::Interpolation::Tricubic) =>
-            {
-                return Err(FieldError::File {
+            crate::grinf::Grinf::Sparse(sparse) => {
+                // A sparse bake is sampled as it was baked: its bricks hold the apron
+                // Catmull-Rom reads, or none.
+                let has = sparse.interp();
+                if let Some(asked) = interpolation.map(Interp::from)
+                    && asked != has
+                {
+                    return Err(FieldError::File {
                         path: scene_dir.join(path).display().to_string(),
-                        message: "a sparse bake is sampled trilinearly only; `interpolation = \"tricubic\"` needs a dense bake".into(),
+                        message: format!(
+                            "this sparse bake is {} (sampled as it was baked); `interpolation = \"{}\"` needs a sparse bake made with `grin bake --sparse --interp {}`",
+                            has.name(),
+                            asked.name(),
+                            asked.name()
+                        ),
                     });
+                }
+                Arc::new(sparse)
             }
-            crate::grinf::Grinf::Sparse(sparse) => Arc::new(sparse),
         },
     };
     check_positive(field.as_ref(), &field.describe())?;

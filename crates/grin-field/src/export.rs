@@ -188,20 +188,22 @@ pub fn export_sparse_vdb(
         for b in bricks() {
             boxes.push(brick_box(b).ok_or_else(too_large)?);
         }
-        let node = |b: &crate::sparse::Brick, v: usize| field.voxel_f32(b, b.offset + v);
+        // A brick's own nodes (a Catmull-Rom bake's apron is the neighbours' to export).
+        let node = |b: &crate::sparse::Brick, v: usize| field.voxel_f32(b, v);
         writer.add_float_boxes(
             delta_name,
             world_from_index,
             bricks()
                 .zip(&boxes)
-                .map(|(b, &bbox)| (bbox, (0..b.voxel_count()).map(|v| node(b, v)[0]).collect())),
+                .map(|(b, &bbox)| (bbox, b.inner_voxels().map(|v| node(b, v)[0]).collect())),
             &opts,
         )?;
         writer.add_vec3_boxes(
             grad_name,
             world_from_index,
             bricks().zip(&boxes).map(|(b, &bbox)| {
-                let grad = (0..b.voxel_count())
+                let grad = b
+                    .inner_voxels()
                     .map(|v| {
                         let x = node(b, v);
                         [x[1], x[2], x[3]]

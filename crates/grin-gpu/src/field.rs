@@ -465,6 +465,11 @@ pub fn upload_sparse(
     params.macro_threshold = 0.5;
     params.n_uncertainty = grin_field::IndexField::n_uncertainty(sparse) as f32;
     params.flags |= FLAG_OUTSIDE_AMBIENT | FLAG_SPARSE;
+    // Bricks with an apron are sampled tricubically (Catmull-Rom), their (cells + 3)^3
+    // nodes from the first voxel.
+    if sparse.apron() > 0 {
+        params.flags |= FLAG_TRICUBIC;
+    }
     if snorm {
         params.flags |= FLAG_FIELD_SNORM;
     }

@@ -29,7 +29,9 @@ pub struct Args {
     pub max_memory: Option<u64>,
     /// Interpolation stored as the file's default (and used to measure the error).
     /// Default: trilinear, and for a VDB grid whose own voxel size misses the budget,
-    /// tricubic at it and on grids 2x and 4x finer (within --max-memory).
+    /// tricubic at it and on grids 2x and 4x finer (within --max-memory). With --sparse:
+    /// trilinear (the default), or tricubic Catmull-Rom (bricks hold one more layer of
+    /// nodes beyond each face; third order, so smooth fields need far fewer nodes).
     #[arg(long, value_enum)]
     pub interp: Option<InterpArg>,
     /// Storage (default: i16 when its rounding fits the budget, else f32).
@@ -39,9 +41,9 @@ pub struct Args {
     #[arg(long)]
     pub no_crop: bool,
     /// Bake sparsely: bricks only where the index differs from ambient, each at the
-    /// coarsest of its levels that meets --error (a version-2 .grinf, trilinear; both
-    /// backends render it).
-    #[arg(long, conflicts_with_all = ["resolution", "interp", "no_crop"])]
+    /// coarsest of its levels that meets --error (a version-2 .grinf, trilinear or with
+    /// --interp tricubic Catmull-Rom; both backends render it).
+    #[arg(long, conflicts_with_all = ["resolution", "no_crop"])]
     pub sparse: bool,
     /// With --sparse: bricks along the medium's longest axis (default: chosen, bricks of
     /// 1, 2, 4 or 8 32ths of it, whichever the probes predict holds the budget in the
@@ -187,10 +189,7 @@ fn bake_one(
         resolution: args.resolution,
         error_budget: args.error,
         max_memory: args.max_memory.unwrap_or(bake::DEFAULT_MAX_MEMORY),
-        interp: match args.interp {
-            None | Some(InterpArg::Trilinear) => Interp::Trilinear,
-            Some(InterpArg::Tricubic) => Interp::Tricubic,
-        },
+        interp: interp_of(args),
         cubic_past_source: args.interp.is_none(),
         storage: args.storage.map(|s| match s {
             StorageArg::F32 => Storage::F32,
@@ -393,6 +392,14 @@ fn stage_bar() -> (indicatif::ProgressBar, impl Fn(&str, u64, u64) + Sync) {
 }
 
 /// `grin bake --sparse`: bake `field` into a sparse .grinf at `output`.
+/// The interpolation `--interp` asks for (trilinear where it is not given).
+fn interp_of(args: &Args) -> Interp {
+    match args.interp {
+        None | Some(InterpArg::Trilinear) => Interp::Trilinear,
+        Some(InterpArg::Tricubic) => Interp::Tricubic,
+    }
+}
+
 fn bake_sparse(
     args: &Args,
     field: &dyn grin_field::IndexField,
@@ -410,6 +417,7 @@ fn bake_sparse(
         }),
         top_bricks: args.bricks,
         gradient: GradientMode::for_field(spec),
+        interp: interp_of(args),
         ..Default::default()
     };
     let (bar, progress) = stage_bar();
@@ -446,7 +454,7 @@ fn bake_sparse(
         "levels": r.levels,
         "finest_spacing": r.finest_spacing,
         "storage": r.storage.name(),
-        "interp": "trilinear",
+        "interp": sparse.interp().name(),
         "bytes": r.bytes,
         "memory_bytes": r.memory_bytes,
         "dense_bytes": r.dense_bytes,
@@ -473,7 +481,13 @@ fn bake_sparse(
             .iter()
             .enumerate()
             .filter(|(_, n)| **n > 0)
-            .map(|(l, n)| format!("{n} x {}^3", grin_field::sparse::cells_of(l as u8) + 1))
+            .map(|(l, n)| {
+                let cells = grin_field::sparse::cells_of(l as u8);
+                format!(
+                    "{n} x {}^3",
+                    grin_field::sparse::nodes_of(cells, sparse.apron())
+                )
+            })
             .collect();
         let text = [
             format!("baked     {} (sparse)", field.describe()),
@@ -492,7 +506,7 @@ fn bake_sparse(
                 "bytes     {} ({} {}; a dense grid at the finest spacing {:.4} over the active bricks: {})",
                 r.bytes,
                 r.storage.name(),
-                "trilinear",
+                sparse.interp().name(),
                 r.finest_spacing,
                 r.dense_bytes
             ),

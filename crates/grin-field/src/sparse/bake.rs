@@ -26,13 +26,16 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::{BASE_CELLS, Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, cells_of};
+use super::{
+    BASE_CELLS, Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, apron_of, catmull_rom_weights,
+    cells_of, nodes_of,
+};
 use crate::bake::{
     BUDGET_SAFETY, BakeError, CROP_FRACTION_OF_BUDGET, DEFAULT_ERROR_BUDGET, DEFAULT_ERROR_POINTS,
     DEFAULT_MAX_MEMORY, ErrorStats, GRID_MARGIN_TRILINEAR, GradientMode, Progress, SplitMix64,
     choose_storage, measure_error_at, random_points_inside, sample_node,
 };
-use crate::baked::{BakeProvenance, Storage};
+use crate::baked::{BakeProvenance, Interp, Storage};
 use crate::field::IndexField;
 
 /// Bricks along the medium's longest axis.
@@ -71,6 +74,9 @@ pub struct SparseOptions {
     /// Random points the final error is measured at.
     pub error_points: usize,
     pub seed: u64,
+    /// Trilinear, or tricubic Catmull-Rom (bricks with an apron: see the module docs of
+    /// `sparse`).
+    pub interp: Interp,
 }
 
 impl Default for SparseOptions {
@@ -83,6 +89,7 @@ impl Default for SparseOptions {
             gradient: GradientMode::Exact,
             error_points: DEFAULT_ERROR_POINTS,
             seed: 1,
+            interp: Interp::Trilinear,
         }
     }
 }
@@ -127,6 +134,7 @@ struct BakedBrick {
     voxels: BrickVoxels,
     scale: [f32; 2],
     limited: bool,
+    apron: u8,
 }
 
 enum BrickVoxels {
@@ -258,7 +266,10 @@ pub fn bake_sparse(
             let f = [1usize, 2, 4, 8]
                 .into_iter()
                 .filter(|&f| f == 1 || (resolved && top.dims.iter().any(|&d| d >= f)))
-                .min_by_key(|&f| (predicted_voxels(&top, &needed, f), usize::MAX - f))
+                .min_by_key(|&f| {
+                    let voxels = predicted_voxels(&top, &needed, f, apron_of(opts.interp));
+                    (voxels, usize::MAX - f)
+                })
                 .unwrap_or(1);
             merged(&top, &active, f)
         }
@@ -352,7 +363,8 @@ pub fn bake_sparse(
             .into_iter()
             .filter(|&(pos, _)| baked[pos].level < level_max)
             .map(|(pos, err)| {
-                let wanted = cells_of(baked[pos].level) as f64 * (err / tol).sqrt() * 1.05;
+                let wanted =
+                    cells_of(baked[pos].level) as f64 * order_root(opts.interp, err / tol) * 1.05;
                 let level = (baked[pos].level + 1..=level_max)
                     .find(|&l| cells_of(l) as f64 >= wanted)
                     .unwrap_or(level_max);
@@ -450,7 +462,7 @@ fn probe_grid(bounds: crate::bounds::Bounds, feature: Option<f64>) -> usize {
 
 /// Voxels the bricks of `f` x `f` x `f` probe bricks would hold, each at the level the
 /// finest of its probe bricks needs (`needed`: probe brick, cells it needs a side).
-fn predicted_voxels(top: &TopGrid, needed: &[(usize, f64)], f: usize) -> u64 {
+fn predicted_voxels(top: &TopGrid, needed: &[(usize, f64)], f: usize, apron: u8) -> u64 {
     let mut finest = std::collections::HashMap::new();
     for &(idx, cells) in needed {
         let parent = parent_of(top, idx, f);
@@ -463,7 +475,7 @@ fn predicted_voxels(top: &TopGrid, needed: &[(usize, f64)], f: usize) -> u64 {
             let level = (0..=MAX_LEVEL)
                 .find(|&l| cells_of(l) as f64 >= c)
                 .unwrap_or(MAX_LEVEL);
-            (cells_of(level) as u64 + 1).pow(3)
+            (nodes_of(cells_of(level), apron) as u64).pow(3)
         })
         .sum()
 }
@@ -569,18 +581,24 @@ fn bake_brick(
         GradientMode::Exact => 1,
         GradientMode::CentralDifference => 7,
     };
+    let apron = apron_of(opts.interp);
+    let a = f64::from(apron);
     let mut level = first_level.min(level_max);
     loop {
         let cells = cells_of(level);
-        let m = cells + 1;
+        let m = nodes_of(cells, apron);
         let h = top.edge / cells as f64;
-        let shell = GRID_MARGIN_TRILINEAR as f64 * h;
+        let shell = (GRID_MARGIN_TRILINEAR as f64 + a) * h;
         let h_cd = crate::bake::CD_STEP_VOXELS * h;
         let mut raw = crate::alloc::try_with_capacity(m * m * m, "a sparse brick")?;
+        // Node (i, j, k) of the stored grid sits at lo + h (i - apron, j - apron, k - apron).
+        let node = |i: usize, j: usize, k: usize| {
+            lo + h * (DVec3::new(i as f64, j as f64, k as f64) - DVec3::splat(a))
+        };
         for k in 0..m {
             for j in 0..m {
                 for i in 0..m {
-                    let p = lo + h * DVec3::new(i as f64, j as f64, k as f64);
+                    let p = node(i, j, k);
                     raw.push(sample_node(
                         source,
                         bounds,
@@ -597,15 +615,16 @@ fn bake_brick(
         // Curvature only where its stencil holds the field itself: beyond the shell
         // sample_node holds the shell's value, a kink no grid resolves (a brick across a
         // sphere's surface climbed to 256 cells on it).
-        let inside = |i: usize, j: usize, k: usize| {
-            let p = lo + h * DVec3::new(i as f64, j as f64, k as f64);
-            bounds.signed_distance(p) <= 0.0
+        let inside = |i: usize, j: usize, k: usize| bounds.signed_distance(node(i, j, k)) <= 0.0;
+        let predicted = match opts.interp {
+            Interp::Trilinear => curvature_error(&raw, cells, inside),
+            Interp::Tricubic => third_difference_error(&raw, cells, inside),
         };
         let err = points
             .iter()
             .zip(&reference)
-            .map(|(&p, &r)| (delta_at(&raw, cells, (p - lo) / h) - r).abs())
-            .fold(curvature_error(&raw, cells, inside), f64::max);
+            .map(|(&p, &r)| (delta_at(&raw, cells, apron, (p - lo) / h) - r).abs())
+            .fold(predicted, f64::max);
         let met = err <= tolerance;
         if met || level >= level_max {
             let (voxels, scale) = match storage {
@@ -620,11 +639,12 @@ fn bake_brick(
                 voxels,
                 scale,
                 limited: !met,
+                apron,
             });
         }
-        // Trilinear error goes as h^2: the next level is the first whose cells the error
-        // predicts enough for (5% margin), at least one finer.
-        let wanted = cells as f64 * (err / tolerance).sqrt() * 1.05;
+        // Trilinear error goes as h^2, Catmull-Rom's as h^3: the next level is the first
+        // whose cells the error predicts enough for (5% margin), at least one finer.
+        let wanted = cells as f64 * order_root(opts.interp, err / tolerance) * 1.05;
         level = (level + 1..=level_max)
             .find(|&l| cells_of(l) as f64 >= wanted)
             .unwrap_or(level_max);
@@ -663,8 +683,72 @@ fn curvature_error(
     max / 8.0
 }
 
+/// How much finer a grid must be for its error to shrink by `ratio`: the square root
+/// (trilinear, second order) or the cube root (Catmull-Rom, third order).
+fn order_root(interp: Interp, ratio: f64) -> f64 {
+    match interp {
+        Interp::Trilinear => ratio.sqrt(),
+        Interp::Tricubic => ratio.cbrt(),
+    }
+}
+
+/// The largest Catmull-Rom interpolation error the nodes' third differences predict: in a
+/// cell its error along an axis is h^3 |f'''| t (1 - t) (1 - 2t) / 12 to leading order
+/// (zero for quadratics), at most 0.0962 h^3 |f'''| ~ |third difference| / 62; the sum over
+/// the axes at every inner node inside the medium, with a margin of 2 (the random points
+/// catch what this misses). As [`curvature_error`] does for trilinear.
+fn third_difference_error(
+    raw: &[[f32; 4]],
+    cells: usize,
+    inside: impl Fn(usize, usize, usize) -> bool,
+) -> f64 {
+    let m = cells + 3;
+    let at = |i: usize, j: usize, k: usize| f64::from(raw[i + m * (j + m * k)][0]);
+    // A difference from node c - 1 to c + 2 (c within 1 ..= m - 3).
+    let third = |f: &dyn Fn(usize) -> f64, c: usize| {
+        let c = c.clamp(1, m - 3);
+        (f(c + 2) - 3.0 * f(c + 1) + 3.0 * f(c) - f(c - 1)).abs()
+    };
+    let mut max = 0.0f64;
+    for k in 1..m - 1 {
+        for j in 1..m - 1 {
+            for i in 1..m - 1 {
+                if !inside(i, j, k) {
+                    continue;
+                }
+                let s = third(&|x| at(x, j, k), i)
+                    + third(&|y| at(i, y, k), j)
+                    + third(&|z| at(i, j, z), k);
+                max = max.max(s);
+            }
+        }
+    }
+    max / 31.0
+}
+
+/// delta_n of a brick's raw nodes (with `apron` layers beyond its faces) at cell
+/// coordinates `u`: trilinear, or Catmull-Rom where the brick has an apron.
+fn delta_at(raw: &[[f32; 4]], cells: usize, apron: u8, u: DVec3) -> f64 {
+    if apron == 0 {
+        trilinear_delta(raw, cells, u)
+    } else {
+        let m = cells + 3;
+        let (i, t) = super::cell_of(u, cells);
+        let [wx, wy, wz] = t.map(|t| catmull_rom_weights(t as f32).map(f64::from));
+        let mut out = 0.0;
+        for (k, w_k) in wz.iter().enumerate() {
+            for (j, w_j) in wy.iter().enumerate() {
+                let row = i[0] + m * ((i[1] + j) + m * (i[2] + k));
+                let line: f64 = (0..4).map(|x| wx[x] * f64::from(raw[row + x][0])).sum();
+                out += line * w_k * w_j;
+            }
+        }
+        out
+    }
+}
+
 /// Trilinear delta_n of a brick's raw nodes at cell coordinates `u`.
-fn delta_at(raw: &[[f32; 4]], cells: usize, u: DVec3) -> f64 {
+fn trilinear_delta(raw: &[[f32; 4]], cells: usize, u: DVec3) -> f64 {
     let m = cells + 1;
     let (i, t) = super::cell_of(u, cells);
     let mut out = 0.0;
@@ -729,7 +813,10 @@ fn assemble(
     ambient: f64,
     source: &dyn IndexField,
 ) -> Result<SparseField, BakeError> {
-    let voxel_total: usize = baked.iter().map(|b| (cells_of(b.level) + 1).pow(3)).sum();
+    let voxel_total: usize = baked
+        .iter()
+        .map(|b| nodes_of(cells_of(b.level), b.apron).pow(3))
+        .sum();
     let mut table =
         crate::alloc::try_filled(top.brick_count(), EMPTY, "a sparse field's brick table")?;
     let mut bricks = Vec::with_capacity(baked.len());
@@ -764,8 +851,9 @@ fn assemble(
             level: b.level,
             offset,
             scale: b.scale,
+            apron: b.apron,
         });
-        offset += (cells_of(b.level) + 1).pow(3);
+        offset += nodes_of(cells_of(b.level), b.apron).pow(3);
     }
     SparseField::new(
         *top,

@@ -5,7 +5,8 @@
 //! ```text
 //! 0    magic "GRINF\0\0\0"
 //! 8    u32 version = 2, u32 table offset (a multiple of 16)
-//! 16   u32 bricks per axis x3, u32 active bricks, u32 storage (0 f32, 1 i16), u32 interp (0)
+//! 16   u32 bricks per axis x3, u32 active bricks, u32 storage (0 f32, 1 i16),
+//!      u32 interp (0 trilinear, 1 tricubic Catmull-Rom: bricks with an apron)
 //! 40   f64 ambient index, f64 origin x3, f64 brick edge
 //! 80   u32 bounds kind (0 sphere, 1 box), u32 0, f64 x6 (centre, radius, 0, 0 | min, max)
 //! 136  f64 max and RMS |n error|, max and RMS |grad n error|
@@ -14,15 +15,16 @@
 //! then, at a multiple of 16: 16 bytes per active brick: u32 level, f32 scale of delta_n,
 //!   f32 scale of the gradient (1, 1 for f32), u32 0
 //! then, at a multiple of 16: the voxels of brick 0, 1, ... in order, each brick
-//!   (cells + 1)^3 voxels x fastest, cells = LEVEL_CELLS[level] (4, 5, 6, 8, 10, 12, 16,
-//!   20, 24, 32, 40, 48, 64, 80, 96, 128, 160, 192, 256), a voxel 4 f32 or 4 i16
+//!   (cells + 1)^3 voxels x fastest ((cells + 3)^3 with interp 1: one node beyond each
+//!   face), cells = LEVEL_CELLS[level] (4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64,
+//!   80, 96, 128, 160, 192, 256), a voxel 4 f32 or 4 i16
 //! last 4 bytes: CRC-32 of everything before them
 //! ```
 //!
 //! A brick's position is where the table names it; its voxels start where the previous
 //! brick's end.
 
-use super::{Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, cells_of};
+use super::{Brick, EMPTY, MAX_LEVEL, Pool, SparseField, TopGrid, cells_of, nodes_of};
 use crate::baked::{BakeProvenance, Storage};
 use crate::field::IndexField;
 use crate::grinf::{CRC_BYTES, DATA_ALIGN, GrinfError, MAGIC, MAX_DESCRIPTION_BYTES, Reader};
@@ -90,7 +92,8 @@ pub fn write_to(field: &SparseField, w: &mut dyn std::io::Write) -> std::io::Res
         Storage::F32 => 0,
         Storage::I16 => 1,
     };
-    u32s(&mut b, &[field.bricks().len() as u32, storage, 0]);
+    let interp = u32::from(field.apron());
+    u32s(&mut b, &[field.bricks().len() as u32, storage, interp]);
     f64s(&mut b, &[field.ambient_index()]);
     f64s(&mut b, &top.origin.to_array());
     f64s(&mut b, &[top.edge]);
@@ -184,14 +187,14 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
     let dims = [r.u32() as usize, r.u32() as usize, r.u32() as usize];
     let active = r.u32() as usize;
     let storage = r.storage().map_err(header_err)?;
-    match r.u32() {
-        0 => {}
+    let apron = match r.u32() {
+        s @ (0 | 1) => s as u8,
         s => {
             return Err(header_err(format!(
-                "unknown interpolation code {s} (sparse fields are trilinear)"
+                "unknown interpolation code {s} (0 trilinear, 1 tricubic Catmull-Rom)"
             )));
         }
-    }
+    };
     let entries = dims.iter().map(|&d| d as u64).product::<u64>();
     if dims.contains(&0) || entries > MAX_TABLE_ENTRIES {
         return Err(header_err(format!(
@@ -224,7 +227,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
             )));
         }
         levels.push(level as u8);
-        voxels += ((cells_of(level as u8) + 1) as u64).pow(3);
+        voxels += (nodes_of(cells_of(level as u8), apron) as u64).pow(3);
     }
     let expected =
         pool_offset as u64 + voxels * storage.bytes_per_voxel() as u64 + CRC_BYTES as u64;
@@ -278,6 +281,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
             level,
             offset,
             scale: [f(rec + 4), f(rec + 8)],
+            apron,
         };
         offset += brick.voxel_count();
         bricks.push(brick);

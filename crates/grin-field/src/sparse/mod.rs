@@ -10,14 +10,20 @@
 //! * k)` with `m = cells + 1`, channels `[delta_n, dn/dx, dn/dy, dn/dz]` as in a dense bake.
 //! Each brick's voxels start at its `offset` in one shared pool (an atlas).
 //!
-//! Every brick owns the nodes on its faces (the apron trilinear reads need), so a sample
-//! reads one brick only. Where bricks of different levels meet, their faces interpolate
-//! the same source at different spacings: the jump there is at most the coarser brick's
+//! Every brick owns the nodes on its faces (what trilinear reads need), so a sample reads
+//! one brick only. Where bricks of different levels meet, their faces interpolate the same
+//! source at different spacings: the jump there is at most the coarser brick's
 //! interpolation error, inside the budget the bake measured. i16 storage keeps a scale per
 //! brick (delta_n, and one for the gradient's components).
 //!
-//! Only trilinear sampling: a tricubic spline needs a prefilter across brick edges (a wider
-//! apron), which this format does not store yet.
+//! Two samplings, one a field: trilinear (C0, second order), or tricubic Catmull-Rom (C1,
+//! third order: exact for quadratics), which reads 4 nodes an axis around the cell. A
+//! Catmull-Rom brick stores an *apron*: one more layer of nodes beyond each face, baked
+//! from the source at the brick's own spacing (`cells + 3` nodes an edge, node (i, j, k)
+//! at `brick origin + edge / cells * (i - 1, j - 1, k - 1)`), so its reads stay in the
+//! brick as trilinear ones do. Catmull-Rom needs no prefilter (it interpolates the nodes
+//! as they are), so a brick is baked on its own; a smooth field needs far fewer nodes
+//! than trilinear for the same error.
 //!
 //! One concept a file: the field and its sampling here, the bake in `bake`, the file in
 //! `file`.
@@ -29,7 +35,7 @@ mod tests;
 
 use glam::{DVec3, Vec4};
 
-use crate::baked::{BakeProvenance, MacroGrid, Storage};
+use crate::baked::{BakeProvenance, Interp, MacroGrid, Storage};
 use crate::bounds::Bounds;
 use crate::field::{FieldSample, IndexField};
 
@@ -61,18 +67,66 @@ pub struct Brick {
     pub offset: usize,
     /// i16 storage: the scale of delta_n and of the gradient's components (1 for f32).
     pub scale: [f32; 2],
+    /// Layers of nodes beyond each face: 0 (trilinear) or 1 (Catmull-Rom), the same for
+    /// every brick of a field.
+    pub apron: u8,
+}
+
+/// The apron a sampling needs beyond each brick face (see the module docs).
+pub fn apron_of(interp: Interp) -> u8 {
+    match interp {
+        Interp::Trilinear => 0,
+        Interp::Tricubic => 1,
+    }
+}
+
+/// Nodes a brick edge of `cells` cells stores with `apron` layers beyond each face.
+pub fn nodes_of(cells: usize, apron: u8) -> usize {
+    cells + 1 + 2 * usize::from(apron)
+}
+
+/// The sum of |Catmull-Rom weights| along an axis is at most 1.25 (at t = 1/2), so an
+/// interpolated value lies within (1.25^3 - 1) / 2 of its nodes' range beyond that range.
+pub const CATMULL_ROM_OVERSHOOT: f64 = (1.25 * 1.25 * 1.25 - 1.0) / 2.0;
+
+/// Catmull-Rom weights at fraction t of the cell between the middle two of 4 nodes
+/// (the shader's `catmull_rom_weights`, in f32 as on the GPU).
+#[inline]
+pub fn catmull_rom_weights(t: f32) -> [f32; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
 }
 
 impl Brick {
     pub fn cells(&self) -> usize {
         cells_of(self.level)
     }
-    /// Nodes per edge.
+    /// Nodes per edge (the apron's included).
     pub fn nodes(&self) -> usize {
-        self.cells() + 1
+        nodes_of(self.cells(), self.apron)
     }
     pub fn voxel_count(&self) -> usize {
         self.nodes().pow(3)
+    }
+    /// The voxels (pool indices) of the brick's own `(cells + 1)^3` nodes, those on and
+    /// inside its faces, x fastest: all of them, or all but the apron.
+    pub fn inner_voxels(&self) -> impl Iterator<Item = usize> + use<> {
+        let (m, a, inner) = (self.nodes(), usize::from(self.apron), self.cells() + 1);
+        let offset = self.offset;
+        (0..inner.pow(3)).map(move |v| {
+            let (i, j, k) = (
+                v % inner + a,
+                (v / inner) % inner + a,
+                v / (inner * inner) + a,
+            );
+            offset + i + m * (j + m * k)
+        })
     }
 }
 
@@ -206,7 +260,14 @@ pub fn check_parts(
     }
     let mut seen = vec![false; bricks.len()];
     let mut at_end = 0usize;
+    let apron = bricks.first().map_or(0, |b| b.apron);
     for (i, b) in bricks.iter().enumerate() {
+        if b.apron > 1 || b.apron != apron {
+            return Err(format!(
+                "brick {i} has an apron of {} node layers where brick 0 has {apron} (0 or 1, the same for all)",
+                b.apron
+            ));
+        }
         if b.level > MAX_LEVEL {
             return Err(format!(
                 "brick {i} has level {} (at most {MAX_LEVEL})",
@@ -313,8 +374,14 @@ impl SparseField {
         if ambient + lo <= 0.0 {
             return Err(format!("n = {} <= 0 in the stored voxels", ambient + lo));
         }
-        field.n_range = (ambient + lo, ambient + hi);
-        field.max_grad = g;
+        // Catmull-Rom's negative weights reach beyond the nodes' range.
+        let over = match field.interp() {
+            Interp::Trilinear => 0.0,
+            Interp::Tricubic => CATMULL_ROM_OVERSHOOT,
+        };
+        let spread = over * (hi - lo);
+        field.n_range = (ambient + lo - spread, ambient + hi + spread);
+        field.max_grad = g * (1.0 + 2.0 * over);
         // Straight flights over empty bricks: one macro cell a brick, homogeneous (0)
         // where empty.
         field.macro_grid.max_grad = field
@@ -385,6 +452,18 @@ impl SparseField {
     }
     pub fn storage(&self) -> Storage {
         self.pool.storage()
+    }
+    /// How the field is sampled: trilinear, or tricubic Catmull-Rom where its bricks hold
+    /// an apron (see the module docs).
+    pub fn interp(&self) -> Interp {
+        match self.bricks.first().map_or(0, |b| b.apron) {
+            0 => Interp::Trilinear,
+            _ => Interp::Tricubic,
+        }
+    }
+    /// Layers of apron nodes beyond each brick face (0 or 1).
+    pub fn apron(&self) -> u8 {
+        self.bricks.first().map_or(0, |b| b.apron)
     }
     pub fn provenance(&self) -> &BakeProvenance {
         &self.provenance
@@ -478,10 +557,11 @@ impl SparseField {
     #[inline]
     fn trilinear(&self, b: &Brick, u: DVec3) -> [f64; 4] {
         let cells = b.cells();
-        let m = cells + 1;
+        let m = b.nodes();
         let (i, t) = cell_of(u, cells);
         let t = t.map(|t| t as f32);
-        let base = b.offset + i[0] + m * (i[1] + m * i[2]);
+        let a = usize::from(b.apron);
+        let base = b.offset + (i[0] + a) + m * ((i[1] + a) + m * (i[2] + a));
         let offsets = [0, 1, m, m + 1, m * m, m * m + 1, m * m + m, m * m + m + 1];
         let blend = |c: [Vec4; 8]| {
             let x00 = c[0].lerp(c[1], t[0]);
@@ -507,6 +587,49 @@ impl SparseField {
         };
         v.to_array().map(f64::from)
     }
+
+    /// Tricubic Catmull-Rom [delta_n, grad n] at cell coordinates `u` in brick `b` (which
+    /// holds an apron): the 4 x 4 x 4 nodes around the cell, weights in f32, each line of
+    /// 4 along x weighted and then scaled by its y-z weight, z outer (the shader's order);
+    /// i16 taps are scaled once at the end.
+    #[inline]
+    fn catmull_rom(&self, b: &Brick, u: DVec3) -> [f64; 4] {
+        let cells = b.cells();
+        let m = b.nodes();
+        let (i, t) = cell_of(u, cells);
+        let [wx, wy, wz] = t.map(|t| catmull_rom_weights(t as f32));
+        // Node i - 1 of the cell is stored at i (the apron shifts every index by one).
+        let base = b.offset + i[0] + m * (i[1] + m * i[2]);
+        let tap = |v: usize| -> Vec4 {
+            match &self.pool {
+                Pool::F32(p) => Vec4::from(p[v]),
+                Pool::I16(p) => {
+                    let q = p[v];
+                    Vec4::new(
+                        f32::from(q[0]),
+                        f32::from(q[1]),
+                        f32::from(q[2]),
+                        f32::from(q[3]),
+                    )
+                }
+            }
+        };
+        let mut out = Vec4::ZERO;
+        for (k, w_k) in wz.iter().enumerate() {
+            for (j, w_j) in wy.iter().enumerate() {
+                let row = base + m * (j + m * k);
+                let mut line = tap(row) * wx[0];
+                line += tap(row + 1) * wx[1];
+                line += tap(row + 2) * wx[2];
+                line += tap(row + 3) * wx[3];
+                out += line * (w_k * w_j);
+            }
+        }
+        if let Pool::I16(_) = &self.pool {
+            out *= Vec4::new(b.scale[0], b.scale[1], b.scale[1], b.scale[1]);
+        }
+        out.to_array().map(f64::from)
+    }
 }
 
 impl IndexField for SparseField {
@@ -517,7 +640,11 @@ impl IndexField for SparseField {
                 grad_n: DVec3::ZERO,
             },
             Some((b, u)) => {
-                let x = self.trilinear(b, u);
+                let x = if b.apron == 0 {
+                    self.trilinear(b, u)
+                } else {
+                    self.catmull_rom(b, u)
+                };
                 FieldSample {
                     n: self.ambient + x[0],
                     grad_n: DVec3::new(x[1], x[2], x[3]),
@@ -538,8 +665,12 @@ impl IndexField for SparseField {
         self.max_grad
     }
     fn describe(&self) -> String {
+        let sampling = match self.interp() {
+            Interp::Trilinear => "",
+            Interp::Tricubic => ", Catmull-Rom",
+        };
         format!(
-            "sparse bake ({} of {} bricks) of {}",
+            "sparse bake ({} of {} bricks{sampling}) of {}",
             self.bricks.len(),
             self.table.len(),
             self.provenance.source

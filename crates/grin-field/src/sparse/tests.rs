@@ -189,17 +189,22 @@ fn unproven_fields_are_probed() {
 #[test]
 fn file_round_trip_is_exact() {
     let src = one_plume();
-    for storage in [crate::baked::Storage::F32, crate::baked::Storage::I16] {
+    let cases = [crate::baked::Storage::F32, crate::baked::Storage::I16]
+        .into_iter()
+        .flat_map(|s| [(s, Interp::Trilinear), (s, Interp::Tricubic)]);
+    for (storage, interp) in cases {
         let (f, _) = bake(
             &src,
             &SparseOptions {
                 storage: Some(storage),
                 top_bricks: Some(12),
+                interp,
                 ..Default::default()
             },
         );
         let bytes = file::to_bytes(&f);
         let g = file::from_bytes(&bytes, "x.grinf").expect("read back");
+        assert_eq!(g.interp(), interp);
         assert_eq!(g.bricks(), f.bricks());
         assert_eq!(g.table(), f.table());
         assert_eq!(g.provenance(), f.provenance());
@@ -210,6 +215,15 @@ fn file_round_trip_is_exact() {
         assert!(
             e.to_string()
                 .starts_with("x.grinf: a sparse .grinf (version 2)"),
+            "{e}"
+        );
+        // An interpolation code beyond the two is refused by name (the checksum is
+        // checked after the header's codes).
+        let mut bad = bytes.clone();
+        bad[36..40].copy_from_slice(&2u32.to_le_bytes());
+        let e = file::from_bytes(&bad, "x.grinf").expect_err("code 2");
+        assert!(
+            e.to_string().contains("unknown interpolation code 2"),
             "{e}"
         );
     }
@@ -232,4 +246,147 @@ fn memory_cap_is_a_clear_error() {
         text.starts_with("a sparse bake needs more than the memory cap of 20971520 bytes"),
         "{text}"
     );
+}
+
+/// One Catmull-Rom brick (`cells` a side, with its apron) of `f` (delta_n and its
+/// gradient) over the unit cube.
+fn catmull_rom_brick(cells: usize, f: impl Fn(DVec3) -> (f64, DVec3)) -> SparseField {
+    let level = LEVEL_CELLS
+        .iter()
+        .position(|&c| c == cells)
+        .expect("a level") as u8;
+    let m = nodes_of(cells, 1);
+    let h = 1.0 / cells as f64;
+    let mut pool = Vec::with_capacity(m * m * m);
+    for k in 0..m {
+        for j in 0..m {
+            for i in 0..m {
+                let p = h * (DVec3::new(i as f64, j as f64, k as f64) - DVec3::ONE);
+                let (d, g) = f(p);
+                pool.push([d as f32, g.x as f32, g.y as f32, g.z as f32]);
+            }
+        }
+    }
+    let brick = Brick {
+        at: [0; 3],
+        level,
+        offset: 0,
+        scale: [1.0, 1.0],
+        apron: 1,
+    };
+    SparseField::new(
+        TopGrid {
+            origin: DVec3::ZERO,
+            edge: 1.0,
+            dims: [1; 3],
+        },
+        vec![0],
+        vec![brick],
+        Pool::F32(pool),
+        Bounds::Box {
+            min: DVec3::ZERO,
+            max: DVec3::ONE,
+        },
+        1.0,
+        crate::baked::BakeProvenance::default(),
+    )
+    .expect("a field")
+}
+
+/// Catmull-Rom reproduces quadratics (to f32 rounding) and converges at third order in n
+/// and in the gradient's channels; the field reports it samples tricubically.
+#[test]
+fn catmull_rom_bricks_hold_quadratics_and_converge_at_third_order() {
+    let quadratic = |p: DVec3| {
+        let d = 0.01 * (p.x * p.x + 2.0 * p.y * p.y - p.z * p.z + p.x * p.y);
+        let g = 0.01 * DVec3::new(2.0 * p.x + p.y, 4.0 * p.y + p.x, -2.0 * p.z);
+        (d, g)
+    };
+    let f = catmull_rom_brick(8, quadratic);
+    assert_eq!(f.interp(), crate::baked::Interp::Tricubic);
+    let points = random_points_inside(f.bounds(), 2000, 3);
+    let worst = |f: &SparseField, exact: &dyn Fn(DVec3) -> (f64, DVec3)| {
+        points.iter().fold((0.0f64, 0.0f64), |(wn, wg), &p| {
+            let s = f.sample(p);
+            let (d, g) = exact(p);
+            (
+                wn.max((s.n - 1.0 - d).abs()),
+                wg.max((s.grad_n - g).length()),
+            )
+        })
+    };
+    let (en, eg) = worst(&f, &quadratic);
+    assert!(
+        en < 1e-8 && eg < 1e-7,
+        "quadratic: n off by {en:e}, grad by {eg:e}"
+    );
+    let smooth = |p: DVec3| {
+        let (a, b, c) = (2.0 * p.x + 1.0, 3.0 * p.y, 2.5 * p.z - 0.5);
+        let d = 0.01 * a.sin() * b.cos() * c.sin();
+        let g = 0.01
+            * DVec3::new(
+                2.0 * a.cos() * b.cos() * c.sin(),
+                -3.0 * a.sin() * b.sin() * c.sin(),
+                2.5 * a.sin() * b.cos() * c.cos(),
+            );
+        (d, g)
+    };
+    let errors: Vec<(f64, f64)> = [8, 16, 32]
+        .iter()
+        .map(|&c| worst(&catmull_rom_brick(c, smooth), &smooth))
+        .collect();
+    eprintln!("Catmull-Rom at 8, 16, 32 cells: (n, grad) errors {errors:?}");
+    for w in errors.windows(2) {
+        let (on, og) = ((w[0].0 / w[1].0).log2(), (w[0].1 / w[1].1).log2());
+        assert!(
+            on > 2.6 && og > 2.6,
+            "orders {on:.2} (n) and {og:.2} (grad) from {errors:?}"
+        );
+    }
+}
+
+/// At the same budget a Catmull-Rom bake meets it at independent points, as a trilinear
+/// one does, in a fraction of the bytes (a smooth plume: third order against second).
+#[test]
+fn catmull_rom_bakes_meet_the_budget_in_fewer_bytes() {
+    let src = one_plume();
+    for budget in [1e-3, 1e-4] {
+        let bytes = [
+            crate::baked::Interp::Trilinear,
+            crate::baked::Interp::Tricubic,
+        ]
+        .map(|interp| {
+            let (f, r) = bake(
+                &src,
+                &SparseOptions {
+                    error_budget: budget,
+                    storage: Some(crate::baked::Storage::F32),
+                    interp,
+                    ..Default::default()
+                },
+            );
+            assert_eq!(f.interp(), interp);
+            let mut worst = 0.0f64;
+            for p in random_points_inside(src.bounds(), 20_000, 99) {
+                worst = worst.max((f.sample(p).n - src.n(p)).abs());
+            }
+            let rel = worst / r.delta_n_range;
+            assert!(
+                rel <= budget && r.meets_budget,
+                "{} at {budget}: independent relative error {rel}",
+                interp.name()
+            );
+            r.bytes
+        });
+        eprintln!(
+            "at {budget}: trilinear {} bytes, Catmull-Rom {}",
+            bytes[0], bytes[1]
+        );
+        assert!(
+            bytes[1] * 3 < bytes[0],
+            "at {budget}: trilinear {} bytes, Catmull-Rom {}",
+            bytes[0],
+            bytes[1]
+        );
+    }
 }
