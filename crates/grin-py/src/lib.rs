@@ -395,7 +395,7 @@ fn description(
 
 /// A sparse bake's arrays: every active brick's nodes decoded to float32, one brick after
 /// another (`delta_n` (N,), `grad` (N, 3); brick b's nodes from `brick_offset[b]`, x fastest,
-/// `brick_cells[b] + 1` a side), each brick's top-grid position `brick_at` (B, 3), and the
+/// `brick_cells[b] + 1 + 2 apron` a side), each brick's top-grid position `brick_at` (B, 3), and the
 /// description (JSON, `"sparse": true`, the top grid's origin, edge and dims).
 fn sparse_arrays<'py>(
     py: Python<'py>,
@@ -424,11 +424,12 @@ fn sparse_arrays<'py>(
     let top = field.top();
     let info = description(
         field,
-        "trilinear",
+        field.interp().name(),
         field.storage(),
         field.provenance(),
         serde_json::json!({
             "sparse": true,
+            "apron": field.apron(),
             "top_origin": top.origin.to_array(),
             "brick_edge": top.edge,
             "top_dims": top.dims,

@@ -126,16 +126,21 @@ def test_trace_equals_the_cli_table(tmp_path):
     np.testing.assert_array_equal(got["steps"], col["steps"].astype(np.uint32))
 
 
-def test_read_field_reads_a_sparse_bake_brick_by_brick(tmp_path):
+@pytest.mark.parametrize("interp", ["trilinear", "tricubic"])
+def test_read_field_reads_a_sparse_bake_brick_by_brick(tmp_path, interp):
     # data/scenes/plume.toml: n = ambient - sum a exp(-|r - c|^2 / s^2).
     path = tmp_path / "plume.grinf"
-    cli("bake", SCENES / "plume.toml", "--sparse", "-o", path)
+    cli("bake", SCENES / "plume.toml", "--sparse", "--interp", interp, "-o", path)
     read = grin.read_field(path)
     assert isinstance(read, grin.SparseField)
     info = read.info
+    # A tricubic (Catmull-Rom) bake's bricks hold one layer of nodes beyond each face.
+    apron = {"trilinear": 0, "tricubic": 1}[interp]
+    assert (info["interp"], info["apron"]) == (interp, apron)
     active = len(read.brick_cells)
     assert 0 < active < int(np.prod(info["top_dims"]))
-    assert read.delta_n.shape == (int(read.brick_offset[-1]) + (int(read.brick_cells[-1]) + 1) ** 3,)
+    last = int(read.brick_cells[-1]) + 1 + 2 * apron
+    assert read.delta_n.shape == (int(read.brick_offset[-1]) + last ** 3,)
     plumes = [(6.0e-3, (0.0, 0.0, 3.5), 0.6), (5.0e-3, (-0.4, 0.3, 4.2), 0.4),
               (4.0e-3, (0.5, 0.2, 5.0), 0.5)]
     worst, worst_grad, nodes = 0.0, 0.0, 0

@@ -281,7 +281,7 @@ pub fn bake_sparse(
     let storage = opts
         .storage
         .unwrap_or_else(|| choose_storage(range, opts.error_budget));
-    let level_max = finest_level(top.edge, source.source_spacing());
+    let level_max = finest_level(top.edge, source.source_spacing(), opts.interp);
     let used = AtomicU64::new(table_bytes);
     let over = AtomicBool::new(false);
     let done = AtomicU64::new(0);
@@ -529,12 +529,16 @@ fn brick_of(top: &TopGrid, p: DVec3) -> Option<usize> {
 
 /// The finest level a brick of `edge` may take: [`MAX_LEVEL`], or for a source with its
 /// own spacing the finest whose spacing is at least half of it.
-fn finest_level(edge: f64, source_spacing: Option<f64>) -> u8 {
+fn finest_level(edge: f64, source_spacing: Option<f64>, interp: Interp) -> u8 {
     let Some(h) = source_spacing.filter(|h| h.is_finite() && *h > 0.0) else {
         return MAX_LEVEL;
     };
+    let fraction = match interp {
+        Interp::Trilinear => 0.5,
+        Interp::Tricubic => 0.25,
+    };
     (0..=MAX_LEVEL)
-        .take_while(|&l| edge / cells_of(l) as f64 >= 0.5 * h * (1.0 - 1e-9))
+        .take_while(|&l| edge / cells_of(l) as f64 >= fraction * h * (1.0 - 1e-9))
         .last()
         .unwrap_or(0)
 }

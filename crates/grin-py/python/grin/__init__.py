@@ -245,7 +245,10 @@ class SparseField:
 
     ``delta_n`` (N,) and ``grad`` (N, 3) hold every brick's nodes one brick after another;
     :meth:`bricks` cuts them into per-brick arrays indexed [k, j, i] (x fastest) with node
-    (i, j, k) at ``origin + spacing * (i, j, k)`` in world metres.
+    (i, j, k) at ``origin + spacing * (i, j, k)`` in world metres. A tricubic
+    (Catmull-Rom) bake, ``info["interp"] == "tricubic"``, stores ``info["apron"] == 1``
+    more layer of nodes beyond each brick face: its arrays are ``cells + 3`` a side and
+    their origin one spacing before the brick's corner.
     """
 
     delta_n: np.ndarray
@@ -261,15 +264,18 @@ class SparseField:
 
     def bricks(self) -> Iterator[Tuple[np.ndarray, float, np.ndarray, np.ndarray]]:
         """Each active brick: (origin, spacing, delta_n (m, m, m), grad (m, m, m, 3)),
-        m = cells + 1 nodes a side."""
+        m = cells + 1 nodes a side (cells + 3 with an apron, the origin one spacing before
+        the brick's corner)."""
         top = np.array(self.info["top_origin"])
         edge = self.info["brick_edge"]
+        apron = int(self.info.get("apron", 0))
         for at, cells, first in zip(self.brick_at, self.brick_cells, self.brick_offset):
-            m = int(cells) + 1
+            m = int(cells) + 1 + 2 * apron
             end = int(first) + m**3
+            spacing = edge / int(cells)
             yield (
-                top + edge * at.astype(np.float64),
-                edge / int(cells),
+                top + edge * at.astype(np.float64) - apron * spacing,
+                spacing,
                 self.delta_n[int(first):end].reshape(m, m, m),
                 self.grad[int(first):end].reshape(m, m, m, 3),
             )
