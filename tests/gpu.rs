@@ -288,10 +288,10 @@ fn bench_speed_quick_reports_both_backends() {
             .is_some_and(|x| x.is_finite() && x > 0.0),
         "{r}"
     );
-    // Each scene baked sparsely at its dense bake's error: the sparse bake meets it, and
-    // its rows name both fields' bytes and the frame-time ratios.
+    // Each scene baked sparsely at its dense bake's error, trilinear and Catmull-Rom: the
+    // sparse bake meets it, and its rows name both fields' bytes and the frame-time ratios.
     let sparse = r["sparse"].as_array().expect("sparse rows");
-    assert_eq!(sparse.len(), 3, "{r}");
+    assert_eq!(sparse.len(), 6, "{r}");
     for row in sparse {
         let f = |k: &str| row[k].as_f64().unwrap_or(f64::NAN);
         // The same error: within 1% (grin_bench::cases::SAME_ERROR).
@@ -301,7 +301,12 @@ fn bench_speed_quick_reports_both_backends() {
             f("gpu_time_ratio") > 0.0 && f("cpu_time_ratio") > 0.0,
             "{row}"
         );
-        let label = format!("{} sparse", row["scene"].as_str().expect("scene"));
+        let scene = row["scene"].as_str().expect("scene");
+        let label = match row["interp"].as_str() {
+            Some("trilinear") => format!("{scene} sparse"),
+            Some("tricubic") => format!("{scene} sparse catmull-rom"),
+            other => panic!("interp {other:?}: {row}"),
+        };
         assert!(
             runs.iter().any(|x| x["scene"] == label.as_str()),
             "{label}: {r}"

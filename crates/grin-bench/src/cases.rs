@@ -455,11 +455,16 @@ fn baked_with_error(
     Ok((grid_case(base, name, grid, error), error))
 }
 
-/// `base` baked sparsely (`grin bake --sparse`) at relative error `error`: what a dense
-/// bake's rows are compared with at the same error. The reference stays the source's.
-pub fn sparse(base: &Case, error: f64) -> anyhow::Result<Case> {
-    let (field, report) = sparse_at(base.source.as_ref(), error, &base.name)?;
-    let name = format!("{}-sparse-{}", base.name, report.storage.name());
+/// `base` baked sparsely (`grin bake --sparse`, `interp`: trilinear or Catmull-Rom) at
+/// relative error `error`: what a dense bake's rows are compared with at the same error.
+/// The reference stays the source's.
+pub fn sparse(base: &Case, error: f64, interp: Interp) -> anyhow::Result<Case> {
+    let (field, report) = sparse_at(base.source.as_ref(), error, interp, &base.name)?;
+    let kind = match interp {
+        Interp::Trilinear => "",
+        Interp::Tricubic => "catmull-rom-",
+    };
+    let name = format!("{}-sparse-{kind}{}", base.name, report.storage.name());
     let grid = GpuGrid::from(Arc::new(field));
     Ok(grid_case(base, name, grid, report.relative_error))
 }
@@ -469,10 +474,12 @@ pub fn sparse(base: &Case, error: f64) -> anyhow::Result<Case> {
 pub fn sparse_at(
     source: &dyn IndexField,
     error: f64,
+    interp: Interp,
     name: &str,
 ) -> anyhow::Result<(SparseField, SparseReport)> {
     let opts = SparseOptions {
         error_budget: error,
+        interp,
         ..SparseOptions::default()
     };
     bake_sparse(source, &opts, &|_, _, _| {})
@@ -500,10 +507,11 @@ const MATCH_BAKES: usize = 6;
 pub fn sparse_matching(
     source: &dyn IndexField,
     error: f64,
+    interp: Interp,
     name: &str,
 ) -> anyhow::Result<(SparseField, SparseReport)> {
     let limit = error * SAME_ERROR;
-    let first = sparse_at(source, error, name)?;
+    let first = sparse_at(source, error, interp, name)?;
     let measured = first.1.relative_error;
     if measured >= 0.9 * error || measured <= 0.0 {
         return Ok(first);
@@ -513,7 +521,7 @@ pub fn sparse_matching(
     let (mut within, mut over) = (error, None::<f64>);
     let mut budget = error * (error / measured).min(2.0);
     for _ in 0..MATCH_BAKES {
-        let next = sparse_at(source, budget, name)?;
+        let next = sparse_at(source, budget, interp, name)?;
         if next.1.relative_error <= limit {
             within = budget;
             if next.1.memory_bytes < best.1.memory_bytes {
@@ -576,7 +584,7 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
             let p = plume(9)?;
             let lb = baked(&l, 32, Interp::Tricubic, Storage::F32)?;
             let (pb, error) = baked_with_error(&p, 32, Interp::Trilinear, Storage::F32)?;
-            let ps = sparse(&p, error)?;
+            let ps = sparse(&p, error, Interp::Trilinear)?;
             vec![l, p, lb, pb, ps]
         }
         Suite::Full => {
@@ -615,11 +623,14 @@ pub fn suite(suite: Suite) -> anyhow::Result<Vec<Case>> {
                     v.push(baked(base, 64, interp, storage)?);
                 }
             }
-            // Every reference field baked sparsely at the error its 64-node trilinear i16
-            // grid has: the rows to hold against that grid's (`--case -i16` runs both).
+            // Every reference field baked sparsely, trilinear and Catmull-Rom, at the error
+            // its 64-node trilinear i16 grid has: the rows to hold against that grid's
+            // (`--case -i16` runs all three).
             for base in [&l, &p].into_iter().chain(&others) {
                 let (_, error) = baked_with_error(base, 64, Interp::Trilinear, Storage::I16)?;
-                v.push(sparse(base, error)?);
+                for interp in [Interp::Trilinear, Interp::Tricubic] {
+                    v.push(sparse(base, error, interp)?);
+                }
             }
             v
         }

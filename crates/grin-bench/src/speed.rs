@@ -4,9 +4,9 @@
 //! noise/analytic frame-time ratio (the paper had 2.0); and the marcher's field-sample
 //! rate as a fraction of the adapter's raw trilinear 3D-texture sample rate measured by
 //! a microbenchmark (shaders/texture_bench.wgsl). Each of the three scenes is also baked
-//! sparsely (grin_field::sparse), the coarsest sparse bake measuring the dense one's error
-//! or less (within 1%: `cases::sparse_matching`), and timed the same way: the field's bytes
-//! and frame time, sparse against dense.
+//! sparsely (grin_field::sparse), trilinear and Catmull-Rom, the coarsest sparse bake
+//! measuring the dense one's error or less (within 1%: `cases::sparse_matching`), and
+//! timed the same way: the field's bytes and frame time, sparse against dense.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use grin_field::IndexField;
+use grin_field::baked::Interp;
 use grin_gpu::field::{bake_for_gpu_with_report, bake_warning};
 use grin_gpu::{GpuContext, GpuRenderer};
 use grin_render::image::Frame;
@@ -200,6 +201,8 @@ fn timed_frames(
 #[derive(Debug, Clone, Serialize)]
 pub struct SparseRow {
     pub scene: String,
+    /// `trilinear` or `tricubic` (Catmull-Rom).
+    pub interp: &'static str,
     /// The dense bake's measured relative error: what the sparse bake's may not exceed
     /// (by more than 1%, `cases::SAME_ERROR`).
     pub error: f64,
@@ -216,8 +219,13 @@ pub struct SparseRow {
     pub cpu_time_ratio: Option<f64>,
 }
 
-/// Label suffix of the sparse bakes' runs.
-const SPARSE: &str = " sparse";
+/// The label of a scene's sparse bake's runs.
+fn sparse_label(scene: &str, interp: Interp) -> String {
+    match interp {
+        Interp::Trilinear => format!("{scene} sparse"),
+        Interp::Tricubic => format!("{scene} sparse catmull-rom"),
+    }
+}
 
 #[allow(clippy::too_many_arguments)]
 fn run_of(
@@ -321,13 +329,16 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
         let rs = prepare(baked.clone())?;
         prepared.push((label.to_owned(), rs, Some(baked.clone())));
         // The same field sparsely, at the error the dense grid has: the coarsest sparse
-        // bake measuring no more than it.
+        // bake measuring no more than it, trilinear and Catmull-Rom.
         let error = bake.relative_error.max(1e-6);
-        let (sparse, report) = crate::cases::sparse_matching(field.as_ref(), error, &name)?;
-        let sparse = Arc::new(sparse);
-        let rs = prepare(sparse.clone())?;
-        sparse_prepared.push((format!("{label}{SPARSE}"), rs, None));
-        sparse_bakes.push((label, error, report, baked.data_bytes() as u64, sparse));
+        for interp in [Interp::Trilinear, Interp::Tricubic] {
+            let (sparse, report) =
+                crate::cases::sparse_matching(field.as_ref(), error, interp, &name)?;
+            let sparse = Arc::new(sparse);
+            let rs = prepare(sparse.clone())?;
+            sparse_prepared.push((sparse_label(label, interp), rs, None));
+            sparse_bakes.push((label, interp, error, report, baked.data_bytes() as u64));
+        }
     }
 
     // The marcher alone: paper (c)'s medium filling the whole frame (its silhouette
@@ -453,14 +464,15 @@ pub fn run(options: &Options, progress: &dyn Progress) -> anyhow::Result<Report>
     };
     let sparse = sparse_bakes
         .iter()
-        .map(|(label, error, report, dense_bytes, _)| {
-            let with = format!("{label}{SPARSE}");
+        .map(|(label, interp, error, report, dense_bytes)| {
+            let with = sparse_label(label, *interp);
             let ratio = |backend: &str| match (exact(&with, backend), exact(label, backend)) {
                 (Some(s), Some(d)) => Some(s.ms_per_frame / d.ms_per_frame),
                 _ => None,
             };
             SparseRow {
                 scene: (*label).to_owned(),
+                interp: interp.name(),
                 error: *error,
                 sparse_error: report.relative_error,
                 dense_bytes: *dense_bytes,

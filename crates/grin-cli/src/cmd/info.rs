@@ -198,7 +198,8 @@ fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> 
             "levels": levels,
             "finest_spacing": f.finest_spacing(),
             "storage": f.storage().name(),
-            "interp": "trilinear",
+            "interp": f.interp().name(),
+            "apron": f.apron(),
             "ambient_index": f.ambient_index(),
             "bounds": bounds_json(&f.bounds()),
             "source": p.source,
@@ -223,19 +224,23 @@ fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> 
     );
     outln!("  source        {}", p.source);
     outln!(
-        "  bricks        {} of {} active ({}x{}x{}, edge {}), {} storage, trilinear",
+        "  bricks        {} of {} active ({}x{}x{}, edge {}), {} storage, {}",
         f.bricks().len(),
         f.table().len(),
         top.dims[0],
         top.dims[1],
         top.dims[2],
         top.edge,
-        f.storage().name()
+        f.storage().name(),
+        match f.interp() {
+            grin_field::baked::Interp::Trilinear => "trilinear",
+            grin_field::baked::Interp::Tricubic => "tricubic Catmull-Rom (bricks with an apron)",
+        }
     );
     for (l, n) in levels.iter().enumerate().filter(|(_, n)| **n > 0) {
         outln!(
             "  level {l}       {n} bricks of {}^3 nodes (spacing {:.4e})",
-            grin_field::sparse::cells_of(l as u8) + 1,
+            grin_field::sparse::nodes_of(grin_field::sparse::cells_of(l as u8), f.apron()),
             f.spacing(l as u8)
         );
     }

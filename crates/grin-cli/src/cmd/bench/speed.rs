@@ -112,8 +112,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     for s in &report.sparse {
         outln!(
-            "sparse {:<18} at error {:.2e} (sparse's {:.2e}): {} of {} bricks, {} bytes vs dense {} ({:.2}x), frame time gpu {:.2}x{} (aim: bytes <= 1x, time <= 1.3x)",
+            "sparse {:<18} {:<9} at error {:.2e} (sparse's {:.2e}): {} of {} bricks, {} bytes vs dense {} ({:.2}x), frame time gpu {:.2}x{} (aim: bytes <= 1x, time <= 1.3x)",
             s.scene,
+            s.interp,
             s.error,
             s.sparse_error,
             s.active_bricks,
