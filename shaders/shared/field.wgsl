@@ -190,6 +190,12 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
         let s = textureLoad(macro_tex, vec3<i32>(b + vec3<u32>(0u, 0u, bricks.z)), 0);
         v = v * s.xyyy;
     }
+    // Catmull-Rom rings past a sharp edge: delta_n is clamped to the nodes' range
+    // (params.field_scale.xy for a sparse bake), flat where clamped.
+    if tricubic && (v.x < params.field_scale.x || v.x > params.field_scale.y) {
+        let d = clamp(v.x, params.field_scale.x, params.field_scale.y);
+        return FieldSample(ambient_index() + d, vec3<f32>(0.0), d);
+    }
     return FieldSample(ambient_index() + v.x, v.yzw, v.x);
 }
 

@@ -119,6 +119,14 @@ pub trait IndexField: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// Where this field's data sit on an axis-aligned cubic lattice (a VDB grid without
+    /// rotation or shear): the world point of lattice node (0, 0, 0) and the spacing, so
+    /// that a Catmull-Rom bake with its nodes on the same lattice interpolates exactly
+    /// what this field interpolates. `None` elsewhere.
+    fn source_lattice(&self) -> Option<(DVec3, f64)> {
+        None
+    }
+
     /// How far n may be from what this field stands for (a bake's measured max |n
     /// error| against its source; 0 for fields that are their own definition). A
     /// refraction at the bounds amplifies it by tan of the refracted angle: the tracer

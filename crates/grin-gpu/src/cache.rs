@@ -22,6 +22,7 @@ use std::sync::Arc;
 
 use grin_field::IndexField;
 use grin_field::baked::Interp;
+use grin_field::sparse::SparseField;
 use grin_scene::MediumSpec;
 use sha2::{Digest, Sha256};
 
@@ -251,12 +252,20 @@ fn identity(bytes: &[u8]) -> (u32, u64, u32) {
 /// box), where sparse bricks pay; noise filling its bounds would only spend the time.
 pub const SPARSE_WHEN_HOMOGENEOUS: f64 = 0.5;
 
-/// The GPU's grid for `field`: the coarsest dense grid meeting the error budget
-/// ([`bake_for_gpu_auto`]); where the best dense grid within the GPU's cap misses it (not
-/// because it reached a grid source's own voxels) and is mostly homogeneous
-/// ([`SPARSE_WHEN_HOMOGENEOUS`]), a sparse bake at the default budget whose f32 upload
-/// fits the same cap, if it meets the budget. The warnings are the kept dense bake's.
+/// The GPU's grid for `field`. Data on an axis-aligned lattice (a VDB grid): Catmull-Rom
+/// bricks on that lattice, which interpolate what the source interpolates at about its own
+/// voxel count, if they meet the default budget within the cap. Else the coarsest dense
+/// grid meeting the budget ([`bake_for_gpu_auto`]); where the best dense grid within the
+/// GPU's cap misses it (not because it reached a grid source's own voxels) and is mostly
+/// homogeneous ([`SPARSE_WHEN_HOMOGENEOUS`]), a sparse bake at the default budget whose
+/// f32 upload fits the same cap, if it meets the budget. The warnings are the kept dense
+/// bake's.
 pub fn bake_for_gpu_grid(field: &dyn IndexField) -> Result<(GpuGrid, Vec<String>), GpuError> {
+    if field.source_lattice().is_some()
+        && let Some(sparse) = sparse_for_gpu(field, Interp::Tricubic)
+    {
+        return Ok((GpuGrid::Sparse(Arc::new(sparse)), Vec::new()));
+    }
     let (baked, report) = bake_for_gpu_auto(field).map_err(|e| GpuError::Bake(e.to_string()))?;
     if report.relative_error > grin_field::bake::DEFAULT_ERROR_BUDGET
         && !report.source_limited
@@ -265,19 +274,7 @@ pub fn bake_for_gpu_grid(field: &dyn IndexField) -> Result<(GpuGrid, Vec<String>
         // Trilinear first (8 reads a sample); where that misses the budget or the cap,
         // Catmull-Rom (64 reads, third order: far fewer nodes on smooth content).
         for interp in [Interp::Trilinear, Interp::Tricubic] {
-            let opts = grin_field::sparse::bake::SparseOptions {
-                // i16 on the host; on the device f32 texels where it lacks rgba16snorm:
-                // half the cap on the host.
-                max_memory: grin_field::bake::device::GPU_BAKE_MAX_BYTES / 2,
-                interp,
-                ..Default::default()
-            };
-            if let Ok((sparse, r)) =
-                grin_field::sparse::bake::bake_sparse(field, &opts, &|_, _, _| {})
-                && r.meets_budget
-                && (sparse.pool().len() + sparse.table().len()) as u64 * FIELD_TEXEL_BYTES
-                    <= grin_field::bake::device::GPU_BAKE_MAX_BYTES
-            {
+            if let Some(sparse) = sparse_for_gpu(field, interp) {
                 return Ok((GpuGrid::Sparse(Arc::new(sparse)), Vec::new()));
             }
         }
@@ -286,6 +283,21 @@ pub fn bake_for_gpu_grid(field: &dyn IndexField) -> Result<(GpuGrid, Vec<String>
         GpuGrid::Dense(Arc::new(baked)),
         bake_warning(&report).into_iter().collect(),
     ))
+}
+
+/// A sparse bake of `field` (`interp`) at the default budget, if it meets the budget and
+/// its f32 upload fits the GPU's bake cap.
+fn sparse_for_gpu(field: &dyn IndexField, interp: Interp) -> Option<SparseField> {
+    let opts = grin_field::sparse::bake::SparseOptions {
+        // i16 on the host; on the device f32 texels where it lacks rgba16snorm: half the
+        // cap on the host.
+        max_memory: grin_field::bake::device::GPU_BAKE_MAX_BYTES / 2,
+        interp,
+        ..Default::default()
+    };
+    let (sparse, r) = grin_field::sparse::bake::bake_sparse(field, &opts, &|_, _, _| {}).ok()?;
+    let bytes = (sparse.pool().len() + sparse.table().len()) as u64 * FIELD_TEXEL_BYTES;
+    (r.meets_budget && bytes <= grin_field::bake::device::GPU_BAKE_MAX_BYTES).then_some(sparse)
 }
 
 /// A field baked for the GPU ([`bake_for_gpu_grid`]), read from `cache` under `key` when

@@ -469,6 +469,9 @@ pub fn upload_sparse(
     // nodes from the first voxel.
     if sparse.apron() > 0 {
         params.flags |= FLAG_TRICUBIC;
+        // The nodes' delta_n range, which a sample is clamped to.
+        let (lo, hi) = sparse.delta_range();
+        params.field_scale = [lo, hi, 0.0, 0.0];
     }
     if snorm {
         params.flags |= FLAG_FIELD_SNORM;

@@ -205,7 +205,9 @@ pub struct FrameParams {
     pub estimate_limit: f32,
     pub _pad3: f32,
     /// A dense rgba16snorm field's scales (`FLAG_FIELD_SNORM`): delta_n and the gradient's
-    /// components, times 32767.
+    /// components, times 32767. A sparse Catmull-Rom bake (`FLAG_SPARSE | FLAG_TRICUBIC`,
+    /// its scales per brick) holds its nodes' delta_n range here instead (x, y), which its
+    /// samples are clamped to.
     pub field_scale: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<FrameParams>() == 25 * 16);

@@ -391,7 +391,6 @@ fn stage_bar() -> (indicatif::ProgressBar, impl Fn(&str, u64, u64) + Sync) {
     (bar, progress)
 }
 
-/// `grin bake --sparse`: bake `field` into a sparse .grinf at `output`.
 /// The interpolation `--interp` asks for (trilinear where it is not given).
 fn interp_of(args: &Args) -> Interp {
     match args.interp {
@@ -400,6 +399,7 @@ fn interp_of(args: &Args) -> Interp {
     }
 }
 
+/// `grin bake --sparse`: bake `field` into a sparse .grinf at `output`.
 fn bake_sparse(
     args: &Args,
     field: &dyn grin_field::IndexField,

@@ -4,10 +4,12 @@
 //! Layout. The medium's box is cut into a top grid of cubic *bricks* of world edge `edge`
 //! (brick (a, b, c) covers `origin + edge * [a, a+1] x [b, b+1] x [c, c+1]`, x fastest in
 //! the `table`). A brick the field leaves at ambient is empty (`table` holds [`EMPTY`]); an
-//! active brick holds a dense grid of `cells + 1` nodes per edge, `cells =
+//! active brick holds a dense grid of `m = cells + 1 + 2 apron` nodes per edge, `cells =
 //! LEVEL_CELLS[level]` (a ladder of ratio ~1.25 from 4 to 256, so a brick is at most 25%
-//! finer per axis than its content needs), node (i, j, k) at `brick origin + edge / cells * (i, j, k)`, voxel `i + m * (j + m
-//! * k)` with `m = cells + 1`, channels `[delta_n, dn/dx, dn/dy, dn/dz]` as in a dense bake.
+//! finer per axis than its content needs), node (i, j, k) at `brick origin + (edge /
+//! cells) (i - apron, j - apron, k - apron)`, voxel `i + m * (j + m * k)`, channels
+//! `[delta_n, dn/dx, dn/dy, dn/dz]` as in a dense bake; `apron` is 0 (trilinear) or 1
+//! (Catmull-Rom, below).
 //! Each brick's voxels start at its `offset` in one shared pool (an atlas).
 //!
 //! Every brick owns the nodes on its faces (what trilinear reads need), so a sample reads
@@ -23,7 +25,10 @@
 //! at `brick origin + edge / cells * (i - 1, j - 1, k - 1)`), so its reads stay in the
 //! brick as trilinear ones do. Catmull-Rom needs no prefilter (it interpolates the nodes
 //! as they are), so a brick is baked on its own; a smooth field needs far fewer nodes
-//! than trilinear for the same error.
+//! than trilinear for the same error. Its negative weights ring past a sharp edge, so a
+//! sample's delta_n is clamped to the range of all the field's nodes, with a zero
+//! gradient where clamped (as grin's Catmull-Rom sampling of a VDB grid is: a bake on that
+//! grid's own lattice then interpolates exactly what the grid does).
 //!
 //! One concept a file: the field and its sampling here, the bake in `bake`, the file in
 //! `file`.
@@ -86,7 +91,8 @@ pub fn nodes_of(cells: usize, apron: u8) -> usize {
 }
 
 /// The sum of |Catmull-Rom weights| along an axis is at most 1.25 (at t = 1/2), so an
-/// interpolated value lies within (1.25^3 - 1) / 2 of its nodes' range beyond that range.
+/// interpolated gradient lies within (1.25^3 - 1) / 2 of its nodes' range beyond that
+/// range (delta_n itself is clamped to its nodes' range: see the module docs).
 pub const CATMULL_ROM_OVERSHOOT: f64 = (1.25 * 1.25 * 1.25 - 1.0) / 2.0;
 
 /// Catmull-Rom weights at fraction t of the cell between the middle two of 4 nodes
@@ -232,6 +238,9 @@ pub struct SparseField {
     finest_level: Option<u8>,
     /// 1 / the top grid's edge: top-grid coordinates are a product, as on the GPU.
     inv_edge: f64,
+    /// The nodes' delta_n range, as f32 (what the GPU compares with): a Catmull-Rom
+    /// sample's delta_n is clamped to it.
+    delta_range: (f32, f32),
 }
 
 /// Why a sparse field's parts do not fit together.
@@ -356,6 +365,7 @@ impl SparseField {
             near_cells: Vec::new(),
             finest_level: None,
             inv_edge: 1.0 / top.edge,
+            delta_range: (0.0, 0.0),
         };
         field.near_cells = field.neighbourhood_cells();
         field.finest_level = field.bricks.iter().map(|b| b.level).max();
@@ -374,14 +384,15 @@ impl SparseField {
         if ambient + lo <= 0.0 {
             return Err(format!("n = {} <= 0 in the stored voxels", ambient + lo));
         }
-        // Catmull-Rom's negative weights reach beyond the nodes' range.
+        // delta_n stays in its nodes' range (Catmull-Rom's is clamped there); its
+        // interpolated gradient may reach past the nodes' largest.
         let over = match field.interp() {
             Interp::Trilinear => 0.0,
             Interp::Tricubic => CATMULL_ROM_OVERSHOOT,
         };
-        let spread = over * (hi - lo);
-        field.n_range = (ambient + lo - spread, ambient + hi + spread);
+        field.n_range = (ambient + lo, ambient + hi);
         field.max_grad = g * (1.0 + 2.0 * over);
+        field.delta_range = (lo as f32, hi as f32);
         // Straight flights over empty bricks: one macro cell a brick, homogeneous (0)
         // where empty.
         field.macro_grid.max_grad = field
@@ -464,6 +475,10 @@ impl SparseField {
     /// Layers of apron nodes beyond each brick face (0 or 1).
     pub fn apron(&self) -> u8 {
         self.bricks.first().map_or(0, |b| b.apron)
+    }
+    /// The nodes' delta_n range (f32) a Catmull-Rom sample is clamped to.
+    pub fn delta_range(&self) -> (f32, f32) {
+        self.delta_range
     }
     pub fn provenance(&self) -> &BakeProvenance {
         &self.provenance
@@ -643,7 +658,15 @@ impl IndexField for SparseField {
                 let x = if b.apron == 0 {
                     self.trilinear(b, u)
                 } else {
-                    self.catmull_rom(b, u)
+                    let x = self.catmull_rom(b, u);
+                    let (lo, hi) = self.delta_range;
+                    let (lo, hi) = (f64::from(lo), f64::from(hi));
+                    if x[0] < lo || x[0] > hi {
+                        // Rings past the nodes: flat at their range.
+                        [x[0].clamp(lo, hi), 0.0, 0.0, 0.0]
+                    } else {
+                        x
+                    }
                 };
                 FieldSample {
                     n: self.ambient + x[0],

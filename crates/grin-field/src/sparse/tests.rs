@@ -390,3 +390,57 @@ fn catmull_rom_bakes_meet_the_budget_in_fewer_bytes() {
         );
     }
 }
+
+/// Catmull-Rom rings past a sharp edge; a sample is clamped to the nodes' delta_n range,
+/// flat (zero gradient) where clamped, as grin's sampling of a VDB grid is. A brick's
+/// records must agree on their apron.
+#[test]
+fn catmull_rom_is_clamped_to_its_nodes_and_aprons_agree() {
+    // A step in x: 0 below x = 0.5, -0.01 above.
+    let step = |p: DVec3| (if p.x < 0.5 { 0.0 } else { -0.01 }, DVec3::ZERO);
+    let f = catmull_rom_brick(8, step);
+    assert_eq!(f.delta_range(), (-0.01, 0.0));
+    let (mut clamped, mut lowest, mut highest) = (0, f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..=400 {
+        let p = DVec3::new(i as f64 / 400.0, 0.37, 0.61);
+        let s = f.sample(p);
+        lowest = lowest.min(s.n - 1.0);
+        highest = highest.max(s.n - 1.0);
+        if s.n - 1.0 == 0.0 || s.n - 1.0 == f64::from(-0.01f32) {
+            assert_eq!(s.grad_n, DVec3::ZERO, "flat where clamped at {p}");
+            clamped += 1;
+        }
+    }
+    assert!(
+        lowest >= f64::from(-0.01f32) && highest <= 0.0 && clamped > 0,
+        "delta_n {lowest} ..= {highest}, {clamped} clamped"
+    );
+    // Raw Catmull-Rom of the same nodes rings past them (what the clamp is for).
+    let b = f.bricks()[0];
+    let raw = f.catmull_rom(&b, DVec3::new(2.5, 3.0, 4.0));
+    assert!(raw[0] > 0.0, "ringing {}", raw[0]);
+    // Mixed aprons are a crafted file's, refused by name.
+    let mut bricks = vec![
+        b,
+        Brick {
+            at: [1, 0, 0],
+            offset: b.voxel_count(),
+            apron: 0,
+            ..b
+        },
+    ];
+    let top = TopGrid {
+        origin: DVec3::ZERO,
+        edge: 1.0,
+        dims: [2, 1, 1],
+    };
+    let len = bricks[0].voxel_count() + bricks[1].voxel_count();
+    let e = check_parts(&top, &[0, 1], &bricks, len).expect_err("mixed aprons");
+    assert!(
+        e.contains("brick 1 has an apron of 0 node layers where brick 0 has 1"),
+        "{e}"
+    );
+    bricks[1].apron = 2;
+    bricks[0].apron = 2;
+    assert!(check_parts(&top, &[0, 1], &bricks, len).is_err());
+}

@@ -288,6 +288,15 @@ impl IndexField for VdbField {
             .fold(f64::INFINITY, f64::min);
         (voxel > 0.0 && voxel.is_finite()).then_some(voxel)
     }
+    /// The grid's voxel centres where its transform is a uniform scale and an offset.
+    fn source_lattice(&self) -> Option<(DVec3, f64)> {
+        let m = &self.world_from_grid.matrix3;
+        let h = m.x_axis.x;
+        let diagonal = m.x_axis == DVec3::new(h, 0.0, 0.0)
+            && m.y_axis == DVec3::new(0.0, h, 0.0)
+            && m.z_axis == DVec3::new(0.0, 0.0, h);
+        (diagonal && h > 0.0 && h.is_finite()).then_some((self.world_from_grid.translation, h))
+    }
     fn max_grad_n(&self) -> f64 {
         self.max_grad
     }
