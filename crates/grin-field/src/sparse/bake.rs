@@ -222,7 +222,7 @@ pub fn bake_sparse(
                 }
             }
             evals.fetch_add((m * m * m) as u64, Ordering::Relaxed);
-            let curvature = curvature_error(&nodes, BASE_CELLS, |i, j, k| {
+            let curvature = predicted_error(&nodes, BASE_CELLS, Interp::Trilinear, |i, j, k| {
                 bounds.signed_distance(node(i, j, k)) <= 0.0
             });
             Some((max, source.delta_bound(lo, hi), curvature))
@@ -301,6 +301,16 @@ pub fn bake_sparse(
             finest_level(top.edge, source.source_spacing(), opts.interp),
         ),
     };
+    let job = BrickJob {
+        top: &top,
+        features: &features,
+        level_max,
+        predict: lattice.is_none(),
+        tolerance,
+        storage,
+        opts,
+        evals: &evals,
+    };
     let used = AtomicU64::new(table_bytes);
     let over = AtomicBool::new(false);
     let done = AtomicU64::new(0);
@@ -313,20 +323,7 @@ pub fn bake_sparse(
                 return Err(BakeError::Option("stopped".into()));
             }
             let at = top.at(idx);
-            let b = bake_brick(
-                source,
-                &top,
-                at,
-                idx,
-                &features,
-                first_level,
-                level_max,
-                lattice.is_none(),
-                tolerance,
-                storage,
-                opts,
-                &evals,
-            )?;
+            let b = bake_brick(source, &job, at, idx, first_level)?;
             let bytes = match &b.voxels {
                 BrickVoxels::F32(v) => 16 * v.len(),
                 BrickVoxels::I16(v) => 8 * v.len(),
@@ -410,20 +407,7 @@ pub fn bake_sparse(
             .map(|&(pos, level)| {
                 let idx = active[pos];
                 let at = top.at(idx);
-                bake_brick(
-                    source,
-                    &top,
-                    at,
-                    idx,
-                    &features,
-                    level,
-                    level_max,
-                    lattice.is_none(),
-                    tolerance,
-                    storage,
-                    opts,
-                    &evals,
-                )
+                bake_brick(source, &job, at, idx, level)
             })
             .collect::<Result<_, _>>()?;
         for (&(pos, _), b) in redo.iter().zip(rebaked) {
@@ -606,22 +590,40 @@ fn finest_level(edge: f64, source_spacing: Option<f64>, interp: Interp) -> u8 {
         .unwrap_or(0)
 }
 
-/// Bake brick `at` at the coarsest level that meets `tolerance` (absolute |n| error).
-#[allow(clippy::too_many_arguments)]
-fn bake_brick(
-    source: &dyn IndexField,
-    top: &TopGrid,
-    at: [usize; 3],
-    idx: usize,
-    features: &[DVec3],
-    first_level: u8,
+/// What every brick's bake shares: the top grid, the field's feature points, the finest
+/// level a brick may take, whether the nodes' differences predict the error (not on a
+/// source's lattice), the absolute |n| tolerance, the storage, the options and the count
+/// of source evaluations.
+struct BrickJob<'a> {
+    top: &'a TopGrid,
+    features: &'a [DVec3],
     level_max: u8,
     predict: bool,
     tolerance: f64,
     storage: Storage,
-    opts: &SparseOptions,
-    evals: &AtomicU64,
+    opts: &'a SparseOptions,
+    evals: &'a AtomicU64,
+}
+
+/// Bake brick `at` (top-grid index `idx`) at the coarsest level from `first_level` that
+/// meets the tolerance.
+fn bake_brick(
+    source: &dyn IndexField,
+    job: &BrickJob<'_>,
+    at: [usize; 3],
+    idx: usize,
+    first_level: u8,
 ) -> Result<BakedBrick, BakeError> {
+    let BrickJob {
+        top,
+        features,
+        level_max,
+        predict,
+        tolerance,
+        storage,
+        opts,
+        evals,
+    } = *job;
     let bounds = source.bounds();
     let ambient = source.ambient_index();
     let (lo, hi) = top.brick_box(at);
@@ -686,10 +688,10 @@ fn bake_brick(
         let inside = |i: usize, j: usize, k: usize| bounds.signed_distance(node(i, j, k)) <= 0.0;
         // What the nodes' differences predict the interpolation misses (not on a source's
         // lattice, where the nodes are the source's own data).
-        let predicted = match (predict, opts.interp) {
-            (false, _) => 0.0,
-            (true, Interp::Trilinear) => curvature_error(&raw, cells, inside),
-            (true, Interp::Tricubic) => third_difference_error(&raw, cells, inside),
+        let predicted = if predict {
+            predicted_error(&raw, cells, opts.interp, inside)
+        } else {
+            0.0
         };
         let err = points
             .iter()
@@ -722,36 +724,66 @@ fn bake_brick(
     }
 }
 
-/// The largest trilinear interpolation error the nodes' own curvature predicts: inside a
-/// cell the error is sum_a t_a (1 - t_a) h^2 |f_aa| / 2 to leading order, at most
-/// sum_a |second difference along a| / 8, taken at every node inside the medium. Random points
-/// alone miss the one cell where a narrow peak's error is largest (64 points a brick left
-/// an eight-plume bake at 1.9e-3 against a 1e-3 budget).
-fn curvature_error(
+/// The largest interpolation error a brick's raw nodes predict for themselves (with the
+/// apron `interp` needs), taken at every node inside the medium. Random points alone miss
+/// the one cell where a narrow peak's error is largest (64 points a brick left an
+/// eight-plume bake at 1.9e-3 against a 1e-3 budget).
+/// - Trilinear: inside a cell the error is sum_a t_a (1 - t_a) h^2 |f_aa| / 2 to leading
+///   order, at most sum_a |second difference along a| / 8.
+/// - Catmull-Rom: along an axis h^3 |f'''| t (1 - t) (1 - 2t) / 6 to leading order (zero for
+///   quadratics), at most 0.016 h^3 |f'''| ~ |third difference| / 62; the sum over the axes
+///   at every inner node, with a margin of 2 (the random points catch what this misses).
+fn predicted_error(
     raw: &[[f32; 4]],
     cells: usize,
+    interp: Interp,
     inside: impl Fn(usize, usize, usize) -> bool,
 ) -> f64 {
-    let m = cells + 1;
+    let m = nodes_of(cells, apron_of(interp));
     let at = |i: usize, j: usize, k: usize| f64::from(raw[i + m * (j + m * k)][0]);
-    // On a face the difference is the one centred a node inwards (one-sided there).
-    let inner = |a: usize| a.clamp(1, m - 2);
-    let mut max = 0.0f64;
-    for k in 0..m {
-        for j in 0..m {
-            for i in 0..m {
-                if !inside(i, j, k) {
-                    continue;
-                }
+    match interp {
+        Interp::Trilinear => {
+            // On a face the difference is the one centred a node inwards (one-sided there).
+            let inner = |a: usize| a.clamp(1, m - 2);
+            let max = max_over_nodes(0..m, inside, |i, j, k| {
                 let (ci, cj, ck) = (inner(i), inner(j), inner(k));
-                let s = (at(ci + 1, j, k) + at(ci - 1, j, k) - 2.0 * at(ci, j, k)).abs()
+                (at(ci + 1, j, k) + at(ci - 1, j, k) - 2.0 * at(ci, j, k)).abs()
                     + (at(i, cj + 1, k) + at(i, cj - 1, k) - 2.0 * at(i, cj, k)).abs()
-                    + (at(i, j, ck + 1) + at(i, j, ck - 1) - 2.0 * at(i, j, ck)).abs();
-                max = max.max(s);
+                    + (at(i, j, ck + 1) + at(i, j, ck - 1) - 2.0 * at(i, j, ck)).abs()
+            });
+            max / 8.0
+        }
+        Interp::Tricubic => {
+            // A difference from node c - 1 to c + 2 (c within 1 ..= m - 3).
+            let third = |f: &dyn Fn(usize) -> f64, c: usize| {
+                let c = c.clamp(1, m - 3);
+                (f(c + 2) - 3.0 * f(c + 1) + 3.0 * f(c) - f(c - 1)).abs()
+            };
+            let max = max_over_nodes(1..m - 1, inside, |i, j, k| {
+                third(&|x| at(x, j, k), i) + third(&|y| at(i, y, k), j) + third(&|z| at(i, j, z), k)
+            });
+            max / 31.0
+        }
+    }
+}
+
+/// The largest `f` at the nodes (i, j, k), each in `range`, where `inside` holds.
+fn max_over_nodes(
+    range: std::ops::Range<usize>,
+    inside: impl Fn(usize, usize, usize) -> bool,
+    f: impl Fn(usize, usize, usize) -> f64,
+) -> f64 {
+    let mut max = 0.0f64;
+    for k in range.clone() {
+        for j in range.clone() {
+            for i in range.clone() {
+                if inside(i, j, k) {
+                    max = max.max(f(i, j, k));
+                }
             }
         }
     }
-    max / 8.0
+    max
 }
 
 /// How much finer a grid must be for its error to shrink by `ratio`: the square root
@@ -761,40 +793,6 @@ fn order_root(interp: Interp, ratio: f64) -> f64 {
         Interp::Trilinear => ratio.sqrt(),
         Interp::Tricubic => ratio.cbrt(),
     }
-}
-
-/// The largest Catmull-Rom interpolation error the nodes' third differences predict: in a
-/// cell its error along an axis is h^3 |f'''| t (1 - t) (1 - 2t) / 6 to leading order
-/// (zero for quadratics), at most 0.016 h^3 |f'''| ~ |third difference| / 62; the sum over
-/// the axes at every inner node inside the medium, with a margin of 2 (the random points
-/// catch what this misses). As [`curvature_error`] does for trilinear.
-fn third_difference_error(
-    raw: &[[f32; 4]],
-    cells: usize,
-    inside: impl Fn(usize, usize, usize) -> bool,
-) -> f64 {
-    let m = cells + 3;
-    let at = |i: usize, j: usize, k: usize| f64::from(raw[i + m * (j + m * k)][0]);
-    // A difference from node c - 1 to c + 2 (c within 1 ..= m - 3).
-    let third = |f: &dyn Fn(usize) -> f64, c: usize| {
-        let c = c.clamp(1, m - 3);
-        (f(c + 2) - 3.0 * f(c + 1) + 3.0 * f(c) - f(c - 1)).abs()
-    };
-    let mut max = 0.0f64;
-    for k in 1..m - 1 {
-        for j in 1..m - 1 {
-            for i in 1..m - 1 {
-                if !inside(i, j, k) {
-                    continue;
-                }
-                let s = third(&|x| at(x, j, k), i)
-                    + third(&|y| at(i, y, k), j)
-                    + third(&|z| at(i, j, z), k);
-                max = max.max(s);
-            }
-        }
-    }
-    max / 31.0
 }
 
 /// delta_n of a brick's raw nodes (with `apron` layers beyond its faces) at cell

@@ -95,18 +95,11 @@ pub fn nodes_of(cells: usize, apron: u8) -> usize {
 /// range (delta_n itself is clamped to its nodes' range: see the module docs).
 pub const CATMULL_ROM_OVERSHOOT: f64 = (1.25 * 1.25 * 1.25 - 1.0) / 2.0;
 
-/// Catmull-Rom weights at fraction t of the cell between the middle two of 4 nodes
-/// (the shader's `catmull_rom_weights`, in f32 as on the GPU).
+/// Catmull-Rom weights at fraction t of the cell between the middle two of 4 nodes, in
+/// f32 as on the GPU (the shader's `catmull_rom_weights`).
 #[inline]
 pub fn catmull_rom_weights(t: f32) -> [f32; 4] {
-    let t2 = t * t;
-    let t3 = t2 * t;
-    [
-        0.5 * (-t3 + 2.0 * t2 - t),
-        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-        0.5 * (t3 - t2),
-    ]
+    crate::vdb::catmull_rom::catmull_rom_weights(t)
 }
 
 impl Brick {

@@ -1,6 +1,8 @@
 //! Tricubic Catmull-Rom interpolation of the mapped voxels: the tap weights, their
 //! derivatives, and delta_n with its index-space gradient at a point.
 
+use std::ops::{Add, Mul, Neg, Sub};
+
 use super::VdbField;
 
 impl VdbField {
@@ -44,15 +46,21 @@ impl VdbField {
     }
 }
 
-/// Catmull-Rom weights of the taps at offsets -1, 0, 1, 2 for fraction `t`.
-fn catmull_rom_weights(t: f64) -> [f64; 4] {
+/// Catmull-Rom weights of the taps at offsets -1, 0, 1, 2 for fraction `t`, in the
+/// precision of `t` (f64 here; f32 for a sparse bake, as on the GPU, whose shader's
+/// `catmull_rom_weights` is the same arithmetic).
+pub(crate) fn catmull_rom_weights<T>(t: T) -> [T; 4]
+where
+    T: Copy + From<f32> + Add<Output = T> + Sub<Output = T> + Mul<Output = T> + Neg<Output = T>,
+{
+    let c = |v: f32| T::from(v);
     let t2 = t * t;
     let t3 = t2 * t;
     [
-        0.5 * (-t3 + 2.0 * t2 - t),
-        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-        0.5 * (t3 - t2),
+        c(0.5) * (-t3 + c(2.0) * t2 - t),
+        c(0.5) * (c(3.0) * t3 - c(5.0) * t2 + c(2.0)),
+        c(0.5) * (-(c(3.0) * t3) + c(4.0) * t2 + t),
+        c(0.5) * (t3 - t2),
     ]
 }
 

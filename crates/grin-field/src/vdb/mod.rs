@@ -44,7 +44,7 @@
 //! Catmull-Rom interpolant in `catmull_rom`.
 
 mod bricks;
-mod catmull_rom;
+pub(crate) mod catmull_rom;
 mod load;
 mod locate;
 mod mapping;
