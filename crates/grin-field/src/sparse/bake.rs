@@ -69,9 +69,9 @@ pub struct SparseOptions {
     /// the probes' curvature predicts holds the budget in the fewest voxels (small bricks
     /// pay for their shared faces, (cells + 1)^3 nodes for cells^3 cells, (cells + 3)^3
     /// with a Catmull-Rom apron; large ones are as fine everywhere as their finest
-    /// corner). The prediction is trilinear's (second differences, h^2) for either
-    /// sampling: for Catmull-Rom it overstates the cells a brick needs. A Catmull-Rom bake
-    /// of data on a lattice (a VDB grid) takes that lattice's bricks instead.
+    /// corner). The prediction is the sampling's own (second differences and h^2 for
+    /// trilinear, third differences and h^3 for Catmull-Rom). A Catmull-Rom bake of data
+    /// on a lattice (a VDB grid) takes that lattice's bricks instead.
     pub top_bricks: Option<usize>,
     pub gradient: GradientMode,
     /// Random points the final error is measured at.
@@ -222,9 +222,14 @@ pub fn bake_sparse(
                 }
             }
             evals.fetch_add((m * m * m) as u64, Ordering::Relaxed);
-            let curvature = predicted_error(&nodes, BASE_CELLS, Interp::Trilinear, |i, j, k| {
-                bounds.signed_distance(node(i, j, k)) <= 0.0
-            });
+            // What the sampling's own error predictor makes of the probes: Catmull-Rom's
+            // third differences read the 5^3 probes as 2 cells and their apron.
+            let inside =
+                |i: usize, j: usize, k: usize| bounds.signed_distance(node(i, j, k)) <= 0.0;
+            let curvature = match opts.interp {
+                Interp::Trilinear => predicted_error(&nodes, BASE_CELLS, opts.interp, inside),
+                Interp::Tricubic => predicted_error(&nodes, BASE_CELLS - 2, opts.interp, inside),
+            };
             Some((max, source.delta_bound(lo, hi), curvature))
         })
         .collect();
@@ -266,7 +271,8 @@ pub fn bake_sparse(
                 .iter()
                 .map(|&idx| {
                     let e = probes[idx].map_or(0.0, |p| p.2);
-                    (idx, BASE_CELLS as f64 * (e / tolerance).sqrt() * 1.05)
+                    let ratio = order_root(opts.interp, e / tolerance);
+                    (idx, BASE_CELLS as f64 * ratio * 1.05)
                 })
                 .collect();
             // Where the probes are 4x coarser than a brick needs, their curvature is
