@@ -283,6 +283,14 @@ fn hostile_sparse_files_are_clear_errors() {
     let mid = flipped.len() / 2;
     flipped[mid] ^= 0x40;
     assert_err(&info(&flipped, "flip.grinf"), "checksum mismatch");
+    // A trilinear file whose header claims Catmull-Rom (interpolation word 1): its bricks
+    // would need (cells + 3)^3 voxels each, which the file does not hold.
+    let mut claimed = good.clone();
+    claimed[36..40].copy_from_slice(&1u32.to_le_bytes());
+    assert_err(
+        &info(&recrc(claimed), "claimed.grinf"),
+        "claimed.grinf: file is",
+    );
     // The first brick record sits after the header, description and table.
     let table_offset = u32::from_le_bytes(good[12..16].try_into().expect("4")) as usize;
     let entries: usize = (0..3)
@@ -309,7 +317,7 @@ fn hostile_sparse_files_are_clear_errors() {
     let mut nan = good.clone();
     nan[pool + 4..pool + 8].copy_from_slice(&f32::NAN.to_le_bytes());
     assert_err(&info(&recrc(nan), "nan.grinf"), "non-finite voxel");
-    for name in ["short", "flip", "level", "table", "nan"] {
+    for name in ["short", "flip", "claimed", "level", "table", "nan"] {
         let o = grin()
             .arg("info")
             .arg(d.path(&format!("{name}.grinf")))
