@@ -347,6 +347,20 @@ impl Reader<'_> {
             s => Err(format!("unknown bounds code {s}")),
         }
     }
+
+    /// The measured errors as [`put_bounds_and_errors`] wrote them (max and RMS |n error|,
+    /// max and RMS |grad n error|): each finite and not negative, else the message's error
+    /// (a field's n uncertainty comes from them).
+    pub(crate) fn errors(&mut self) -> Result<(f64, f64, f64, f64), String> {
+        let e = [0; 4].map(|_| self.f64());
+        if e.iter().all(|v| v.is_finite() && *v >= 0.0) {
+            Ok((e[0], e[1], e[2], e[3]))
+        } else {
+            Err(format!(
+                "measured errors {e:?} (max and RMS of n, then of grad n) must be finite and not negative"
+            ))
+        }
+    }
 }
 
 /// Parse and validate the header: magic, version, size, checksum, then the fields.
@@ -405,7 +419,7 @@ pub fn parse_header(b: &[u8], path: &str) -> Result<GrinfHeader, GrinfError> {
     let spacing = r.dvec3();
     let scale = [r.f32(), r.f32(), r.f32(), r.f32()];
     let (bounds, _) = r.bounds().map_err(header_err)?;
-    let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = (r.f64(), r.f64(), r.f64(), r.f64());
+    let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = r.errors().map_err(header_err)?;
     let desc_len = r.u32() as usize;
     if FIXED_HEADER_BYTES + desc_len > data_offset || !data_offset.is_multiple_of(DATA_ALIGN) {
         return Err(header_err(format!(

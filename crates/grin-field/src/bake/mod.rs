@@ -141,7 +141,7 @@ pub enum BakeError {
         best: f64,
     },
     #[error(
-        "a sparse bake needs more than the memory cap of {cap} bytes ({need} bytes after {done} of {active} active bricks; raise --max-memory or --error)"
+        "a sparse bake needs more than the memory cap of {cap} bytes ({need} bytes{}; raise --max-memory or --error)", sparse_progress(*done, *active)
     )]
     SparseMemory {
         need: u64,
@@ -262,6 +262,16 @@ pub(crate) fn check_budget_and_points(budget: f64, points: usize) -> Result<(), 
         return Err(BakeError::Option("error_points must be at least 1".into()));
     }
     Ok(())
+}
+
+/// Where a sparse bake stood when it passed its memory cap: after how many of its active
+/// bricks (nothing when the brick table alone is over it).
+fn sparse_progress(done: usize, active: usize) -> String {
+    if active == 0 {
+        " for the brick table alone".into()
+    } else {
+        format!(" after {done} of {active} active bricks")
+    }
 }
 
 /// Bake `source` per `opts`.

@@ -317,52 +317,9 @@ pub fn bake_sparse(
         opts,
         evals: &evals,
     };
-    let used = AtomicU64::new(table_bytes);
-    let over = AtomicBool::new(false);
-    let done = AtomicU64::new(0);
-    let total = active.len() as u64;
-    progress("bake bricks", 0, total);
-    let baked: Vec<BakedBrick> = active
-        .par_iter()
-        .map(|&idx| -> Result<BakedBrick, BakeError> {
-            if over.load(Ordering::Relaxed) {
-                return Err(BakeError::Option("stopped".into()));
-            }
-            let at = top.at(idx);
-            let b = bake_brick(source, &job, at, idx, first_level)?;
-            let bytes = match &b.voxels {
-                BrickVoxels::F32(v) => 16 * v.len(),
-                BrickVoxels::I16(v) => 8 * v.len(),
-            } + std::mem::size_of::<Brick>();
-            let now = used.fetch_add(bytes as u64, Ordering::Relaxed) + bytes as u64;
-            if now > opts.max_memory {
-                over.store(true, Ordering::Relaxed);
-            }
-            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-            progress("bake bricks", d, total);
-            Ok(b)
-        })
-        .collect::<Result<_, _>>()
-        .map_err(|e| {
-            if over.load(Ordering::Relaxed) {
-                BakeError::SparseMemory {
-                    need: used.load(Ordering::Relaxed),
-                    cap: opts.max_memory,
-                    done: done.load(Ordering::Relaxed) as usize,
-                    active: active.len(),
-                }
-            } else {
-                e
-            }
-        })?;
-    if over.load(Ordering::Relaxed) {
-        return Err(BakeError::SparseMemory {
-            need: used.load(Ordering::Relaxed),
-            cap: opts.max_memory,
-            done: baked.len(),
-            active: active.len(),
-        });
-    }
+    progress("bake bricks", 0, active.len() as u64);
+    let todo: Vec<(usize, u8)> = active.iter().map(|&idx| (idx, first_level)).collect();
+    let baked = bake_within(source, &job, &todo, table_bytes, active.len(), progress)?;
 
     // 4. Assemble and measure. Bricks where the measured error is over their share are
     // baked again finer: a level search judges a brick by 64 points and its nodes'
@@ -373,7 +330,9 @@ pub fn bake_sparse(
     let mut round = 0u64;
     let (mut field, errors, range, rel) = loop {
         progress("measure error", round, REFINE_ROUNDS + 1);
-        let field = assemble(&top, &active, &mut baked, storage, bounds, ambient, source)?;
+        let field = assemble(&top, &active, &mut baked, storage, bounds, ambient, source)?
+            .with_apron(apron_of(opts.interp))
+            .map_err(BakeError::Option)?;
         let errors = measure_error_at(source, &field, opts.gradient, &points);
         let range = range.max(errors.max_source_delta_n);
         let rel = crate::bake::relative_error(errors.max_err_n, range);
@@ -407,15 +366,18 @@ pub fn bake_sparse(
         if redo.is_empty() {
             break (field, errors, range, rel);
         }
+        // What stays is counted against the cap with what the bricks baked again take.
+        let staying = field.memory_bytes() as u64
+            - redo
+                .iter()
+                .map(|&(pos, _)| baked_bytes(baked[pos].level, job.storage, apron_of(opts.interp)))
+                .sum::<u64>();
         disassemble(field, &mut baked);
-        let rebaked: Vec<BakedBrick> = redo
-            .par_iter()
-            .map(|&(pos, level)| {
-                let idx = active[pos];
-                let at = top.at(idx);
-                bake_brick(source, &job, at, idx, level)
-            })
-            .collect::<Result<_, _>>()?;
+        let todo: Vec<(usize, u8)> = redo
+            .iter()
+            .map(|&(pos, level)| (active[pos], level))
+            .collect();
+        let rebaked = bake_within(source, &job, &todo, staying, active.len(), &|_, _, _| {})?;
         for (&(pos, _), b) in redo.iter().zip(rebaked) {
             baked[pos] = b;
         }
@@ -594,6 +556,55 @@ fn finest_level(edge: f64, source_spacing: Option<f64>, interp: Interp) -> u8 {
         .take_while(|&l| edge / cells_of(l) as f64 >= fraction * h * (1.0 - 1e-9))
         .last()
         .unwrap_or(0)
+}
+
+/// Bake the bricks `todo` (top-grid index, first level) in parallel, their bytes counted
+/// from `used` on: once the count passes the cap no further brick starts and the bake is
+/// a [`BakeError::SparseMemory`] (`active` the field's active bricks, for its message).
+fn bake_within(
+    source: &dyn IndexField,
+    job: &BrickJob<'_>,
+    todo: &[(usize, u8)],
+    used: u64,
+    active: usize,
+    progress: Progress<'_>,
+) -> Result<Vec<BakedBrick>, BakeError> {
+    let cap = job.opts.max_memory;
+    let used = AtomicU64::new(used);
+    let over = AtomicBool::new(false);
+    let done = AtomicU64::new(0);
+    let total = todo.len() as u64;
+    let baked = todo
+        .par_iter()
+        .map(|&(idx, level)| -> Result<BakedBrick, BakeError> {
+            if over.load(Ordering::Relaxed) {
+                return Err(BakeError::Option("stopped".into()));
+            }
+            let b = bake_brick(source, job, job.top.at(idx), idx, level)?;
+            let bytes = baked_bytes(b.level, job.storage, b.apron);
+            if used.fetch_add(bytes, Ordering::Relaxed) + bytes > cap {
+                over.store(true, Ordering::Relaxed);
+            }
+            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+            progress("bake bricks", d, total);
+            Ok(b)
+        })
+        .collect::<Result<Vec<_>, _>>();
+    if over.load(Ordering::Relaxed) {
+        return Err(BakeError::SparseMemory {
+            need: used.load(Ordering::Relaxed),
+            cap,
+            done: done.load(Ordering::Relaxed) as usize,
+            active,
+        });
+    }
+    baked
+}
+
+/// Bytes a brick at `level` with `apron` holds in memory (its voxels and its record).
+fn baked_bytes(level: u8, storage: Storage, apron: u8) -> u64 {
+    let voxels = (nodes_of(cells_of(level), apron) as u64).pow(3);
+    voxels * storage.bytes_per_voxel() as u64 + std::mem::size_of::<Brick>() as u64
 }
 
 /// What every brick's bake shares: the top grid, the field's feature points, the finest

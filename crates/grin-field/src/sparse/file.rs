@@ -241,7 +241,7 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
     if !bv.iter().all(|v| v.is_finite()) {
         return Err(header_err(format!("bounds {bv:?} are not finite")));
     }
-    let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = (r.f64(), r.f64(), r.f64(), r.f64());
+    let (max_err_n, rms_err_n, max_err_grad, rms_err_grad) = r.errors().map_err(header_err)?;
     let desc_len = r.u32() as usize;
     if FIXED_HEADER_BYTES + desc_len > table_offset {
         return Err(header_err(format!(
@@ -322,5 +322,6 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
             rms_err_grad,
         },
     )
+    .and_then(|f| f.with_apron(apron))
     .map_err(header_err)
 }

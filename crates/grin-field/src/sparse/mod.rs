@@ -234,6 +234,9 @@ pub struct SparseField {
     /// The nodes' delta_n range, as f32 (what the GPU compares with): a Catmull-Rom
     /// sample's delta_n is clamped to it.
     delta_range: (f32, f32),
+    /// Apron layers of every brick (0 trilinear, 1 Catmull-Rom): the bricks', or for a
+    /// field with none what it was baked with ([`Self::with_apron`]).
+    apron: u8,
 }
 
 /// Why a sparse field's parts do not fit together.
@@ -336,6 +339,7 @@ impl SparseField {
         provenance: BakeProvenance,
     ) -> Result<Self, String> {
         check_parts(&top, &table, &bricks, pool.len())?;
+        let bricks_apron = bricks.first().map_or(0, |b| b.apron);
         if !(ambient.is_finite() && ambient > 0.0) {
             return Err(format!("ambient index {ambient} must be positive"));
         }
@@ -359,6 +363,7 @@ impl SparseField {
             finest_level: None,
             inv_edge: 1.0 / top.edge,
             delta_range: (0.0, 0.0),
+            apron: bricks_apron,
         };
         field.near_cells = field.neighbourhood_cells();
         field.finest_level = field.bricks.iter().map(|b| b.level).max();
@@ -460,14 +465,27 @@ impl SparseField {
     /// How the field is sampled: trilinear, or tricubic Catmull-Rom where its bricks hold
     /// an apron (see the module docs).
     pub fn interp(&self) -> Interp {
-        match self.bricks.first().map_or(0, |b| b.apron) {
+        match self.apron {
             0 => Interp::Trilinear,
             _ => Interp::Tricubic,
         }
     }
     /// Layers of apron nodes beyond each brick face (0 or 1).
     pub fn apron(&self) -> u8 {
-        self.bricks.first().map_or(0, |b| b.apron)
+        self.apron
+    }
+    /// The field with `apron` (0 or 1) as its sampling's: what a field with no active brick
+    /// keeps of how it was baked (an all-ambient medium baked Catmull-Rom stays one). A
+    /// field with bricks must already have it.
+    pub fn with_apron(mut self, apron: u8) -> Result<Self, String> {
+        if apron > 1 || (!self.bricks.is_empty() && apron != self.apron) {
+            return Err(format!(
+                "an apron of {apron} node layers for bricks with {}",
+                self.apron
+            ));
+        }
+        self.apron = apron;
+        Ok(self)
     }
     /// The nodes' delta_n range (f32) a Catmull-Rom sample is clamped to.
     pub fn delta_range(&self) -> (f32, f32) {

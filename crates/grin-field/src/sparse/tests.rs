@@ -444,3 +444,66 @@ fn catmull_rom_is_clamped_to_its_nodes_and_aprons_agree() {
     bricks[0].apron = 2;
     assert!(check_parts(&top, &[0, 1], &bricks, len).is_err());
 }
+
+/// A budget the storage cannot meet (i16 rounds to ~1e-5 of the range) is refused at the
+/// memory cap, wherever the bake passes it (the rounds that bake bricks again finer count
+/// against it too: they once grew a Catmull-Rom bake of this plume to 17 GB under a 1 GB
+/// cap, `grin bake --sparse --interp tricubic --storage i16 --error 1e-6`).
+#[test]
+fn refining_stops_at_the_memory_cap() {
+    let e = bake_sparse(
+        &one_plume(),
+        &SparseOptions {
+            error_budget: 1e-6,
+            storage: Some(crate::baked::Storage::I16),
+            interp: Interp::Tricubic,
+            max_memory: 48 << 20,
+            ..Default::default()
+        },
+        &no_progress,
+    )
+    .expect_err("over the cap");
+    assert!(
+        e.to_string()
+            .starts_with("a sparse bake needs more than the memory cap of 50331648 bytes"),
+        "{e}"
+    );
+}
+
+/// An all-ambient medium baked Catmull-Rom has no brick to say so, and keeps it: in the
+/// field and through its file. A header's measured errors must be finite and not negative.
+#[test]
+fn an_empty_catmull_rom_bake_keeps_its_sampling_and_errors_are_checked() {
+    let uniform = crate::analytic::Uniform::new(
+        Bounds::Box {
+            min: DVec3::splat(-1.0),
+            max: DVec3::splat(1.0),
+        },
+        1.0003,
+        1.0003,
+    )
+    .expect("uniform");
+    let (f, r) = bake(
+        &uniform,
+        &SparseOptions {
+            interp: Interp::Tricubic,
+            ..Default::default()
+        },
+    );
+    assert_eq!(
+        (r.active_bricks, f.interp(), f.apron()),
+        (0, Interp::Tricubic, 1)
+    );
+    let mut bytes = file::to_bytes(&f);
+    let g = file::from_bytes(&bytes, "u.grinf").expect("read back");
+    assert_eq!(g.interp(), Interp::Tricubic);
+    bytes[136..144].copy_from_slice(&f64::NAN.to_le_bytes());
+    let n = bytes.len() - 4;
+    let crc = crc32fast::hash(&bytes[..n]);
+    bytes[n..].copy_from_slice(&crc.to_le_bytes());
+    let e = file::from_bytes(&bytes, "u.grinf").expect_err("NaN error");
+    assert!(
+        e.to_string().contains("must be finite and not negative"),
+        "{e}"
+    );
+}
