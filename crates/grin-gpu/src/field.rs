@@ -476,9 +476,9 @@ pub fn upload_sparse(
     if snorm {
         params.flags |= FLAG_FIELD_SNORM;
     }
-    if !table.contains(&grin_field::sparse::EMPTY) {
-        params.flags &= !FLAG_MACRO_CELLS;
-    }
+    // The macro-cell test stays on where no brick is empty (it then flies only outside
+    // the top grid): a sequence's frames, some with empty bricks and some without, share
+    // one compiled pipeline (the flags are pipeline constants).
     Ok(FieldTextures {
         field,
         macro_cells,

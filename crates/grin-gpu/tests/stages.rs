@@ -787,8 +787,8 @@ fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
     }
 }
 
-fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::Interp) {
-    use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+/// The plume scene with two plumes in it, and its directory.
+fn two_plumes() -> (Scene, PathBuf) {
     let text = std::fs::read_to_string(scene_path("plume")).unwrap();
     let start = text.find("field = { kind = \"plume\"").unwrap();
     let end = start + text[start..].find("] }").unwrap() + 3;
@@ -797,11 +797,58 @@ fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::I
         &text[..start],
         &text[end..]
     );
-    let path = std::env::temp_dir().join(format!("grin-stages-sparse-{}.toml", std::process::id()));
+    // A file of its own per call: the tests that read it run at once.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!(
+        "grin-stages-sparse-{}-{call}.toml",
+        std::process::id()
+    ));
     std::fs::write(&path, text).unwrap();
     let scene: Scene = load_scene(&path).unwrap();
     std::fs::remove_file(&path).ok();
-    let dir = path.parent().unwrap();
+    (scene, path.parent().unwrap().to_owned())
+}
+
+/// A sequence's sparse frames share their compiled pipelines whether or not a frame has
+/// an empty brick: the upload keeps the macro-cell flag (a pipeline constant) either way.
+#[test]
+fn sparse_bakes_with_and_without_empty_bricks_keep_one_pipeline() {
+    use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+    let (scene, dir) = two_plumes();
+    let source = grin_field::build_field(scene.medium.as_ref().unwrap(), &dir).unwrap();
+    let Some(ctx) = harness::context("sparse macro-cell flag") else {
+        return;
+    };
+    let mut flags = Vec::new();
+    for top_bricks in [1, 24] {
+        // A loose budget: one brick's finest cells meet it.
+        let opts = SparseOptions {
+            top_bricks: Some(top_bricks),
+            error_budget: 0.05,
+            ..Default::default()
+        };
+        let (sparse, _) = bake_sparse(source.as_ref(), &opts, &|_, _, _| {}).unwrap();
+        let empty = sparse.table().contains(&grin_field::sparse::EMPTY);
+        // One brick holds the plumes; 24^3 leave most of the box empty.
+        assert_eq!(empty, top_bricks > 1, "{top_bricks} bricks a side");
+        let mut params = <grin_gpu::gpu_data::FrameParams as bytemuck::Zeroable>::zeroed();
+        params.flags = grin_gpu::gpu_data::FLAG_MACRO_CELLS;
+        grin_gpu::field::upload_sparse(&ctx, &sparse, &mut params).unwrap();
+        flags.push(params.flags);
+    }
+    assert_eq!(
+        flags[0], flags[1],
+        "flags {:#x} and {:#x}",
+        flags[0], flags[1]
+    );
+    assert_ne!(flags[0] & grin_gpu::gpu_data::FLAG_MACRO_CELLS, 0);
+}
+
+fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::Interp) {
+    use grin_field::sparse::bake::{SparseOptions, bake_sparse};
+    let (scene, dir) = two_plumes();
+    let dir = dir.as_path();
     let source = grin_field::build_field(scene.medium.as_ref().unwrap(), dir).unwrap();
     let opts = SparseOptions {
         top_bricks: Some(24),
