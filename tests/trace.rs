@@ -1,5 +1,7 @@
 //! End-to-end tests of `grin trace`: ray table in, ray table out, through the real
 //! scene loader and field profiles.
+//!
+//! One concept, one file: a test per promise of `grin trace`, through the binary.
 
 use common::{TestDir as Dir, assert_err, assert_failed, assert_ok, json, stderr};
 use grin_testkit as common;

@@ -1,6 +1,9 @@
 //! The `.grinf` baked-field file: a versioned, little-endian, CRC-32-checksummed header
 //! (transform, ambient index, storage, scale, bounds, source, measured error) followed by
 //! the voxels. The layout is documented in docs/grinf.md (with a numpy loader).
+//!
+//! One concept, one file: the dense layout's writer and its reader, which refuses what the
+//! writer cannot have written.
 
 use std::path::Path;
 

@@ -9,7 +9,8 @@
 //! batch's results as it comes, so the cost is linear in the rows and the memory follows a
 //! batch, not the table (a million rows trace in the memory of [`BATCH_ROWS`]).
 //!
-//! Over 600 lines: one concept, a ray table from its rows to its results; a quarter of it is tests.
+//! Over 600 lines: one concept, a ray table from its rows to its results (its tests in
+//! `table/tests.rs`).
 
 use std::collections::VecDeque;
 use std::io::{self, BufRead, Write};
