@@ -102,6 +102,7 @@ impl Eaton {
 }
 
 impl IndexField for Eaton {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let d = p - self.center;
         let r = d.length();
@@ -114,12 +115,6 @@ impl IndexField for Eaton {
             )
         }
     }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
-    }
     fn n_range(&self) -> (f64, f64) {
         // n decreases monotonically with r.
         (self.n2_and_slope(self.r_max).0.sqrt(), self.cap_a.sqrt())
@@ -131,9 +126,6 @@ impl IndexField for Eaton {
     }
     fn describe(&self) -> String {
         format!("eaton R={} core={}", Num(self.radius), Num(self.core))
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 

@@ -107,6 +107,7 @@ pub fn turning_height(e: f64, scale_height: f64, beta: f64) -> Option<f64> {
 }
 
 impl IndexField for ExponentialAtmosphere {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let h = p.dot(self.axis_v) - self.base;
         let x = self.e * (-h / self.scale_height).exp();
@@ -124,12 +125,6 @@ impl IndexField for ExponentialAtmosphere {
             }
         }
     }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
-    }
     fn n_range(&self) -> (f64, f64) {
         let a = self.n_at_height(self.h_range.0);
         let b = self.n_at_height(self.h_range.1);
@@ -146,9 +141,6 @@ impl IndexField for ExponentialAtmosphere {
             Num(self.base),
             axis_name(self.axis)
         )
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 

@@ -109,6 +109,7 @@ pub fn exact_path(r0: DVec3, t0: DVec3, n0: f64, a: f64, axis: DVec3, t: f64) ->
 }
 
 impl IndexField for GrinRod {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let rho = self.rho_vec(p - self.center);
         let n02 = self.n0 * self.n0;
@@ -117,12 +118,6 @@ impl IndexField for GrinRod {
             n02 * (1.0 - a2 * rho.length_squared()),
             rho * (-2.0 * n02 * a2),
         )
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
     }
     fn n_range(&self) -> (f64, f64) {
         let ar = self.a * self.rho_max;
@@ -139,9 +134,6 @@ impl IndexField for GrinRod {
             Num(self.a),
             axis_name(self.axis)
         )
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 

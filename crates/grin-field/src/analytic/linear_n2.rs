@@ -84,15 +84,10 @@ pub fn exact_path(r0: DVec3, t0: DVec3, k: f64, axis: DVec3, t: f64) -> (DVec3, 
 }
 
 impl IndexField for LinearN2 {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let u = (p - self.center).dot(self.axis_v);
         from_n2(self.n0 * self.n0 + self.k * u, self.axis_v * self.k)
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
     }
     fn n_range(&self) -> (f64, f64) {
         (self.n_min, self.n_max)
@@ -107,9 +102,6 @@ impl IndexField for LinearN2 {
             Num(self.k),
             axis_name(self.axis)
         )
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 

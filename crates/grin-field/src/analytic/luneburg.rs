@@ -76,16 +76,11 @@ pub fn exact_path(r0: DVec3, t0: DVec3, radius: f64, t: f64) -> (DVec3, DVec3) {
 }
 
 impl IndexField for Luneburg {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let d = p - self.center;
         let inv_r2 = 1.0 / (self.radius * self.radius);
         from_n2(2.0 - d.length_squared() * inv_r2, d * (-2.0 * inv_r2))
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
     }
     fn n_range(&self) -> (f64, f64) {
         let n_min = (2.0 - (self.r_max / self.radius).powi(2)).sqrt();
@@ -98,9 +93,6 @@ impl IndexField for Luneburg {
     }
     fn describe(&self) -> String {
         format!("luneburg R={}", Num(self.radius))
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 

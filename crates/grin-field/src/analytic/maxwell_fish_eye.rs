@@ -56,6 +56,7 @@ pub fn image_point(p: DVec3, a: f64) -> DVec3 {
 }
 
 impl IndexField for MaxwellFishEye {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let d = p - self.center;
         let q = 1.0 + d.length_squared() / (self.a * self.a);
@@ -64,12 +65,6 @@ impl IndexField for MaxwellFishEye {
             n,
             grad_n: d * (-2.0 * n / (self.a * self.a * q)),
         }
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
     }
     fn n_range(&self) -> (f64, f64) {
         let u = self.r_max / self.a;
@@ -82,9 +77,6 @@ impl IndexField for MaxwellFishEye {
     }
     fn describe(&self) -> String {
         format!("maxwell-fish-eye n0={} a={}", Num(self.n0), Num(self.a))
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 

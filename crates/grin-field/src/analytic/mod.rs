@@ -10,6 +10,23 @@
 //! Exact solutions are in the t-parameter form of the ray equation used everywhere in
 //! grin: dr/dt = T, dT/dt = n grad n, with |T| = n.
 
+/// The part of [`IndexField`](crate::IndexField) every profile here shares: the bounds
+/// and ambient index it stores, and no local step limits (a formula has no empty cells
+/// to fly over and no features to cap a step at).
+macro_rules! analytic_basics {
+    () => {
+        fn bounds(&self) -> Bounds {
+            self.bounds
+        }
+        fn ambient_index(&self) -> f64 {
+            self.ambient
+        }
+        fn has_local_step_limits(&self) -> bool {
+            false
+        }
+    };
+}
+
 pub mod eaton;
 pub mod exponential_atmosphere;
 pub mod grin_rod;

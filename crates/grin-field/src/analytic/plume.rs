@@ -69,6 +69,7 @@ impl Plume {
 }
 
 impl IndexField for Plume {
+    analytic_basics!();
     fn sample(&self, p: DVec3) -> FieldSample<f64> {
         let mut n = self.ambient;
         let mut grad_n = DVec3::ZERO;
@@ -80,12 +81,6 @@ impl IndexField for Plume {
             grad_n += d * (2.0 * g * inv_s2);
         }
         FieldSample { n, grad_n }
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
     }
     /// A bound, exact for a single blob centred in the bounds: overlapping blobs at most
     /// add their amplitudes.
@@ -104,9 +99,6 @@ impl IndexField for Plume {
     }
     fn describe(&self) -> String {
         format!("plume ({} blobs)", self.blobs.len())
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
     /// The narrowest blob's width s.
     fn feature_size(&self) -> Option<f64> {

@@ -29,17 +29,12 @@ impl Uniform {
 }
 
 impl IndexField for Uniform {
+    analytic_basics!();
     fn sample(&self, _p: DVec3) -> FieldSample<f64> {
         FieldSample {
             n: self.n,
             grad_n: DVec3::ZERO,
         }
-    }
-    fn bounds(&self) -> Bounds {
-        self.bounds
-    }
-    fn ambient_index(&self) -> f64 {
-        self.ambient
     }
     fn n_range(&self) -> (f64, f64) {
         (self.n, self.n)
@@ -49,9 +44,6 @@ impl IndexField for Uniform {
     }
     fn describe(&self) -> String {
         format!("uniform n={}", Num(self.n))
-    }
-    fn has_local_step_limits(&self) -> bool {
-        false
     }
 }
 
