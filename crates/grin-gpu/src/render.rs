@@ -695,18 +695,21 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// Render every pixel into `image` (the viewer's image on the device): the frame's
-    /// samples start the image (`overwrite`) or are added to it, AOV `aov` is coloured
-    /// into its texture ([`ViewImage::show`]) and the frame's statistics come back;
-    /// nothing else is read back but the passes' timestamps. A frame of one band is one
-    /// submission. Setting `cancel` stops between bands with [`GpuError::Cancelled`], the
-    /// image then part this frame and part the last: start it again.
+    /// samples start the image (`overwrite`) or are added to it and AOV `aov` is coloured
+    /// into its texture ([`ViewImage::show`]). With `read`, the statistics counted since
+    /// the last read come back (32 bytes) with the passes' timestamps
+    /// ([`Self::last_device_seconds`]); without, nothing is read back: the frame is waited
+    /// for on the device's fence. A frame of one band is one submission. Setting `cancel`
+    /// stops between bands with [`GpuError::Cancelled`], the image then part this frame and
+    /// part the last: start it again.
     pub fn render_to_view(
         &self,
         image: &mut ViewImage,
         overwrite: bool,
         aov: u32,
+        read: bool,
         cancel: &AtomicBool,
-    ) -> Result<ViewStats, GpuError> {
+    ) -> Result<Option<ViewStats>, GpuError> {
         let (width, height) = (self.params.width, self.params.height);
         image.begin_frame(width, height, overwrite, self.params.spp);
         let image = &*image;
@@ -715,10 +718,16 @@ impl<'a> GpuRenderer<'a> {
                 image,
                 first: row == 0,
                 show: (row + rows >= height).then_some(aov),
+                read,
             };
             self.render_band(row, rows, sink)
         })?;
-        image.read_stats(self.ctx, aov)
+        if read {
+            image.read_stats(self.ctx, aov).map(Some)
+        } else {
+            self.ctx.wait_submitted()?;
+            Ok(None)
+        }
     }
 
     /// Run `band(first_row, rows)` over the frame's bands, stopping between them with
@@ -731,16 +740,20 @@ impl<'a> GpuRenderer<'a> {
     ) -> Result<(), GpuError> {
         let height = self.params.height;
         let mut row = 0;
-        let mut device_seconds = 0.0;
+        // NaN where no band was timed (a viewer's frame that reads nothing back).
+        let mut device_seconds: Option<f64> = None;
         self.rounds.store(0, Ordering::Relaxed);
         while row < height {
             if cancel.load(Ordering::Relaxed) {
                 return Err(GpuError::Cancelled);
             }
             let rows = self.rows_per_band.min(height - row);
-            device_seconds += band(row, rows)?.unwrap_or(0.0);
+            if let Some(s) = band(row, rows)? {
+                *device_seconds.get_or_insert(0.0) += s;
+            }
             row += rows;
         }
+        let device_seconds = device_seconds.unwrap_or(f64::NAN);
         if let Some(timer) = &self.timer {
             timer
                 .last
@@ -756,11 +769,13 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// Seconds the device spent in the render passes of the last [`Self::render`]
-    /// (timestamps written around each pass; `None` where the adapter has none).
+    /// (timestamps written around each pass; `None` where the adapter has none, or the
+    /// last frame was a viewer's that read nothing back).
     pub fn last_device_seconds(&self) -> Option<f64> {
         self.timer
             .as_ref()
             .map(|t| f64::from_bits(t.last.load(Ordering::Relaxed)))
+            .filter(|s| !s.is_nan())
     }
 
     /// Render and time the whole frame (for benchmarks).
@@ -792,6 +807,11 @@ impl<'a> GpuRenderer<'a> {
         let bytes = u64::from(width) * u64::from(rows) * std::mem::size_of::<PixelOut>() as u64;
         let passes = if self.medium_pipeline.is_some() { 2 } else { 1 };
         let view = matches!(sink, BandSink::View { .. });
+        // The passes' timestamps are read with a view's statistics only.
+        let timer = match &sink {
+            BandSink::View { read: false, .. } => None,
+            _ => self.timer.as_ref(),
+        };
         // Every round there could be: each pixel's samples, each path's events, each
         // march's loop bound, a round's steps at a time (never reached: the count of
         // pixels left reaches zero long before).
@@ -898,7 +918,7 @@ impl<'a> GpuRenderer<'a> {
                 if submission == 0 {
                     self.encode_sink(&mut encoder, &sink, first_row, rows, bytes);
                 }
-                if let Some(timer) = &self.timer {
+                if let Some(timer) = timer {
                     timer.resolve(&mut encoder, passes);
                 }
             })?;
@@ -916,7 +936,7 @@ impl<'a> GpuRenderer<'a> {
             if status[3] == 0 {
                 break;
             }
-            if let Some(timer) = &self.timer {
+            if let Some(timer) = timer {
                 earlier_seconds += self.submission_seconds(timer, submission - 1, passes)?;
             }
             encoder = ctx
@@ -942,12 +962,12 @@ impl<'a> GpuRenderer<'a> {
             }
             // A CPU adapter runs a band for a good part of a second: wait for each, so a
             // cancel stops the frame between them (timestamps below wait too).
-            BandSink::View { .. } if self.timer.is_none() && ctx.is_cpu_adapter() => {
+            BandSink::View { .. } if timer.is_none() && ctx.is_cpu_adapter() => {
                 ctx.wait_submitted()?;
             }
             BandSink::View { .. } => {}
         }
-        match &self.timer {
+        match timer {
             Some(timer) => {
                 let last = self.submission_seconds(timer, submission - 1, passes)?;
                 Ok(Some(earlier_seconds + last))
@@ -970,10 +990,12 @@ impl<'a> GpuRenderer<'a> {
             BandSink::ReadBack(_) => {
                 encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
             }
-            BandSink::View { image, show, .. } => {
+            BandSink::View {
+                image, show, read, ..
+            } => {
                 image.accumulate_band(self.ctx, encoder, &self.out_buffer, first_row, rows);
                 if let Some(aov) = show {
-                    image.encode_show(self.ctx, encoder, *aov);
+                    image.encode_show(self.ctx, encoder, *aov, *read);
                 }
             }
         }
@@ -1048,6 +1070,8 @@ enum BandSink<'s> {
         first: bool,
         /// The frame's last band: colour this AOV after it.
         show: Option<u32>,
+        /// The frame's statistics and timestamps are read back.
+        read: bool,
     },
 }
 

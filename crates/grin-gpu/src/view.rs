@@ -4,15 +4,18 @@
 //! [`GpuRenderer::render_to_view`](crate::GpuRenderer::render_to_view) adds each band of
 //! the render kernel's pixels to [`ViewImage`]'s accumulation (`view_accumulate`,
 //! shaders/view.wgsl) instead of reading them back, then colours the AOV asked for into
-//! the texture (`view_scale`, `view_colour`, as `grin_view::display` colours a [`Frame`])
-//! and reads back the frame's 32 bytes of statistics, all in the frame's one submission
-//! where it is one band; [`ViewImage::show`] colours it again in another AOV. Pixels are read
-//! back only when asked ([`ViewImage::read_frame`], [`ViewImage::read_display`]: a
-//! screenshot, an export, a test), and counted apart ([`ViewImage::pixel_bytes_read_back`]).
+//! the texture (`view_scale`, `view_colour`, as `grin_view::display` colours a [`Frame`]),
+//! all in the frame's one submission where it is one band; [`ViewImage::show`] colours it
+//! again in another AOV. The device counts the frames' steps, evaluations and loop-limit
+//! suspects from one read of those statistics (32 bytes) to the next, so a frame reads
+//! nothing back unless its caller asks for them (the viewer: a few times a second).
+//! Pixels are read back only when asked ([`ViewImage::read_frame`],
+//! [`ViewImage::read_display`]: a screenshot, an export, a test), and counted apart
+//! ([`ViewImage::pixel_bytes_read_back`]).
 //!
 //! Over 600 lines: one concept, the image's buffers and the passes and read-backs on them.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use grin_render::image::Frame;
 
@@ -28,7 +31,7 @@ const STAT_SUSPECTS: usize = 4;
 const STAT_SCALE: usize = 5;
 /// Bytes of `stats` (8 u32 words).
 pub const STATS_BYTES: u64 = 32;
-/// Bytes of the statistics cleared at the start of a frame (steps, evaluations, suspects).
+/// Bytes of the statistics cleared after they are read (steps, evaluations, suspects).
 const FRAME_STATS_BYTES: u64 = 20;
 
 /// The texture's format: linear, filterable, writable from a compute shader everywhere.
@@ -51,14 +54,17 @@ pub(crate) struct ViewParams {
     pub pad: [u32; 2],
 }
 
-/// What the device counted of the last frame added and the image shown.
+/// What the device counted of the frames added since the statistics were last read, and
+/// the image shown.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ViewStats {
-    /// Integration steps of all the frame's rays.
+    /// Frames the counts are of (added since the last read).
+    pub frames: u32,
+    /// Integration steps of all those frames' rays.
     pub steps: u64,
-    /// Field evaluations of all the frame's rays.
+    /// Field evaluations of all those frames' rays.
     pub evals: u64,
-    /// The frame's pixels that ended `error` after at least
+    /// Those frames' pixels that ended `error` after at least
     /// [`crate::device::LOOP_LIMIT_SUSPECT_STEPS`] steps (lavapipe's loop limit).
     pub loop_limit_suspects: u32,
     /// The value the full colour scale of the AOV shown stands for (its largest finite
@@ -109,6 +115,8 @@ pub struct ViewImage {
     /// The frame being added: its samples per pixel, and whether it starts the image.
     frame_samples: u32,
     frame_overwrites: bool,
+    /// Frames added since the statistics were last read (0: clear them first).
+    frames_counted: AtomicU32,
     /// Bytes of statistics read back so far.
     stats_read: AtomicU64,
     /// Bytes of pixels read back so far (exports and tests only).
@@ -212,6 +220,7 @@ impl ViewImage {
                 samples: 0,
                 frame_samples: 0,
                 frame_overwrites: true,
+                frames_counted: AtomicU32::new(0),
                 stats_read: AtomicU64::new(0),
                 pixels_read: AtomicU64::new(0),
             }
@@ -271,7 +280,7 @@ impl ViewImage {
         self.samples
     }
 
-    /// Bytes of statistics read back so far (32 a frame shown).
+    /// Bytes of statistics read back so far (32 a read).
     pub fn stats_bytes_read_back(&self) -> u64 {
         self.stats_read.load(Ordering::Relaxed)
     }
@@ -294,9 +303,18 @@ impl ViewImage {
         self.samples += samples;
     }
 
-    /// Clear the frame's statistics, in `encoder` (before its first band).
+    /// Drop what the statistics counted since the last read (a frame cut short by a
+    /// cancel): the next frame clears them.
+    pub fn discard_stats(&self) {
+        self.frames_counted.store(0, Ordering::Relaxed);
+    }
+
+    /// Start counting a frame's statistics, in `encoder` (before its first band): after
+    /// a read, clear them first; else the frame adds to what was counted since.
     pub(crate) fn encode_clear(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.clear_buffer(&self.stats, 0, Some(FRAME_STATS_BYTES));
+        if self.frames_counted.fetch_add(1, Ordering::Relaxed) == 0 {
+            encoder.clear_buffer(&self.stats, 0, Some(FRAME_STATS_BYTES));
+        }
     }
 
     /// Add `band` (render_main's pixels of rows `first_row .. first_row + rows`) of the
@@ -357,7 +375,7 @@ impl ViewImage {
 
     /// Colour AOV `aov` (grin_view::display::Aov's index: beauty, deflection, steps, opd,
     /// status) of the accumulated image into the texture, and read back the statistics
-    /// of the last frame added (32 bytes; waits for the device).
+    /// (32 bytes; waits for the device).
     pub fn show(&self, ctx: &GpuContext, aov: u32) -> Result<ViewStats, GpuError> {
         if self.size[0] == 0 || self.size[1] == 0 {
             return Err(GpuError::DeviceLost("no image to show".into()));
@@ -368,19 +386,21 @@ impl ViewImage {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("view colour"),
                 });
-            self.encode_show(ctx, &mut encoder, aov);
+            self.encode_show(ctx, &mut encoder, aov, true);
             ctx.queue.submit([encoder.finish()]);
         })?;
         self.read_stats(ctx, aov)
     }
 
-    /// The colour passes of [`Self::show`] and the copy of the statistics, in `encoder`
-    /// (after the frame's last band: one submission a frame).
+    /// The colour passes of [`Self::show`] and, with `copy_stats`, the copy of the
+    /// statistics to read, in `encoder` (after the frame's last band: one submission a
+    /// frame).
     pub(crate) fn encode_show(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         aov: u32,
+        copy_stats: bool,
     ) {
         let [width, height] = self.size;
         let params = ViewParams {
@@ -414,19 +434,24 @@ impl ViewImage {
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
-        encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, STATS_BYTES);
+        if copy_stats {
+            encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, STATS_BYTES);
+        }
     }
 
-    /// The statistics copied by [`Self::encode_show`] (waits for its submission).
+    /// The statistics copied by [`Self::encode_show`] (waits for its submission); the
+    /// next frame starts counting afresh.
     pub(crate) fn read_stats(&self, ctx: &GpuContext, aov: u32) -> Result<ViewStats, GpuError> {
         let words: Vec<u32> = read_buffer(ctx, &self.stats_readback, STATS_BYTES)?;
         self.stats_read.fetch_add(STATS_BYTES, Ordering::Relaxed);
+        let frames = self.frames_counted.swap(0, Ordering::Relaxed);
         let wide = |at: usize| u64::from(words[at]) | (u64::from(words[at + 1]) << 32);
         let scale = match aov {
             1..=3 => f32::from_bits(words[STAT_SCALE]),
             _ => 1.0,
         };
         Ok(ViewStats {
+            frames,
             steps: wide(STAT_STEPS),
             evals: wide(STAT_EVALS),
             loop_limit_suspects: words[STAT_SUSPECTS],

@@ -50,6 +50,11 @@ pub const CPU_BAND_PIXELS: u32 = 4096;
 
 /// Fields kept in memory (time steps of an animation, interpolations).
 const FIELDS_KEPT: usize = 4;
+
+/// How often a frame reads back the device's statistics (steps, evaluations and loop-limit
+/// suspects counted since the last read, 32 bytes, with the passes' timestamps) for the
+/// panel, while the method stays the same: the frames between read nothing back.
+pub const STATS_PERIOD: std::time::Duration = std::time::Duration::from_millis(500);
 /// Nodes along the longest axis of the bakes made while time plays (a full bake per
 /// frame would stall playback; the paused frame is baked to the error budget).
 pub const PLAYBACK_BAKE_RESOLUTION: usize = 48;
@@ -94,19 +99,21 @@ pub struct Rendered {
     pub aov_scale: f32,
     /// Samples per pixel accumulated.
     pub samples: u32,
-    /// Seconds the GPU frame took on the wall clock (its dispatches to the statistics
-    /// read back after the colour pass).
+    /// Seconds the GPU frame took on the wall clock (its dispatches to its end on the
+    /// device, after the colour pass).
     pub gpu_seconds: f64,
     /// Seconds the device spent in the frame's render passes (its timestamps; `None`
-    /// where the adapter writes none).
+    /// where the adapter writes none, or the frame read nothing back).
     pub device_seconds: Option<f64>,
-    /// Bytes the frame read back from the device: its statistics and the passes'
-    /// timestamps (no pixels).
+    /// Bytes the frame read back from the device: none, or every [`STATS_PERIOD`] and
+    /// when the method changes, the statistics and the passes' timestamps (never pixels).
     pub read_back_bytes: u64,
     /// Seconds spent on baking, building fields and pipelines before it (0 when the
     /// renderer was only re-aimed).
     pub setup_seconds: f64,
     pub rays_per_second: f64,
+    /// Means over the frames counted at the last read of the statistics (this frame's
+    /// method).
     pub steps_per_ray: f64,
     pub evals_per_ray: f64,
     /// The accumulation reached `max_spp`.
@@ -211,6 +218,21 @@ pub struct Session<'a> {
     pub cache_use: Option<CacheUse>,
     /// The current field's GPU grid: node counts and bytes.
     pub field_grid: Option<([u32; 3], u64)>,
+    /// The statistics as last read: when, for which method (integrator, step,
+    /// interpolation, samples, preview), and their means a ray.
+    stats: Option<StatsRead>,
+    /// Rays of the frames added since the statistics were last read.
+    rays_uncounted: f64,
+}
+
+/// The device's statistics as a [`Session`] last read them.
+#[derive(Debug, Clone)]
+struct StatsRead {
+    at: Instant,
+    method: String,
+    steps_per_ray: f64,
+    evals_per_ray: f64,
+    aov_scale: f32,
 }
 
 impl std::fmt::Debug for Session<'_> {
@@ -253,6 +275,8 @@ impl<'a> Session<'a> {
             frame_warning: None,
             cache_use: None,
             field_grid: None,
+            stats: None,
+            rays_uncounted: 0.0,
         };
         // Build the field now, so a scene whose medium cannot be built fails here.
         let applied = ViewSettings::from_scene(&s.scene).apply(&s.scene, 1, 1);
@@ -492,23 +516,46 @@ impl<'a> Session<'a> {
         let Some(image) = self.image.as_mut() else {
             return Err(RenderFailure::Error(anyhow::anyhow!("no image")));
         };
+        // The statistics are read when the method (or the AOV, whose colour scale they
+        // hold) is not the one last read, and every STATS_PERIOD; the frames between
+        // read nothing back.
+        let counted = format!(
+            "{method} {:?} spp {spp} preview {preview} {:?} medium {}",
+            settings.interpolation, settings.aov, settings.medium
+        );
+        let same = self.stats.as_ref().is_some_and(|s| s.method == counted);
+        if !same {
+            // What was counted since the last read is of another method: dropped.
+            image.discard_stats();
+            self.rays_uncounted = 0.0;
+        }
+        let read = !same
+            || self
+                .stats
+                .as_ref()
+                .is_some_and(|s| s.at.elapsed() >= STATS_PERIOD);
         let read_before = g.renderer.bytes_read_back() + image.stats_bytes_read_back();
         let start = Instant::now();
-        let stats =
-            match g
-                .renderer
-                .render_to_view(image, !continuing, aov_index(settings.aov), cancel)
-            {
-                Ok(stats) => stats,
-                Err(e) => {
-                    // Part of the image may be this frame's: the next starts it again.
-                    self.accum = None;
-                    return Err(match e {
-                        grin_gpu::GpuError::Cancelled => RenderFailure::Cancelled,
-                        e => e.into(),
-                    });
-                }
-            };
+        let stats = match g.renderer.render_to_view(
+            image,
+            !continuing,
+            aov_index(settings.aov),
+            read,
+            cancel,
+        ) {
+            Ok(stats) => stats,
+            Err(e) => {
+                // Part of the image may be this frame's: the next starts it again,
+                // and counts its statistics afresh.
+                self.accum = None;
+                image.discard_stats();
+                self.rays_uncounted = 0.0;
+                return Err(match e {
+                    grin_gpu::GpuError::Cancelled => RenderFailure::Cancelled,
+                    e => e.into(),
+                });
+            }
+        };
         self.shown_aov = Some(settings.aov);
         let gpu_seconds = start.elapsed().as_secs_f64();
         let pixel_samples = f64::from(width) * f64::from(height) * f64::from(spp.max(1));
@@ -516,25 +563,42 @@ impl<'a> Session<'a> {
         let device_seconds = g.renderer.last_device_seconds();
         let read_back_bytes =
             g.renderer.bytes_read_back() + image.stats_bytes_read_back() - read_before;
-        self.frame_warning = g
-            .renderer
-            .loop_limit_warning_of(u64::from(stats.loop_limit_suspects));
         let rays = f64::from(width) * f64::from(height) * f64::from(spp);
+        self.rays_uncounted += rays;
+        if let Some(stats) = stats {
+            // Means over every frame counted since the last read.
+            let counted_rays = std::mem::take(&mut self.rays_uncounted).max(1.0);
+            self.frame_warning = g
+                .renderer
+                .loop_limit_warning_of(u64::from(stats.loop_limit_suspects));
+            self.stats = Some(StatsRead {
+                at: Instant::now(),
+                method: counted,
+                steps_per_ray: stats.steps as f64 / counted_rays,
+                evals_per_ray: stats.evals as f64 / counted_rays,
+                aov_scale: stats.scale,
+            });
+        }
+        let Some(stats) = self.stats.clone() else {
+            return Err(RenderFailure::Error(anyhow::anyhow!(
+                "the device's statistics were never read"
+            )));
+        };
         let samples = image.samples();
         self.accum = Some(view);
         Ok(Rendered {
             width,
             height,
             display: image.display_texture(),
-            aov_scale: stats.scale,
+            aov_scale: stats.aov_scale,
             samples,
             gpu_seconds,
             device_seconds,
             read_back_bytes,
             setup_seconds,
             rays_per_second: rays / gpu_seconds.max(1e-9),
-            steps_per_ray: stats.steps as f64 / rays.max(1.0),
-            evals_per_ray: stats.evals as f64 / rays.max(1.0),
+            steps_per_ray: stats.steps_per_ray,
+            evals_per_ray: stats.evals_per_ray,
             converged: samples >= settings.max_spp,
             method,
         })

@@ -100,17 +100,46 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     let mut base = ViewSettings::from_scene(s.scene());
     base.max_spp = 1;
     // The renderer's own counts of what a frame reads back from the device: no pixel
-    // (the image stays on the device, coloured into the window's texture), only the
-    // frame's 32 bytes of statistics and the passes' timestamps (16 bytes a pass, where
-    // the adapter writes them).
-    for _ in 0..2 {
+    // (the image stays on the device, coloured into the window's texture). The first
+    // frame of a method reads the 32 bytes of statistics and the passes' timestamps (16
+    // bytes a pass, where the adapter writes them); the frames after it read nothing
+    // until STATS_PERIOD has passed, and the next read counts them all.
+    let first = render_only(&mut s, &base, W, H);
+    assert!(
+        (32..=32 + 32).contains(&first.read_back_bytes),
+        "{} bytes read back for {W}x{H} pixels",
+        first.read_back_bytes
+    );
+    let since = std::time::Instant::now();
+    let mut quiet = 0;
+    while since.elapsed() < grin_view::session::STATS_PERIOD / 2 || quiet == 0 {
         let r = render_only(&mut s, &base, W, H);
-        assert!(
-            (32..=32 + 32).contains(&r.read_back_bytes),
-            "{} bytes read back for {W}x{H} pixels",
-            r.read_back_bytes
+        if since.elapsed() >= grin_view::session::STATS_PERIOD {
+            break; // a slow machine: this frame may have read
+        }
+        assert_eq!(r.read_back_bytes, 0, "frame {quiet} after the read");
+        assert_eq!(r.device_seconds, None, "no timestamps read");
+        assert_eq!(
+            r.steps_per_ray, first.steps_per_ray,
+            "the last read's means"
         );
+        quiet += 1;
     }
+    std::thread::sleep(grin_view::session::STATS_PERIOD);
+    let r = render_only(&mut s, &base, W, H);
+    assert!(
+        (32..=32 + 32).contains(&r.read_back_bytes),
+        "{}",
+        r.read_back_bytes
+    );
+    // The same view and method: the means over all the frames since are the first's.
+    let off = (r.steps_per_ray - first.steps_per_ray).abs() / first.steps_per_ray;
+    assert!(
+        off < 1e-6,
+        "{} against {}",
+        r.steps_per_ray,
+        first.steps_per_ray
+    );
     assert_eq!(s.pixel_bytes_read_back(), 0, "no pixel crossed to the CPU");
     let r0 = render(&mut s, &base);
     assert_eq!(
