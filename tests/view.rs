@@ -196,7 +196,10 @@ fn view_orbits_and_reports_frame_rates() {
     // (a timestamp pair a pass and band: a few bands on lavapipe), far below a row of
     // the image's pixels (128 x 64 bytes).
     assert!((32.0..=512.0).contains(&bytes), "{s}");
-    assert!(s["read_back_bytes"]["min"] == 0.0, "frames that read nothing: {s}");
+    assert!(
+        s["read_back_bytes"]["min"] == 0.0,
+        "frames that read nothing: {s}"
+    );
     assert!(
         s["adapter"] == s["display_adapter"],
         "the window draws on the renderer's device: {s}"

@@ -14,7 +14,6 @@ use std::path::Path;
 use std::sync::Arc;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use glam::DVec3;
 use grin_field::bake::{BakeOptions, bake, random_points_inside};
 use grin_field::expr::ExprField;
 use grin_field::{IndexField, build_field};
@@ -60,16 +59,7 @@ fn benches(c: &mut Criterion) {
     };
     let (baked, _) = bake(noise.as_ref(), &opts, &|_: &str, _: u64, _: u64| {}).expect("bake");
     fields.push(("baked".to_owned(), Arc::new(baked)));
-    let rod = ExprField::new(
-        "1.6 - 0.05*(x^2 + y^2)",
-        grin_field::Bounds::Box {
-            min: DVec3::new(-2.0, -2.0, 0.0),
-            max: DVec3::new(2.0, 2.0, 10.0),
-        },
-        1.0,
-        0.0,
-    )
-    .expect("rod");
+    let rod = ExprField::benchmark_rod();
 
     const POINTS: usize = 4096;
     let mut g = c.benchmark_group("sample");

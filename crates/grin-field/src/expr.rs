@@ -350,6 +350,18 @@ fn parse_reason(msg: &str) -> String {
 }
 
 impl ExprField {
+    /// The expression GRIN rod of grin's ray-table benchmarks (the criterion benches, the
+    /// numpy comparison in scripts/bench_numpy.py) and of the tests that price them:
+    /// n = 1.6 - 0.05 (x^2 + y^2) in the box -2 <= x, y <= 2, 0 <= z <= 10, in air of 1.
+    pub fn benchmark_rod() -> Self {
+        let bounds = Bounds::Box {
+            min: DVec3::new(-2.0, -2.0, 0.0),
+            max: DVec3::new(2.0, 2.0, 10.0),
+        };
+        Self::new("1.6 - 0.05*(x^2 + y^2)", bounds, 1.0, 0.0)
+            .expect("the benchmark rod's expression is valid")
+    }
+
     /// Parse `text`, differentiate it, and check n > 0 on the check grid inside `bounds`.
     pub fn new(text: &str, bounds: Bounds, ambient: f64, t: f64) -> Result<Self, FieldError> {
         let err = |message: String| FieldError::Expr {

@@ -175,16 +175,7 @@ fn benches(c: &mut Criterion) {
     );
     bench_packets(c, "luneburg", luneburg.as_ref());
     bench_packets(c, "plume", plume.as_ref());
-    let rod = grin_field::expr::ExprField::new(
-        "1.6 - 0.05*(x^2 + y^2)",
-        grin_field::Bounds::Box {
-            min: DVec3::new(-2.0, -2.0, 0.0),
-            max: DVec3::new(2.0, 2.0, 10.0),
-        },
-        1.0,
-        0.0,
-    )
-    .expect("rod");
+    let rod = grin_field::expr::ExprField::benchmark_rod();
     bench_packets(c, "expr-rod", &rod);
     bench_field::<f64>(c, "luneburg", luneburg.as_ref(), "f64");
     bench_field::<f32>(c, "luneburg", luneburg.as_ref(), "f32");

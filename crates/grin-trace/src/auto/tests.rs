@@ -96,16 +96,7 @@ fn a_named_integrator_is_kept_and_zero_pilots_leave_error_control() {
 /// is the cheapest that did by its own price.
 #[test]
 fn a_ray_table_prices_packet_methods_at_their_cost_in_packets() {
-    let rod = grin_field::expr::ExprField::new(
-        "1.6 - 0.05*(x^2 + y^2)",
-        grin_field::Bounds::Box {
-            min: DVec3::new(-2.0, -2.0, 0.0),
-            max: DVec3::new(2.0, 2.0, 10.0),
-        },
-        1.0,
-        0.0,
-    )
-    .expect("rod");
+    let rod = grin_field::expr::ExprField::benchmark_rod();
     let pilots: Vec<(DVec3, DVec3)> = (0..64)
         .map(|i| {
             let (x, y) = (

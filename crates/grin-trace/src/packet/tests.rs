@@ -54,16 +54,7 @@ fn rays(center: DVec3, spread: f64, count: usize) -> Vec<(DVec3, DVec3)> {
 /// exit and a step cap that ends rays at `max_steps`.
 #[test]
 fn packets_are_the_scalar_tracer_bit_for_bit() {
-    let rod = ExprField::new(
-        "1.6 - 0.05*(x^2 + y^2)",
-        Bounds::Box {
-            min: DVec3::new(-2.0, -2.0, 0.0),
-            max: DVec3::new(2.0, 2.0, 10.0),
-        },
-        1.0,
-        0.0,
-    )
-    .expect("rod");
+    let rod = ExprField::benchmark_rod();
     let ball = Bounds::Sphere {
         center: DVec3::ZERO,
         radius: 1.0,
