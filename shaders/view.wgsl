@@ -4,8 +4,8 @@
 // pixels are added to an accumulation buffer that stays on the GPU, and the image is
 // coloured into a texture the window draws, so no pixel crosses to the CPU per frame.
 //   view_accumulate  one band of render_main's pixels, weighted by the frame's samples,
-//                    into the accumulation (and the frame's steps, evaluations and
-//                    loop-limit suspects into `stats`)
+//                    into the accumulation (and its steps, evaluations and loop-limit
+//                    suspects into `stats`, summed over the frames since they were read)
 //   view_scale       the largest finite |value| of the AOV shown (its colour scale)
 //   view_shade       the AOV shown, as grin_view::display::rgba colours it, a colour a
 //                    pixel (linear; the window's sampler and framebuffer encode sRGB)

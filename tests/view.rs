@@ -197,10 +197,6 @@ fn view_orbits_and_reports_frame_rates() {
     // the image's pixels (128 x 64 bytes).
     assert!((32.0..=512.0).contains(&bytes), "{s}");
     assert!(
-        s["read_back_bytes"]["min"] == 0.0,
-        "frames that read nothing: {s}"
-    );
-    assert!(
         s["adapter"] == s["display_adapter"],
         "the window draws on the renderer's device: {s}"
     );

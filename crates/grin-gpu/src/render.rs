@@ -1066,7 +1066,8 @@ enum BandSink<'s> {
     ReadBack(&'s mut dyn FnMut(&[PixelOut])),
     View {
         image: &'s ViewImage,
-        /// The frame's first band: clear its statistics first.
+        /// The frame's first band: its statistics start counting (cleared first after a
+        /// read).
         first: bool,
         /// The frame's last band: colour this AOV after it.
         show: Option<u32>,

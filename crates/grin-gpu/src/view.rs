@@ -303,8 +303,8 @@ impl ViewImage {
         self.samples += samples;
     }
 
-    /// Drop what the statistics counted since the last read (a frame cut short by a
-    /// cancel): the next frame clears them.
+    /// Drop what the statistics counted since the last read (a frame cut short, another
+    /// method's frames): the next frame clears them.
     pub fn discard_stats(&self) {
         self.frames_counted.store(0, Ordering::Relaxed);
     }
@@ -375,7 +375,8 @@ impl ViewImage {
 
     /// Colour AOV `aov` (grin_view::display::Aov's index: beauty, deflection, steps, opd,
     /// status) of the accumulated image into the texture, and read back the statistics
-    /// (32 bytes; waits for the device).
+    /// (32 bytes; waits for the device). Like every read, it restarts the counts: the
+    /// next frame clears them.
     pub fn show(&self, ctx: &GpuContext, aov: u32) -> Result<ViewStats, GpuError> {
         if self.size[0] == 0 || self.size[1] == 0 {
             return Err(GpuError::DeviceLost("no image to show".into()));

@@ -15,7 +15,6 @@ use grin_gpu::{GpuError, GpuRenderer};
 use grin_render::image::diff_frames;
 use grin_render::scene::RenderScene;
 use grin_scene::parse_scene;
-use grin_trace::render::render_cpu;
 
 /// The paper's set with a metal sphere.
 fn scene_text() -> String {
@@ -103,17 +102,7 @@ height = 64
     );
     let scene = parse_scene(&toml, Path::new("inline.toml")).expect("scene");
     let baked = harness::baked(&scene, Path::new("."), 16).expect("medium");
-    let rs = RenderScene::new(
-        &scene,
-        Path::new("."),
-        Some(baked.clone() as Arc<dyn grin_field::IndexField>),
-    )
-    .expect("scene");
-    let gpu = GpuRenderer::new(&ctx, &rs, Some(&baked))
-        .expect("renderer")
-        .render(&|_| {}, &AtomicBool::new(false))
-        .expect("render");
-    let cpu = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("cpu");
+    let (rs, cpu, gpu) = harness::render_both_of(&ctx, &scene, Path::new("."), Some(baked));
     let origin = DVec3::new(0.0, 0.0, -4.0);
     let mut checked = 0;
     let mut worst: f64 = 0.0;
@@ -234,17 +223,7 @@ jitter = false
     let scene = parse_scene(&toml, Path::new("inline.toml")).expect("scene");
     // 16 nodes: two spacings (the feature size that caps steps) stay above the 0.25 step.
     let baked = harness::baked(&scene, Path::new("."), 16).expect("medium");
-    let rs = RenderScene::new(
-        &scene,
-        Path::new("."),
-        Some(baked.clone() as Arc<dyn grin_field::IndexField>),
-    )
-    .expect("scene");
-    let gpu = GpuRenderer::new(&ctx, &rs, Some(&baked))
-        .expect("renderer")
-        .render(&|_| {}, &AtomicBool::new(false))
-        .expect("render");
-    let cpu = render_cpu(&rs, &|_| {}, &AtomicBool::new(false)).expect("cpu");
+    let (rs, cpu, gpu) = harness::render_both_of(&ctx, &scene, Path::new("."), Some(baked));
     let mut shallow_exits = 0;
     let mut differ = Vec::new();
     for py in 0..96 {

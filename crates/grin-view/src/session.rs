@@ -219,7 +219,7 @@ pub struct Session<'a> {
     /// The current field's GPU grid: node counts and bytes.
     pub field_grid: Option<([u32; 3], u64)>,
     /// The statistics as last read: when, for which method (integrator, step,
-    /// interpolation, samples, preview), and their means a ray.
+    /// interpolation, samples, preview, AOV, medium on or off), and their means a ray.
     stats: Option<StatsRead>,
     /// Rays of the frames added since the statistics were last read.
     rays_uncounted: f64,
@@ -349,6 +349,8 @@ impl<'a> Session<'a> {
             image.reserve(self.ctx, w, h, d)?;
         }
         let stats = image.show(self.ctx, aov_index(aov))?;
+        // The read restarts the device's counts: the frames before it are not counted.
+        self.rays_uncounted = 0.0;
         self.shown_aov = Some(aov);
         Ok((image.display_texture(), stats.scale))
     }
@@ -529,7 +531,11 @@ impl<'a> Session<'a> {
             image.discard_stats();
             self.rays_uncounted = 0.0;
         }
+        // The frame that completes a still image reads too: no frame follows it, and the
+        // panel keeps what it shows.
+        let completes = !preview && first_sample + spp >= settings.max_spp;
         let read = !same
+            || completes
             || self
                 .stats
                 .as_ref()
@@ -568,9 +574,9 @@ impl<'a> Session<'a> {
         if let Some(stats) = stats {
             // Means over every frame counted since the last read.
             let counted_rays = std::mem::take(&mut self.rays_uncounted).max(1.0);
-            self.frame_warning = g
-                .renderer
-                .loop_limit_warning_of(u64::from(stats.loop_limit_suspects));
+            // Pixels a frame: the suspects of every frame counted, over their number.
+            let suspects = stats.loop_limit_suspects.div_ceil(stats.frames.max(1));
+            self.frame_warning = g.renderer.loop_limit_warning_of(u64::from(suspects));
             self.stats = Some(StatsRead {
                 at: Instant::now(),
                 method: counted,

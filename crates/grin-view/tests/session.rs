@@ -103,8 +103,12 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     // (the image stays on the device, coloured into the window's texture). The first
     // frame of a method reads the 32 bytes of statistics and the passes' timestamps (16
     // bytes a pass, where the adapter writes them); the frames after it read nothing
-    // until STATS_PERIOD has passed, and the next read counts them all.
-    let first = render_only(&mut s, &base, W, H);
+    // until STATS_PERIOD has passed, and the next read counts them all. Frames of one
+    // view accumulate (no jitter: each the same rays) towards a far `max_spp`.
+    let period = grin_view::session::STATS_PERIOD;
+    let mut long = base.clone();
+    long.max_spp = 10_000;
+    let first = render_only(&mut s, &long, W, H);
     assert!(
         (32..=32 + 32).contains(&first.read_back_bytes),
         "{} bytes read back for {W}x{H} pixels",
@@ -112,10 +116,10 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
     );
     let since = std::time::Instant::now();
     let mut quiet = 0;
-    while since.elapsed() < grin_view::session::STATS_PERIOD / 2 || quiet == 0 {
-        let r = render_only(&mut s, &base, W, H);
-        if since.elapsed() >= grin_view::session::STATS_PERIOD {
-            break; // a slow machine: this frame may have read
+    while since.elapsed() < period / 2 {
+        let r = render_only(&mut s, &long, W, H);
+        if since.elapsed() >= period {
+            break; // this frame may have read
         }
         assert_eq!(r.read_back_bytes, 0, "frame {quiet} after the read");
         assert_eq!(r.device_seconds, None, "no timestamps read");
@@ -125,27 +129,44 @@ fn every_panel_setting_changes_the_next_frame_of_one_session() {
         );
         quiet += 1;
     }
-    std::thread::sleep(grin_view::session::STATS_PERIOD);
-    let r = render_only(&mut s, &base, W, H);
+    assert!(
+        quiet > 0,
+        "no {W}x{H} frame within {period:?} of the last: too slow to test"
+    );
+    std::thread::sleep(period);
+    let r = render_only(&mut s, &long, W, H);
     assert!(
         (32..=32 + 32).contains(&r.read_back_bytes),
         "{}",
         r.read_back_bytes
     );
-    // The same view and method: the means over all the frames since are the first's.
-    let off = (r.steps_per_ray - first.steps_per_ray).abs() / first.steps_per_ray;
-    assert!(
-        off < 1e-6,
-        "{} against {}",
-        r.steps_per_ray,
-        first.steps_per_ray
-    );
+    assert_eq!(r.samples, quiet + 2, "one image, every frame added");
     assert_eq!(s.pixel_bytes_read_back(), 0, "no pixel crossed to the CPU");
+    // The read's means are over every frame since the first's read: with the first's,
+    // they make the accumulated image's mean steps a ray.
+    let n = f64::from(r.samples);
+    let image = s.frame().expect("the image read back");
+    let all = image.pixels.iter().map(|p| f64::from(p.steps)).sum::<f64>() / f64::from(W * H);
+    let since_first = (n * all - first.steps_per_ray) / (n - 1.0);
+    let off = (r.steps_per_ray - since_first).abs() / since_first;
+    assert!(
+        off < 1e-5,
+        "{} against {since_first} ({n} frames)",
+        r.steps_per_ray
+    );
+    // The frame that completes a still image reads, however soon after the last read.
+    let mut two = base.clone();
+    two.max_spp = 2;
+    let a = render_only(&mut s, &two, W, H);
+    assert!(!a.converged, "one of two samples");
+    let b = render_only(&mut s, &two, W, H);
+    assert!(b.converged, "two frames of one sample");
+    assert!(b.read_back_bytes > 0, "the completing frame reads");
     let r0 = render(&mut s, &base);
     assert_eq!(
         s.pixel_bytes_read_back(),
-        u64::from(W * H) * 64,
-        "read on request"
+        2 * u64::from(W * H) * 64,
+        "read on request: twice"
     );
     assert!(max_deflection(&r0) > 0.05, "{}", max_deflection(&r0));
 

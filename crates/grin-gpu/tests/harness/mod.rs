@@ -61,6 +61,18 @@ pub fn render_both(
     scene_dir: &Path,
     baked: Option<Arc<BakedField>>,
 ) -> (Frame, Frame) {
+    let (_, cpu, gpu) = render_both_of(ctx, scene, scene_dir, baked);
+    (cpu, gpu)
+}
+
+/// [`render_both`], with the render description the frames were made of (its camera's
+/// rays, for a test that traces them again).
+pub fn render_both_of(
+    ctx: &GpuContext,
+    scene: &Scene,
+    scene_dir: &Path,
+    baked: Option<Arc<BakedField>>,
+) -> (RenderScene, Frame, Frame) {
     let field = baked.clone().map(|b| b as Arc<dyn IndexField>);
     let rs = RenderScene::new(scene, scene_dir, field).expect("render scene");
     let t = std::time::Instant::now();
@@ -77,7 +89,7 @@ pub fn render_both(
         "CPU render {t_cpu:.2} s; GPU setup {t_setup:.2} s, render {:.2} s",
         t.elapsed().as_secs_f64()
     );
-    (cpu, gpu)
+    (rs, cpu, gpu)
 }
 
 /// Assert the beauty passes agree: mean and 99th-percentile per-pixel difference (the
