@@ -180,7 +180,10 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     // Trilinear: node i; Catmull-Rom: node i - 1, stored at i.
     let first = u32(entry.y) * 65536u + u32(entry.z) + i.x + m * (i.y + m * i.z);
     var v: vec4<f32>;
-    if tricubic {
+    let of_n = (FLAGS & FLAG_GRADIENT_OF_N) != 0u;
+    if of_n {
+        v = sparse_catmull_rom_n(first, m, t);
+    } else if tricubic {
         v = sparse_catmull_rom(first, m, t);
     } else {
         v = sparse_trilinear(first, m, t);
@@ -188,7 +191,12 @@ fn sparse_sample(p: vec3<f32>) -> FieldSample {
     if (FLAGS & FLAG_FIELD_SNORM) != 0u {
         let bricks = params.grid_dims - vec3<u32>(1u);
         let s = textureLoad(macro_tex, vec3<i32>(b + vec3<u32>(0u, 0u, bricks.z)), 0);
-        v = v * s.xyyy;
+        v = v * select(s.xyyy, s.xxxx, of_n);
+    }
+    if of_n {
+        // Cell units to world: a cell is the brick edge / cells.
+        let per_cell = f32(cells) * params.grid_inv_spacing.x;
+        v = v * vec4<f32>(1.0, per_cell, per_cell, per_cell);
     }
     // Catmull-Rom rings past a sharp edge: delta_n is clamped to the nodes' range
     // (params.field_scale.xy for a sparse bake), flat where clamped.
@@ -255,6 +263,54 @@ fn sparse_catmull_rom(first: u32, m: u32, t: vec3<f32>) -> vec4<f32> {
     v = sparse_cr_plane(v, first + plane, m, wz.y, wx, wy);
     v = sparse_cr_plane(v, first + 2u * plane, m, wz.z, wx, wy);
     v = sparse_cr_plane(v, first + 3u * plane, m, wz.w, wx, wy);
+    return v;
+}
+
+// d/dt of catmull_rom_weights (grin_field::sparse::catmull_rom_derivatives).
+fn catmull_rom_derivatives(t: f32) -> vec4<f32> {
+    let t2 = t * t;
+    return vec4<f32>(0.5 * (-(3.0 * t2) + 4.0 * t - 1.0), 0.5 * (9.0 * t2 - 10.0 * t), 0.5 * (-(9.0 * t2) + 8.0 * t + 1.0), 0.5 * (3.0 * t2 - 2.0 * t));
+}
+
+// One line of 4 nodes' delta_n along x from `first`: its value and x derivative.
+fn sparse_cr_line_n(first: u32, wx: vec4<f32>, dx: vec4<f32>) -> vec2<f32> {
+    let f = vec4<f32>(linear_texel(first).x, linear_texel(first + 1u).x, linear_texel(first + 2u).x, linear_texel(first + 3u).x);
+    let v = f.x * wx.x + f.y * wx.y + f.z * wx.z + f.w * wx.w;
+    let d = f.x * dx.x + f.y * dx.y + f.z * dx.z + f.w * dx.w;
+    return vec2<f32>(v, d);
+}
+
+// Line `l` (value, x derivative) of a z plane, added to `acc` as (delta_n, d/dx, d/dy,
+// d/dz) in cell units with the plane's weights wz, dz and the line's wy, dy.
+fn sparse_cr_add_n(acc: vec4<f32>, l: vec2<f32>, wz: f32, dz: f32, wy: f32, dy: f32) -> vec4<f32> {
+    return acc + vec4<f32>(l.x, l.y, l.x, l.x) * vec4<f32>(wz * wy, wz * wy, wz * dy, dz * wy);
+}
+
+// The 4 lines of one z plane from `first` of delta_n alone, added to `acc`
+// (SparseField::catmull_rom with its gradient of n, in its order; no loop: see `tricubic`).
+fn sparse_cr_plane_n(acc: vec4<f32>, first: u32, m: u32, wz: f32, dz: f32, wx: vec4<f32>, dx: vec4<f32>, wy: vec4<f32>, dy: vec4<f32>) -> vec4<f32> {
+    var out = sparse_cr_add_n(acc, sparse_cr_line_n(first, wx, dx), wz, dz, wy.x, dy.x);
+    out = sparse_cr_add_n(out, sparse_cr_line_n(first + m, wx, dx), wz, dz, wy.y, dy.y);
+    out = sparse_cr_add_n(out, sparse_cr_line_n(first + 2u * m, wx, dx), wz, dz, wy.z, dy.z);
+    out = sparse_cr_add_n(out, sparse_cr_line_n(first + 3u * m, wx, dx), wz, dz, wy.w, dy.w);
+    return out;
+}
+
+// Catmull-Rom delta_n of a brick's 4 x 4 x 4 nodes from `first` and its derivative in cell
+// units: the gradient of n where the field's is (FLAG_GRADIENT_OF_N).
+fn sparse_catmull_rom_n(first: u32, m: u32, t: vec3<f32>) -> vec4<f32> {
+    let wx = catmull_rom_weights(t.x);
+    let wy = catmull_rom_weights(t.y);
+    let wz = catmull_rom_weights(t.z);
+    let dx = catmull_rom_derivatives(t.x);
+    let dy = catmull_rom_derivatives(t.y);
+    let dz = catmull_rom_derivatives(t.z);
+    let plane = m * m;
+    var v = vec4<f32>(0.0);
+    v = sparse_cr_plane_n(v, first, m, wz.x, dz.x, wx, dx, wy, dy);
+    v = sparse_cr_plane_n(v, first + plane, m, wz.y, dz.y, wx, dx, wy, dy);
+    v = sparse_cr_plane_n(v, first + 2u * plane, m, wz.z, dz.z, wx, dx, wy, dy);
+    v = sparse_cr_plane_n(v, first + 3u * plane, m, wz.w, dz.w, wx, dx, wy, dy);
     return v;
 }
 

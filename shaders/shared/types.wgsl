@@ -134,6 +134,7 @@ const FLAG_MEDIUM_OBJECTS: u32 = 128u;
 const FLAG_HAS_OBJECTS: u32 = 256u;
 const FLAG_SPARSE: u32 = 512u;
 const FLAG_FIELD_SNORM: u32 = 1024u;
+const FLAG_GRADIENT_OF_N: u32 = 2048u;
 const SHAPE_SPHERE: u32 = 0u;
 const SHAPE_PLANE: u32 = 1u;
 const SHAPE_BOX: u32 = 2u;

@@ -100,7 +100,7 @@ impl BakeCache {
     /// digits. Errors when a file the medium names cannot be read.
     pub fn key(medium: &MediumSpec, scene_dir: &Path) -> Result<String, GpuError> {
         let mut h = Sha256::new();
-        h.update(b"grin-gpu bake cache v7\0");
+        h.update(b"grin-gpu bake cache v8\0");
         h.update(env!("CARGO_PKG_VERSION").as_bytes());
         h.update(format!("\0res={DEFAULT_GPU_BAKE_RESOLUTION}\0").as_bytes());
         h.update(format!("budget={}\0", grin_field::bake::DEFAULT_ERROR_BUDGET).as_bytes());

@@ -30,8 +30,8 @@ pub use grin_field::bake::device::{
 };
 
 use crate::gpu_data::{
-    FLAG_FIELD_SNORM, FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE, FLAG_TRICUBIC,
-    FrameParams,
+    FLAG_FIELD_SNORM, FLAG_GRADIENT_OF_N, FLAG_MACRO_CELLS, FLAG_OUTSIDE_AMBIENT, FLAG_SPARSE,
+    FLAG_TRICUBIC, FrameParams,
 };
 use crate::{GpuContext, GpuError};
 
@@ -472,6 +472,9 @@ pub fn upload_sparse(
         // The nodes' delta_n range, which a sample is clamped to.
         let (lo, hi) = sparse.delta_range();
         params.field_scale = [lo, hi, 0.0, 0.0];
+        if sparse.gradient_of_n() {
+            params.flags |= FLAG_GRADIENT_OF_N;
+        }
     }
     if snorm {
         params.flags |= FLAG_FIELD_SNORM;

@@ -45,8 +45,12 @@ pub const FLAG_SPARSE: u32 = 512;
 /// The field's voxels are rgba16snorm (i16 / 32767): a dense grid's scaled by
 /// `FrameParams::field_scale`, a sparse one's per brick by its table's second block.
 pub const FLAG_FIELD_SNORM: u32 = 1024;
+/// A sparse Catmull-Rom field whose gradient is the derivative of its interpolated
+/// delta_n (`SparseField::gradient_of_n`: a bake on its source's own lattice).
+pub const FLAG_GRADIENT_OF_N: u32 = 2048;
 /// The flags a field's upload sets (crate::field): how the field is sampled.
-pub const FIELD_FLAGS: u32 = FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE | FLAG_FIELD_SNORM;
+pub const FIELD_FLAGS: u32 =
+    FLAG_OUTSIDE_AMBIENT | FLAG_TRICUBIC | FLAG_SPARSE | FLAG_FIELD_SNORM | FLAG_GRADIENT_OF_N;
 
 /// Passes of a frame (the `PASS` pipeline constant, shaders/shared/types.wgsl).
 pub const PASS_ALL: u32 = 0;

@@ -67,6 +67,7 @@ fn mirrored_constants_have_the_same_values() {
         ("FLAG_HAS_OBJECTS", u(g::FLAG_HAS_OBJECTS)),
         ("FLAG_SPARSE", u(g::FLAG_SPARSE)),
         ("FLAG_FIELD_SNORM", u(g::FLAG_FIELD_SNORM)),
+        ("FLAG_GRADIENT_OF_N", u(g::FLAG_GRADIENT_OF_N)),
         ("SPARSE_ROW", grin_gpu::field::SPARSE_ROW as f64),
         ("PASS_ALL", u(g::PASS_ALL)),
         ("PASS_FIRST", u(g::PASS_FIRST)),

@@ -780,9 +780,13 @@ fn straight_flights_match_the_cpu_macro_cell_walk() {
 #[test]
 fn sparse_bakes_sample_and_fly_as_their_cpu_twin() {
     use grin_field::baked::{Interp, Storage};
-    for interp in [Interp::Trilinear, Interp::Tricubic] {
+    for (interp, of_n) in [
+        (Interp::Trilinear, false),
+        (Interp::Tricubic, false),
+        (Interp::Tricubic, true),
+    ] {
         for storage in [Storage::F32, Storage::I16] {
-            sparse_twin(storage, interp);
+            sparse_twin(storage, interp, of_n);
         }
     }
 }
@@ -845,7 +849,9 @@ fn sparse_bakes_with_and_without_empty_bricks_keep_one_pipeline() {
     assert_ne!(flags[0] & grin_gpu::gpu_data::FLAG_MACRO_CELLS, 0);
 }
 
-fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::Interp) {
+/// `of_n`: the Catmull-Rom field's gradient is the derivative of its delta_n (what a bake
+/// on a VDB grid's own lattice samples), forced on this bake of an analytic plume.
+fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::Interp, of_n: bool) {
     use grin_field::sparse::bake::{SparseOptions, bake_sparse};
     let (scene, dir) = two_plumes();
     let dir = dir.as_path();
@@ -871,7 +877,12 @@ fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::I
     );
     assert_eq!(sparse.storage(), storage);
     assert_eq!(sparse.interp(), interp);
-    let storage = format!("{storage:?} {}", interp.name());
+    let sparse = sparse.with_gradient_of_n(of_n).unwrap();
+    let storage = format!(
+        "{storage:?} {}{}",
+        interp.name(),
+        if of_n { " (gradient of n)" } else { "" }
+    );
     let sparse = Arc::new(sparse);
     let rs = RenderScene::new(
         &scene,
@@ -895,6 +906,11 @@ fn sparse_twin(storage: grin_field::baked::Storage, interp: grin_field::baked::I
         params.flags & grin_gpu::gpu_data::FLAG_TRICUBIC != 0,
         interp == grin_field::baked::Interp::Tricubic,
         "{storage}: the tricubic flag"
+    );
+    assert_eq!(
+        params.flags & grin_gpu::gpu_data::FLAG_GRADIENT_OF_N != 0,
+        of_n,
+        "{storage}: the gradient-of-n flag"
     );
     let texel = if snorm { 8 } else { 16 };
     assert!(

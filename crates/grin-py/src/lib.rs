@@ -430,6 +430,7 @@ fn sparse_arrays<'py>(
         serde_json::json!({
             "sparse": true,
             "apron": field.apron(),
+            "gradient_of_n": field.gradient_of_n(),
             "top_origin": top.origin.to_array(),
             "brick_edge": top.edge,
             "top_dims": top.dims,

@@ -200,6 +200,7 @@ fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> 
             "storage": f.storage().name(),
             "interp": f.interp().name(),
             "apron": f.apron(),
+            "gradient_of_n": f.gradient_of_n(),
             "ambient_index": f.ambient_index(),
             "bounds": bounds_json(&f.bounds()),
             "source": p.source,
@@ -232,9 +233,12 @@ fn info_sparse(path: &Path, f: &grin_field::sparse::SparseField, json: bool) -> 
         top.dims[2],
         top.edge,
         f.storage().name(),
-        match f.interp() {
-            grin_field::baked::Interp::Trilinear => "trilinear",
-            grin_field::baked::Interp::Tricubic => "tricubic Catmull-Rom (bricks with an apron)",
+        match (f.interp(), f.gradient_of_n()) {
+            (grin_field::baked::Interp::Trilinear, _) => "trilinear",
+            (grin_field::baked::Interp::Tricubic, false) =>
+                "tricubic Catmull-Rom (bricks with an apron)",
+            (grin_field::baked::Interp::Tricubic, true) =>
+                "tricubic Catmull-Rom (bricks with an apron; the gradient the derivative of n)",
         }
     );
     for (l, n) in levels.iter().enumerate().filter(|(_, n)| **n > 0) {

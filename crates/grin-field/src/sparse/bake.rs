@@ -330,8 +330,11 @@ pub fn bake_sparse(
     let mut round = 0u64;
     let (mut field, errors, range, rel) = loop {
         progress("measure error", round, REFINE_ROUNDS + 1);
+        // On the source's lattice the gradient is the derivative of the interpolated
+        // delta_n, as the source's own is.
         let field = assemble(&top, &active, &mut baked, storage, bounds, ambient, source)?
             .with_apron(apron_of(opts.interp))
+            .and_then(|f| f.with_gradient_of_n(lattice.is_some()))
             .map_err(BakeError::Option)?;
         let errors = measure_error_at(source, &field, opts.gradient, &points);
         let range = range.max(errors.max_source_delta_n);

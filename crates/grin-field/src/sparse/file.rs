@@ -6,7 +6,9 @@
 //! 0    magic "GRINF\0\0\0"
 //! 8    u32 version = 2, u32 table offset (a multiple of 16)
 //! 16   u32 bricks per axis x3, u32 active bricks, u32 storage (0 f32, 1 i16),
-//!      u32 interp (0 trilinear, 1 tricubic Catmull-Rom: bricks with an apron)
+//!      u32 interp (0 trilinear, 1 tricubic Catmull-Rom: bricks with an apron, 2 the same
+//!      with the gradient the derivative of the interpolated delta_n: a bake on its
+//!      source's own lattice)
 //! 40   f64 ambient index, f64 origin x3, f64 brick edge
 //! 80   u32 bounds kind (0 sphere, 1 box), u32 0, f64 x6 (centre, radius, 0, 0 | min, max)
 //! 136  f64 max and RMS |n error|, max and RMS |grad n error|
@@ -92,7 +94,7 @@ pub fn write_to(field: &SparseField, w: &mut dyn std::io::Write) -> std::io::Res
         Storage::F32 => 0,
         Storage::I16 => 1,
     };
-    let interp = u32::from(field.apron());
+    let interp = u32::from(field.apron()) + u32::from(field.gradient_of_n());
     u32s(&mut b, &[field.bricks().len() as u32, storage, interp]);
     f64s(&mut b, &[field.ambient_index()]);
     f64s(&mut b, &top.origin.to_array());
@@ -187,11 +189,14 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
     let dims = [r.u32() as usize, r.u32() as usize, r.u32() as usize];
     let active = r.u32() as usize;
     let storage = r.storage().map_err(header_err)?;
-    let apron = match r.u32() {
-        s @ (0 | 1) => s as u8,
+    let (apron, gradient_of_n) = match r.u32() {
+        0 => (0, false),
+        1 => (1, false),
+        2 => (1, true),
         s => {
             return Err(header_err(format!(
-                "unknown interpolation code {s} (0 trilinear, 1 tricubic Catmull-Rom)"
+                "unknown interpolation code {s} (0 trilinear, 1 tricubic Catmull-Rom, 2 the same \
+                 with the gradient of n)"
             )));
         }
     };
@@ -323,5 +328,6 @@ pub fn from_bytes(b: &[u8], path: &str) -> Result<SparseField, GrinfError> {
         },
     )
     .and_then(|f| f.with_apron(apron))
+    .and_then(|f| f.with_gradient_of_n(gradient_of_n))
     .map_err(header_err)
 }

@@ -102,6 +102,12 @@ pub fn catmull_rom_weights(t: f32) -> [f32; 4] {
     crate::vdb::catmull_rom::catmull_rom_weights(t)
 }
 
+/// d/dt of [`catmull_rom_weights`], f32 as on the GPU (the shader's
+/// `catmull_rom_derivatives`).
+pub fn catmull_rom_derivatives(t: f32) -> [f32; 4] {
+    crate::vdb::catmull_rom::catmull_rom_weight_derivatives(t)
+}
+
 impl Brick {
     pub fn cells(&self) -> usize {
         cells_of(self.level)
@@ -237,6 +243,10 @@ pub struct SparseField {
     /// Apron layers of every brick (0 trilinear, 1 Catmull-Rom): the bricks', or for a
     /// field with none what it was baked with ([`Self::with_apron`]).
     apron: u8,
+    /// Catmull-Rom bricks whose gradient is the derivative of their interpolated delta_n
+    /// (the stored gradient channels unused): a bake on a source's own lattice, whose
+    /// source's gradient is that derivative ([`Self::with_gradient_of_n`]).
+    gradient_of_n: bool,
 }
 
 /// Why a sparse field's parts do not fit together.
@@ -364,6 +374,7 @@ impl SparseField {
             inv_edge: 1.0 / top.edge,
             delta_range: (0.0, 0.0),
             apron: bricks_apron,
+            gradient_of_n: false,
         };
         field.near_cells = field.neighbourhood_cells();
         field.finest_level = field.bricks.iter().map(|b| b.level).max();
@@ -485,6 +496,20 @@ impl SparseField {
             ));
         }
         self.apron = apron;
+        Ok(self)
+    }
+    /// Whether the gradient is the derivative of the interpolated delta_n (see the field
+    /// `gradient_of_n`).
+    pub fn gradient_of_n(&self) -> bool {
+        self.gradient_of_n
+    }
+    /// The field sampling its gradient as the derivative of its Catmull-Rom delta_n
+    /// (`on`), or from its gradient channels: the first only for a Catmull-Rom field.
+    pub fn with_gradient_of_n(mut self, on: bool) -> Result<Self, String> {
+        if on && self.apron == 0 {
+            return Err("a gradient of n for trilinear bricks (Catmull-Rom only)".into());
+        }
+        self.gradient_of_n = on;
         Ok(self)
     }
     /// The nodes' delta_n range (f32) a Catmull-Rom sample is clamped to.
@@ -641,6 +666,28 @@ impl SparseField {
             }
         };
         let mut out = Vec4::ZERO;
+        if self.gradient_of_n {
+            // delta_n and its derivatives in cell units, from the delta_n channel alone
+            // (the shader's sparse_cr_plane_n, in its order).
+            let [dx, dy, dz] = t.map(|t| catmull_rom_derivatives(t as f32));
+            for k in 0..4 {
+                for j in 0..4 {
+                    let row = base + m * (j + m * k);
+                    let f = [tap(row).x, tap(row + 1).x, tap(row + 2).x, tap(row + 3).x];
+                    let v = f[0] * wx[0] + f[1] * wx[1] + f[2] * wx[2] + f[3] * wx[3];
+                    let d = f[0] * dx[0] + f[1] * dx[1] + f[2] * dx[2] + f[3] * dx[3];
+                    out += Vec4::new(v, d, v, v)
+                        * Vec4::new(wz[k] * wy[j], wz[k] * wy[j], wz[k] * dy[j], dz[k] * wy[j]);
+                }
+            }
+            if let Pool::I16(_) = &self.pool {
+                out *= b.scale[0];
+            }
+            // Cell units to world: a cell is edge / cells.
+            let per_cell = cells as f32 * self.inv_edge as f32;
+            out *= Vec4::new(1.0, per_cell, per_cell, per_cell);
+            return out.to_array().map(f64::from);
+        }
         for (k, w_k) in wz.iter().enumerate() {
             for (j, w_j) in wy.iter().enumerate() {
                 let row = base + m * (j + m * k);

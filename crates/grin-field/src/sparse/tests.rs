@@ -184,15 +184,21 @@ fn unproven_fields_are_probed() {
     assert!(f.sample(DVec3::new(0.3, -0.2, 0.0)).n > 1.0099);
 }
 
-/// The file keeps every sample bit for bit, in both storages; a dense reader refuses a
-/// sparse file by name.
+/// The file keeps every sample bit for bit, in both storages, both samplings and a
+/// Catmull-Rom gradient of n; a dense reader refuses a sparse file by name.
 #[test]
 fn file_round_trip_is_exact() {
     let src = one_plume();
     let cases = [crate::baked::Storage::F32, crate::baked::Storage::I16]
         .into_iter()
-        .flat_map(|s| [(s, Interp::Trilinear), (s, Interp::Tricubic)]);
-    for (storage, interp) in cases {
+        .flat_map(|s| {
+            [
+                (s, Interp::Trilinear, false),
+                (s, Interp::Tricubic, false),
+                (s, Interp::Tricubic, true),
+            ]
+        });
+    for (storage, interp, of_n) in cases {
         let (f, _) = bake(
             &src,
             &SparseOptions {
@@ -202,9 +208,11 @@ fn file_round_trip_is_exact() {
                 ..Default::default()
             },
         );
+        let f = f.with_gradient_of_n(of_n).expect("Catmull-Rom");
         let bytes = file::to_bytes(&f);
         let g = file::from_bytes(&bytes, "x.grinf").expect("read back");
         assert_eq!(g.interp(), interp);
+        assert_eq!(g.gradient_of_n(), of_n);
         assert_eq!(g.bricks(), f.bricks());
         assert_eq!(g.table(), f.table());
         assert_eq!(g.provenance(), f.provenance());
@@ -217,13 +225,13 @@ fn file_round_trip_is_exact() {
                 .starts_with("x.grinf: a sparse .grinf (version 2)"),
             "{e}"
         );
-        // An interpolation code beyond the two is refused by name (the checksum is
+        // An interpolation code beyond the three is refused by name (the checksum is
         // checked after the header's codes).
         let mut bad = bytes.clone();
-        bad[36..40].copy_from_slice(&2u32.to_le_bytes());
-        let e = file::from_bytes(&bad, "x.grinf").expect_err("code 2");
+        bad[36..40].copy_from_slice(&3u32.to_le_bytes());
+        let e = file::from_bytes(&bad, "x.grinf").expect_err("code 3");
         assert!(
-            e.to_string().contains("unknown interpolation code 2"),
+            e.to_string().contains("unknown interpolation code 3"),
             "{e}"
         );
     }
@@ -291,6 +299,58 @@ fn catmull_rom_brick(cells: usize, f: impl Fn(DVec3) -> (f64, DVec3)) -> SparseF
         crate::baked::BakeProvenance::default(),
     )
     .expect("a field")
+}
+
+/// A Catmull-Rom field sampling its gradient of n: the gradient is the derivative of the
+/// n it samples (central differences of n agree), where from its channels it is not.
+#[test]
+fn a_gradient_of_n_is_the_derivative_of_the_sampled_n() {
+    let src = one_plume();
+    let (f, _) = bake(
+        &src,
+        &SparseOptions {
+            top_bricks: Some(8),
+            interp: Interp::Tricubic,
+            ..Default::default()
+        },
+    );
+    let worst = |f: &SparseField| {
+        let (mut worst, mut largest) = (0.0f64, 0.0f64);
+        let e = 1e-4;
+        for p in random_points_inside(src.bounds(), 3000, 9) {
+            let s = f.sample(p);
+            if s.n == f.ambient_index() {
+                continue;
+            }
+            let fd = DVec3::new(
+                f.n(p + DVec3::X * e) - f.n(p - DVec3::X * e),
+                f.n(p + DVec3::Y * e) - f.n(p - DVec3::Y * e),
+                f.n(p + DVec3::Z * e) - f.n(p - DVec3::Z * e),
+            ) / (2.0 * e);
+            worst = worst.max((fd - s.grad_n).abs().max_element());
+            largest = largest.max(s.grad_n.abs().max_element());
+        }
+        worst / largest
+    };
+    let channels = worst(&f);
+    let of_n = worst(&f.clone().with_gradient_of_n(true).expect("Catmull-Rom"));
+    eprintln!(
+        "gradient against central differences of n: channels {channels:.2e}, of n {of_n:.2e}"
+    );
+    assert!(of_n < 1e-3, "{of_n:e}");
+    assert!(
+        channels > 3.0 * of_n,
+        "channels {channels:e}, of n {of_n:e}"
+    );
+    // Only Catmull-Rom bricks have one.
+    let (lin, _) = bake(
+        &src,
+        &SparseOptions {
+            top_bricks: Some(8),
+            ..Default::default()
+        },
+    );
+    assert!(lin.with_gradient_of_n(true).is_err());
 }
 
 /// Catmull-Rom reproduces quadratics (to f32 rounding) and converges at third order in n

@@ -12,7 +12,7 @@ impl VdbField {
         let base: [f64; 3] = u.map(f64::floor);
         let t = [u[0] - base[0], u[1] - base[1], u[2] - base[2]];
         let w = t.map(catmull_rom_weights);
-        let dw = t.map(catmull_rom_weight_derivatives);
+        let dw = t.map(catmull_rom_weight_derivatives::<f64>);
         // Far outside the box (also NaN/huge coordinates): background, flat.
         let far = base
             .iter()
@@ -64,13 +64,18 @@ where
     ]
 }
 
-/// d/dt of [`catmull_rom_weights`].
-fn catmull_rom_weight_derivatives(t: f64) -> [f64; 4] {
+/// d/dt of [`catmull_rom_weights`], in the precision of `t` (the shader's
+/// `catmull_rom_derivatives` is the same arithmetic).
+pub(crate) fn catmull_rom_weight_derivatives<T>(t: T) -> [T; 4]
+where
+    T: Copy + From<f32> + Add<Output = T> + Sub<Output = T> + Mul<Output = T> + Neg<Output = T>,
+{
+    let c = |v: f32| T::from(v);
     let t2 = t * t;
     [
-        0.5 * (-3.0 * t2 + 4.0 * t - 1.0),
-        0.5 * (9.0 * t2 - 10.0 * t),
-        0.5 * (-9.0 * t2 + 8.0 * t + 1.0),
-        0.5 * (3.0 * t2 - 2.0 * t),
+        c(0.5) * (-(c(3.0) * t2) + c(4.0) * t - c(1.0)),
+        c(0.5) * (c(9.0) * t2 - c(10.0) * t),
+        c(0.5) * (-(c(9.0) * t2) + c(8.0) * t + c(1.0)),
+        c(0.5) * (c(3.0) * t2 - c(2.0) * t),
     ]
 }
