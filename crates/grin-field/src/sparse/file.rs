@@ -17,7 +17,7 @@
 //! then, at a multiple of 16: 16 bytes per active brick: u32 level, f32 scale of delta_n,
 //!   f32 scale of the gradient (1, 1 for f32), u32 0
 //! then, at a multiple of 16: the voxels of brick 0, 1, ... in order, each brick
-//!   (cells + 1)^3 voxels x fastest ((cells + 3)^3 with interp 1: one node beyond each
+//!   (cells + 1)^3 voxels x fastest ((cells + 3)^3 with interp 1 or 2: one node beyond each
 //!   face), cells = LEVEL_CELLS[level] (4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64,
 //!   80, 96, 128, 160, 192, 256), a voxel 4 f32 or 4 i16
 //! last 4 bytes: CRC-32 of everything before them
