@@ -935,3 +935,54 @@ fn optics_errors_name_the_scene() {
     );
     assert!(!out.exists());
 }
+
+/// On the GPU an `[optics]` output reads back only the channels it is made of (28 bytes
+/// a pixel for schlieren, 4 for an interferogram, against 64 for every channel), with
+/// the same images and the same summary (steps, evaluations and statuses counted on the
+/// device) as a renderer that reads every channel.
+#[test]
+fn a_gpu_optics_render_reads_back_only_its_channels() {
+    if !gpu_or_skip() {
+        return;
+    }
+    use grin_pipeline::{Backend, Quiet, Renderer};
+    let narrow = Renderer::new(Backend::Gpu, false);
+    let whole = Renderer::new(Backend::Gpu, false).reading_every_channel();
+    let (width, height) = (64u32, 48u32);
+    let pixels = u64::from(width * height);
+    for (mode, bytes_per_pixel) in [("schlieren", 28), ("interferogram", 4)] {
+        let path = scenes().join(format!("optics/{mode}.toml"));
+        let mut scene = grin_scene::load_scene(&path).expect("scene");
+        (scene.render.width, scene.render.height) = (width, height);
+        let dir = path.parent().expect("scene dir");
+        let render = |r: &Renderer| r.render(scene.clone(), dir, mode, &Quiet).expect("render");
+        let (n, w) = (render(&narrow), render(&whole));
+        let (nb, wb) = (
+            n.report.read_back_bytes.expect("GPU bytes"),
+            w.report.read_back_bytes.expect("GPU bytes"),
+        );
+        eprintln!("{mode}: {nb} bytes read back, {wb} reading every channel");
+        // The channels, 64 bytes of counts, and the passes' timestamps as a whole read's.
+        assert_eq!(wb + 64, nb + pixels * (64 - bytes_per_pixel), "{mode}");
+        assert!(
+            nb >= pixels * bytes_per_pixel + 64 && nb < pixels * bytes_per_pixel + 1024,
+            "{mode}: {nb}"
+        );
+        assert_eq!(n.report.status_counts, w.report.status_counts, "{mode}");
+        assert_eq!(n.report.status_counts["exited"], pixels as usize, "{mode}");
+        for (a, b) in [
+            (n.report.steps_per_ray, w.report.steps_per_ray),
+            (n.report.evals_per_ray, w.report.evals_per_ray),
+        ] {
+            assert!(
+                a > 1.0 && (a - b).abs() <= 1e-12 * b,
+                "{mode}: {a} against {b}"
+            );
+        }
+        assert_eq!(n.image.names(), w.image.names(), "{mode}");
+        for ((name, a), (_, b)) in n.image.channels.iter().zip(&w.image.channels) {
+            let same = a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same, "{mode}: channel {name} differs from a whole read's");
+        }
+    }
+}

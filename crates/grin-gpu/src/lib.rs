@@ -24,6 +24,7 @@
 
 mod bench;
 pub mod cache;
+pub mod channels;
 pub mod device;
 pub mod error;
 pub mod field;

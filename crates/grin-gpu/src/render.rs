@@ -12,6 +12,7 @@ use grin_field::baked::BakedField;
 use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
 
+use crate::channels::{Channels, FrameTotals, Packer, TOTALS_BYTES};
 use crate::field::{
     DEFAULT_GPU_BAKE_RESOLUTION, DeviceField, FieldTextures, empty_field, fits_device, upload_field,
 };
@@ -694,6 +695,62 @@ impl<'a> GpuRenderer<'a> {
         })
     }
 
+    /// Render every pixel, reading back only `channels` of each (those not read are NaN
+    /// in the frame), with the frame's [`FrameTotals`] counted on the device (64 bytes
+    /// more): what an output made of a few channels needs ([`crate::channels`]). With
+    /// [`Channels::ALL`] this is [`Self::render`], the totals counted on the CPU.
+    pub fn render_channels(
+        &self,
+        channels: Channels,
+        progress: &dyn Fn(u32),
+        cancel: &AtomicBool,
+    ) -> Result<(Frame, FrameTotals), GpuError> {
+        if channels == Channels::ALL {
+            let frame = self.render(progress, cancel)?;
+            let totals = FrameTotals::of(&frame, self.params.spp);
+            return Ok((frame, totals));
+        }
+        let (width, height) = (self.params.width, self.params.height);
+        let packer = Packer::new(
+            self.ctx,
+            channels,
+            self.params.spp,
+            width * self.rows_per_band,
+        )?;
+        packer.clear_totals(self.ctx);
+        let mut pixels = grin_field::alloc::try_with_capacity(
+            width as usize * height as usize,
+            &format!("a {width}x{height} frame"),
+        )
+        .map_err(|e| GpuError::Memory(e.to_string()))?;
+        let words = channels.words() as usize;
+        self.each_band(cancel, |row, rows| {
+            let mut take = |band: &[f32]| {
+                pixels.extend(
+                    band.chunks_exact(words)
+                        .map(|w| channels.unpack(w).to_cpu()),
+                );
+            };
+            let sink = BandSink::Packed {
+                packer: &packer,
+                take: &mut take,
+            };
+            let seconds = self.render_band(row, rows, sink)?;
+            progress(rows);
+            Ok(seconds)
+        })?;
+        let totals = packer.read_totals(self.ctx)?;
+        self.read_back.fetch_add(TOTALS_BYTES, Ordering::Relaxed);
+        Ok((
+            Frame {
+                width,
+                height,
+                pixels,
+            },
+            totals,
+        ))
+    }
+
     /// Render every pixel into `image` (the viewer's image on the device): the frame's
     /// samples start the image (`overwrite`) or are added to it and AOV `aov` is coloured
     /// into its texture ([`ViewImage::show`]). With `read`, the statistics counted since
@@ -804,7 +861,11 @@ impl<'a> GpuRenderer<'a> {
         let mut params = self.params;
         params.first_row = first_row;
         params.row_count = rows;
-        let bytes = u64::from(width) * u64::from(rows) * std::mem::size_of::<PixelOut>() as u64;
+        let per_pixel = match &sink {
+            BandSink::Packed { packer, .. } => packer.channels().bytes_per_pixel(),
+            _ => std::mem::size_of::<PixelOut>() as u64,
+        };
+        let bytes = u64::from(width) * u64::from(rows) * per_pixel;
         let passes = if self.medium_pipeline.is_some() { 2 } else { 1 };
         let view = matches!(sink, BandSink::View { .. });
         // The passes' timestamps are read with a view's statistics only.
@@ -960,6 +1021,10 @@ impl<'a> GpuRenderer<'a> {
                 read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
                 self.read_back.fetch_add(bytes, Ordering::Relaxed);
             }
+            BandSink::Packed { take, .. } => {
+                read_buffer_with(ctx, &self.readback, bytes, |band: &[f32]| take(band))?;
+                self.read_back.fetch_add(bytes, Ordering::Relaxed);
+            }
             // A CPU adapter runs a band for a good part of a second: wait for each, so a
             // cancel stops the frame between them (timestamps below wait too).
             BandSink::View { .. } if timer.is_none() && ctx.is_cpu_adapter() => {
@@ -989,6 +1054,15 @@ impl<'a> GpuRenderer<'a> {
         match sink {
             BandSink::ReadBack(_) => {
                 encoder.copy_buffer_to_buffer(&self.out_buffer, 0, &self.readback, 0, bytes);
+            }
+            BandSink::Packed { packer, .. } => {
+                packer.encode(
+                    self.ctx,
+                    encoder,
+                    &self.out_buffer,
+                    self.params.width * rows,
+                );
+                encoder.copy_buffer_to_buffer(&packer.packed, 0, &self.readback, 0, bytes);
             }
             BandSink::View {
                 image, show, read, ..
@@ -1060,10 +1134,16 @@ impl<'a> GpuRenderer<'a> {
     }
 }
 
-/// Where a band's pixels go: read back and handed to a closure (while the read-back
-/// buffer is mapped), or added to the viewer's image on the device.
+/// Where a band's pixels go: read back (whole, or the channels packed) and handed to a
+/// closure (while the read-back buffer is mapped), or added to the viewer's image on the
+/// device.
 enum BandSink<'s> {
     ReadBack(&'s mut dyn FnMut(&[PixelOut])),
+    /// The channels `packer` keeps, packed on the device, read back and handed over.
+    Packed {
+        packer: &'s Packer,
+        take: &'s mut dyn FnMut(&[f32]),
+    },
     View {
         image: &'s ViewImage,
         /// The frame's first band: its statistics start counting (cleared first after a

@@ -13,3 +13,7 @@ pub const STAGES_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/stages.wgs
 /// The viewer's image on the device (`view_accumulate`, `view_scale`, `view_colour`):
 /// shaders/view.wgsl, run by [`crate::view`].
 pub const VIEW_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/view.wgsl"));
+
+/// The channels `grin render` reads back (`channels_pack`): shaders/channels.wgsl, run by
+/// [`crate::channels`].
+pub const CHANNELS_WGSL: &str = include_str!(concat!(env!("OUT_DIR"), "/channels.wgsl"));

@@ -21,6 +21,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use grin_field::IndexField;
+use grin_gpu::channels::{Channels, FrameTotals};
 use grin_render::image::Frame;
 use grin_render::scene::RenderScene;
 use grin_scene::{OpticsMode, Scene};
@@ -194,6 +195,10 @@ pub struct Report {
     /// coarsest bake meeting the error budget, at most 128 nodes per axis).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gpu_field: Option<GpuField>,
+    /// GPU: bytes read back from the device for the output: the channels of each pixel
+    /// it is made of ([`output_channels`]), the frame's counts, the passes' timestamps.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub read_back_bytes: Option<u64>,
     /// `[optics]`: the mode's output (channels, ranges).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub optics: Option<serde_json::Value>,
@@ -212,6 +217,9 @@ pub struct Rendered {
     pub image: Image,
     /// The frame the output came from: the beauty and AOVs of each pixel (for an
     /// `[optics]` output, of its centre ray; none for a shadowgraph, which traces a beam).
+    /// On the GPU backend it holds the channels the output is made of
+    /// ([`output_channels`]), the others NaN, unless the renderer reads every channel
+    /// ([`Renderer::reading_every_channel`]).
     pub frame: Option<Frame>,
     /// The camera the frame was rendered through.
     pub camera: grin_render::camera::PinholeCamera,
@@ -321,6 +329,9 @@ pub struct Renderer {
     gpu: Mutex<Option<std::sync::Arc<grin_gpu::GpuContext>>>,
     /// What `Backend::Auto` chose, and why (made on first use).
     chosen: std::sync::OnceLock<(Backend, Option<String>)>,
+    /// Read every channel of a GPU frame back, whatever the output is made of
+    /// ([`Renderer::reading_every_channel`]).
+    every_channel: bool,
 }
 
 impl Renderer {
@@ -332,7 +343,16 @@ impl Renderer {
             use_cache,
             gpu: Mutex::new(None),
             chosen: std::sync::OnceLock::new(),
+            every_channel: false,
         }
+    }
+
+    /// Keep every channel of [`Rendered::frame`] on the GPU backend too (for a caller
+    /// that wants more of an `[optics]` render's pixels than its output): by default a
+    /// GPU frame reads back only the channels its output is made of ([`output_channels`]).
+    pub fn reading_every_channel(mut self) -> Self {
+        self.every_channel = true;
+        self
     }
 
     /// The backend asked for (`Auto` stays `Auto`: [`Renderer::chosen`] says what runs).
@@ -485,6 +505,7 @@ impl Renderer {
                 warnings: warnings.list,
                 bake_cache: frame_report.bake_cache,
                 gpu_field: frame_report.gpu_field,
+                read_back_bytes: frame_report.read_back_bytes,
                 optics: Some(optics),
                 auto,
                 auto_note,
@@ -501,12 +522,20 @@ impl Renderer {
         let passes = if bos_scenes.is_some() { 3 } else { 1 };
         progress.begin(u64::from(scene.render.height) * passes);
         let setup_start = Instant::now();
-        let (mut frame, fr) = self.frame(&job, &rs, scene.medium.as_ref(), &mut warnings)?;
+        let channels = output_channels(scene.optics.as_ref().map(|o| o.mode));
+        let (mut frame, fr) =
+            self.frame(&job, &rs, scene.medium.as_ref(), channels, &mut warnings)?;
+        let mut read_back_bytes = fr.read_back_bytes;
         let bos_images = match &bos_scenes {
             Some((with, without)) => {
                 let mut quiet = Warnings::new(progress);
-                let (distorted, _) = self.frame(&job, with, scene.medium.as_ref(), &mut quiet)?;
-                let (reference, _) = self.frame(&job, without, None, &mut quiet)?;
+                let red = Channels::RED;
+                let (distorted, d) =
+                    self.frame(&job, with, scene.medium.as_ref(), red, &mut quiet)?;
+                let (reference, r) = self.frame(&job, without, None, red, &mut quiet)?;
+                for bytes in [d.read_back_bytes, r.read_back_bytes] {
+                    read_back_bytes = read_back_bytes.zip(bytes).map(|(a, b)| a + b);
+                }
                 let red = |f: &Frame| f.pixels.iter().map(|p| f64::from(p.rgb[0])).collect();
                 Some((red(&reference), red(&distorted)))
             }
@@ -558,7 +587,15 @@ impl Renderer {
         let mean = |f: fn(&grin_render::image::PixelOut) -> f32| {
             frame.pixels.iter().map(|p| f64::from(f(p))).sum::<f64>() / n_pixels.max(1.0)
         };
-        let status_counts = status_counts(&frame);
+        // Counted on the device where the frame holds only the output's channels.
+        let (steps_per_ray, evals_per_ray, status_counts) = match &fr.totals {
+            Some(t) => (
+                t.steps as f64 / rays.max(1.0),
+                t.evals as f64 / rays.max(1.0),
+                status_counts_of(&t.status),
+            ),
+            None => (mean(|p| p.steps), mean(|p| p.evals), status_counts(&frame)),
+        };
         let stuck = status_counts["max_steps"] + status_counts["error"];
         if stuck > 0 {
             warnings.push(format!(
@@ -585,12 +622,13 @@ impl Renderer {
             setup_seconds,
             device_seconds: fr.device_seconds,
             rays_per_second: rays / fr.seconds.max(1e-9),
-            steps_per_ray: mean(|p| p.steps),
-            evals_per_ray: mean(|p| p.evals),
+            steps_per_ray,
+            evals_per_ray,
             status_counts,
             warnings: warnings.list,
             bake_cache: fr.bake_cache,
             gpu_field: fr.gpu_field,
+            read_back_bytes,
             optics: optics_summary,
             auto,
             auto_note,
@@ -653,8 +691,9 @@ impl Renderer {
                     );
                 }
                 job.progress.begin(u64::from(beam_rs.settings.height));
+                let channels = output_channels(Some(OpticsMode::Shadowgraph));
                 let (frame, report) =
-                    self.frame(job, &beam_rs, job.scene.medium.as_ref(), warnings)?;
+                    self.frame(job, &beam_rs, job.scene.medium.as_ref(), channels, warnings)?;
                 job.progress.finish();
                 let v = |a: [f32; 3]| glam::DVec3::from_array(a.map(f64::from));
                 // status 0 missed (exit_pos = the ray's start), 1 exited, 5 degraded;
@@ -671,12 +710,15 @@ impl Renderer {
     }
 
     /// One frame of `rs` on this renderer's backend, and what the report says of it;
-    /// warnings are pushed as they arise.
+    /// warnings are pushed as they arise. The GPU reads back `channels` of it (the
+    /// others NaN; every channel where the renderer [reads every
+    /// channel](Renderer::reading_every_channel)).
     fn frame(
         &self,
         job: &Job,
         rs: &RenderScene,
         medium: Option<&grin_scene::MediumSpec>,
+        channels: Channels,
         warnings: &mut Warnings,
     ) -> anyhow::Result<(Frame, FrameReport)> {
         let cancel = AtomicBool::new(false);
@@ -734,11 +776,18 @@ impl Renderer {
                 }
                 report.adapter = renderer.adapter_info();
                 let start = Instant::now();
-                let frame = renderer.render(&tick, &cancel)?;
+                let channels = if self.every_channel {
+                    Channels::ALL
+                } else {
+                    channels
+                };
+                let (frame, totals) = renderer.render_channels(channels, &tick, &cancel)?;
                 report.device_seconds = renderer.last_device_seconds();
-                if let Some(w) = renderer.loop_limit_warning(&frame) {
+                if let Some(w) = renderer.loop_limit_warning_of(totals.loop_limit_suspects) {
                     warnings.push(w);
                 }
+                report.totals = (channels != Channels::ALL).then_some(totals);
+                report.read_back_bytes = Some(renderer.bytes_read_back());
                 report.seconds = start.elapsed().as_secs_f64();
                 Ok((frame, report))
             }
@@ -762,6 +811,10 @@ struct FrameReport {
     device_seconds: Option<f64>,
     gpu_field: Option<GpuField>,
     bake_cache: Option<grin_gpu::cache::CacheUse>,
+    /// The frame's counts from the device, where it read back only some channels.
+    totals: Option<FrameTotals>,
+    /// Bytes the frame read back from the device (GPU).
+    read_back_bytes: Option<u64>,
 }
 
 fn cpu_adapter() -> String {
@@ -845,6 +898,34 @@ fn bos_image_scene(scene: &Scene) -> anyhow::Result<Option<Scene>> {
         },
     });
     Ok(Some(s))
+}
+
+/// The channels of a GPU frame an output is made of (`mode`: its `[optics]` mode, none
+/// for the beauty and AOVs, every channel): the exit position and direction and the
+/// status where rays are followed past the medium (displacement, BOS, schlieren, the
+/// shadowgraph's beam), the optical path to the plane for an interferogram.
+pub fn output_channels(mode: Option<OpticsMode>) -> Channels {
+    match mode {
+        None => Channels::ALL,
+        Some(OpticsMode::Interferogram) => Channels::OPD_PLANE,
+        Some(
+            OpticsMode::Displacement
+            | OpticsMode::Bos
+            | OpticsMode::Schlieren
+            | OpticsMode::Shadowgraph,
+        ) => Channels::EXIT_DIR
+            .and(Channels::EXIT_POS)
+            .and(Channels::STATUS),
+    }
+}
+
+/// Pixels per `aov.status` value, by name, from the device's counts.
+fn status_counts_of(counts: &[u64; 8]) -> std::collections::BTreeMap<&'static str, usize> {
+    grin_trace::RayStatus::ALL
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.name(), counts[i] as usize))
+        .collect()
 }
 
 /// Pixels per `aov.status` value, by name.
