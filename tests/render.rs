@@ -83,6 +83,101 @@ fn cpu_render_writes_exr_with_aovs_and_png_preview() {
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
 }
 
+/// `--aovs` picks the AOVs the EXR holds beside R, G, B: on both backends the channels
+/// written are the whole render's, bit for bit, with the same summary; on the GPU only
+/// they are read back (12 bytes a pixel for `none`); an unknown name is refused with the
+/// list.
+#[test]
+fn aovs_write_only_the_channels_asked_for() {
+    use common::exr_channels;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = scene_path("paper-a.toml");
+    let mut backends = vec!["cpu"];
+    if common::gpu_or_skip() {
+        backends.push("gpu");
+    }
+    let pixels = 96 * 54;
+    for backend in backends {
+        let render = |aovs: &str| {
+            let out = dir
+                .path()
+                .join(format!("{backend}-{}.exr", aovs.replace(',', "-")));
+            let args = [
+                "--backend",
+                backend,
+                "--size",
+                "96x54",
+                "--json",
+                "--aovs",
+                aovs,
+            ];
+            let v = json(&render_with(&scene, &out, &args));
+            (v, exr_channels(&out).1)
+        };
+        let (all, all_exr) = render("all");
+        assert_eq!(all_exr.len(), 15, "{backend}: every channel by default");
+        for (aovs, names) in [
+            ("none", vec!["B", "G", "R"]),
+            (
+                "steps,status",
+                vec!["B", "G", "R", "aov.status", "aov.steps"],
+            ),
+            (
+                "exit_dir,opd_plane",
+                vec![
+                    "B",
+                    "G",
+                    "R",
+                    "aov.exit_dir.X",
+                    "aov.exit_dir.Y",
+                    "aov.exit_dir.Z",
+                    "aov.opd_plane",
+                ],
+            ),
+        ] {
+            let (v, exr) = render(aovs);
+            let mut got: Vec<&str> = exr.keys().map(String::as_str).collect();
+            got.sort_unstable();
+            assert_eq!(got, names, "{backend} --aovs {aovs}");
+            for (name, data) in &exr {
+                let same = data
+                    .iter()
+                    .zip(&all_exr[name])
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(
+                    same,
+                    "{backend} --aovs {aovs}: {name} differs from the whole render's"
+                );
+            }
+            for key in ["status_counts", "steps_per_ray", "evals_per_ray"] {
+                assert_eq!(v[key], all[key], "{backend} --aovs {aovs}: {key}");
+            }
+            if backend == "gpu" {
+                let bytes = |v: &serde_json::Value| v["read_back_bytes"].as_u64().expect("bytes");
+                let per_pixel = 4 * (names.len() as u64);
+                // The channels and 64 bytes of counts in place of 64 bytes a pixel.
+                assert_eq!(
+                    bytes(&v) + pixels * (64 - per_pixel),
+                    bytes(&all) + 64,
+                    "{backend} --aovs {aovs}: bytes read back"
+                );
+            }
+        }
+    }
+    let o = run_render(
+        &scene,
+        &dir.path().join("x.exr"),
+        &["--aovs", "steps,bogus"],
+    );
+    assert_failed(&o);
+    let err = stderr(&o);
+    assert!(
+        err.contains("unknown AOV `bogus`") && err.contains("exit_dir") && err.contains("`none`"),
+        "{err}"
+    );
+    assert!(!dir.path().join("x.exr").exists());
+}
+
 /// The exact Luneburg ray (docs/physics.md, Luneburg lens): entering the unit-radius lens
 /// at p (relative to the centre) along unit d, it leaves at R d travelling along -p / R.
 fn luneburg_exit(c: DVec3, r: f64, o: DVec3, d: DVec3) -> Option<(DVec3, DVec3)> {

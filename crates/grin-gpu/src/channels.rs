@@ -23,6 +23,8 @@ pub struct Channels(u16);
 impl Channels {
     /// Every channel of the pixel: read back whole, as it is written (64 bytes).
     pub const ALL: Self = Self(0x7fff);
+    /// No channel (the counts alone).
+    pub const NONE: Self = Self(0);
     /// The beauty's red, green and blue.
     pub const RGB: Self = Self(0b111);
     /// The beauty's red alone (the BOS images are grey).

@@ -725,11 +725,10 @@ impl<'a> GpuRenderer<'a> {
         .map_err(|e| GpuError::Memory(e.to_string()))?;
         let words = channels.words() as usize;
         self.each_band(cancel, |row, rows| {
+            let n = width as usize * rows as usize;
             let mut take = |band: &[f32]| {
-                pixels.extend(
-                    band.chunks_exact(words)
-                        .map(|w| channels.unpack(w).to_cpu()),
-                );
+                let pixel = |i: usize| channels.unpack(&band[i * words..(i + 1) * words]);
+                pixels.extend((0..n).map(|i| pixel(i).to_cpu()));
             };
             let sink = BandSink::Packed {
                 packer: &packer,
@@ -1021,6 +1020,8 @@ impl<'a> GpuRenderer<'a> {
                 read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
                 self.read_back.fetch_add(bytes, Ordering::Relaxed);
             }
+            // No channel: the counts alone (nothing to map).
+            BandSink::Packed { take, .. } if bytes == 0 => take(&[]),
             BandSink::Packed { take, .. } => {
                 read_buffer_with(ctx, &self.readback, bytes, |band: &[f32]| take(band))?;
                 self.read_back.fetch_add(bytes, Ordering::Relaxed);
@@ -1062,7 +1063,9 @@ impl<'a> GpuRenderer<'a> {
                     &self.out_buffer,
                     self.params.width * rows,
                 );
-                encoder.copy_buffer_to_buffer(&packer.packed, 0, &self.readback, 0, bytes);
+                if bytes > 0 {
+                    encoder.copy_buffer_to_buffer(&packer.packed, 0, &self.readback, 0, bytes);
+                }
             }
             BandSink::View {
                 image, show, read, ..

@@ -332,6 +332,8 @@ pub struct Renderer {
     /// Read every channel of a GPU frame back, whatever the output is made of
     /// ([`Renderer::reading_every_channel`]).
     every_channel: bool,
+    /// The AOVs a beauty output writes beside R, G, B ([`Renderer::with_aovs`]).
+    aovs: Channels,
 }
 
 impl Renderer {
@@ -344,7 +346,15 @@ impl Renderer {
             gpu: Mutex::new(None),
             chosen: std::sync::OnceLock::new(),
             every_channel: false,
+            aovs: Channels::ALL,
         }
+    }
+
+    /// Write only `aovs` ([`parse_aovs`]) beside R, G, B in a beauty output (one without
+    /// `[optics]`; default every AOV). On the GPU only those channels are read back.
+    pub fn with_aovs(mut self, aovs: Channels) -> Self {
+        self.aovs = aovs;
+        self
     }
 
     /// Keep every channel of [`Rendered::frame`] on the GPU backend too (for a caller
@@ -522,7 +532,10 @@ impl Renderer {
         let passes = if bos_scenes.is_some() { 3 } else { 1 };
         progress.begin(u64::from(scene.render.height) * passes);
         let setup_start = Instant::now();
-        let channels = output_channels(scene.optics.as_ref().map(|o| o.mode));
+        let channels = match &scene.optics {
+            Some(o) => output_channels(Some(o.mode)),
+            None => Channels::RGB.and(self.aovs),
+        };
         let (mut frame, fr) =
             self.frame(&job, &rs, scene.medium.as_ref(), channels, &mut warnings)?;
         let mut read_back_bytes = fr.read_back_bytes;
@@ -572,6 +585,7 @@ impl Renderer {
                 image.channels = frame
                     .channels()?
                     .into_iter()
+                    .filter(|(n, _)| aov_written(self.aovs, n))
                     .map(|(n, d)| (n.to_owned(), d))
                     .collect();
                 image.previews.push(Preview {
@@ -917,6 +931,56 @@ pub fn output_channels(mode: Option<OpticsMode>) -> Channels {
             .and(Channels::EXIT_POS)
             .and(Channels::STATUS),
     }
+}
+
+/// The AOVs a beauty output may write (`--aovs`): each name, its channels in the frame,
+/// and the EXR channels it writes.
+pub const AOVS: [(&str, Channels, &[&str]); 8] = [
+    ("deflection", Channels::DEFLECTION, &["aov.deflection_deg"]),
+    (
+        "exit_dir",
+        Channels::EXIT_DIR,
+        &["aov.exit_dir.X", "aov.exit_dir.Y", "aov.exit_dir.Z"],
+    ),
+    ("opd", Channels::OPD, &["aov.opd"]),
+    ("steps", Channels::STEPS, &["aov.steps"]),
+    ("evals", Channels::EVALS, &["aov.evals"]),
+    ("status", Channels::STATUS, &["aov.status"]),
+    (
+        "exit_pos",
+        Channels::EXIT_POS,
+        &["aov.exit_pos.X", "aov.exit_pos.Y", "aov.exit_pos.Z"],
+    ),
+    ("opd_plane", Channels::OPD_PLANE, &["aov.opd_plane"]),
+];
+
+/// `--aovs`: `all`, `none`, or names of [`AOVS`] separated by commas.
+pub fn parse_aovs(list: &str) -> Result<Channels, String> {
+    let mut aovs = Channels::NONE;
+    match list.trim() {
+        "all" => return Ok(Channels::ALL),
+        "none" => return Ok(aovs),
+        _ => {}
+    }
+    for name in list.split(',').map(str::trim) {
+        let (_, channels, _) = AOVS.iter().find(|(n, ..)| *n == name).ok_or_else(|| {
+            let names: Vec<&str> = AOVS.iter().map(|(n, ..)| *n).collect();
+            format!(
+                "unknown AOV `{name}`: the AOVs are {}, or `all` or `none`",
+                names.join(", ")
+            )
+        })?;
+        aovs = aovs.and(*channels);
+    }
+    Ok(aovs)
+}
+
+/// Whether a beauty output with `aovs` writes the EXR channel `name` (R, G and B always).
+fn aov_written(aovs: Channels, name: &str) -> bool {
+    matches!(name, "R" | "G" | "B")
+        || AOVS
+            .iter()
+            .any(|(_, c, names)| aovs.contains(*c) && names.contains(&name))
 }
 
 /// Pixels per `aov.status` value, by name, from the device's counts.

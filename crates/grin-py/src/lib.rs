@@ -172,13 +172,17 @@ struct Renderer {
 #[pymethods]
 impl Renderer {
     #[new]
-    #[pyo3(signature = (backend = "cpu", cache = true))]
-    fn new(backend: &str, cache: bool) -> PyResult<Self> {
+    /// `aovs`: the AOVs a beauty render returns beside R, G, B, as `grin render --aovs`
+    /// takes them (`"all"`, `"none"`, or names separated by commas); on the GPU only
+    /// those channels are read back.
+    #[pyo3(signature = (backend = "cpu", cache = true, aovs = "all"))]
+    fn new(backend: &str, cache: bool, aovs: &str) -> PyResult<Self> {
         let backend = backend
             .parse::<grin_pipeline::Backend>()
             .map_err(GrinError::new_err)?;
+        let aovs = grin_pipeline::parse_aovs(aovs).map_err(GrinError::new_err)?;
         Ok(Self {
-            inner: grin_pipeline::Renderer::new(backend, cache),
+            inner: grin_pipeline::Renderer::new(backend, cache).with_aovs(aovs),
         })
     }
 

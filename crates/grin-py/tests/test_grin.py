@@ -75,6 +75,25 @@ def test_gpu_render_equals_the_cli_exr_bit_for_bit(tmp_path):
     assert_same_channels(r, exr_channels(out))
 
 
+def test_a_renderer_with_aovs_returns_those_channels_of_the_whole_render():
+    for backend in ["cpu", "gpu"]:
+        whole = grin.render(SCENES / "paper-a.toml", backend, width=40, height=24, spp=1,
+                            renderer=grin.Renderer(backend, cache=False))
+        some = grin.render(SCENES / "paper-a.toml", backend, width=40, height=24, spp=1,
+                           renderer=grin.Renderer(backend, cache=False, aovs="steps,status"))
+        assert sorted(some) == ["B", "G", "R", "aov.status", "aov.steps"]
+        for name in some:
+            np.testing.assert_array_equal(some[name], whole[name])
+        assert some.report["status_counts"] == whole.report["status_counts"]
+        assert some.report["steps_per_ray"] == whole.report["steps_per_ray"]
+        if backend == "gpu":
+            # 5 channels of 4 bytes in place of a pixel's 64, and 64 bytes of counts.
+            saved = 40 * 24 * (64 - 20) - 64
+            assert whole.report["read_back_bytes"] - some.report["read_back_bytes"] == saved
+    with pytest.raises(grin.GrinError, match="unknown AOV `depth`"):
+        grin.Renderer("cpu", aovs="depth")
+
+
 def test_a_scene_from_a_dict_renders_as_its_file():
     with open(SCENES / "luneburg.toml", "rb") as f:
         tables = tomllib.load(f)

@@ -79,6 +79,13 @@ pub struct Args {
     /// and its ST map from one scene file. With --frames it holds a frame token too.
     #[arg(long, value_name = "BEAUTY.exr")]
     pub beauty: Option<PathBuf>,
+    /// The AOVs the EXR holds beside R, G, B: `all` (default), `none`, or a comma list of
+    /// deflection, exit_dir, opd, steps, evals, status, exit_pos, opd_plane. On the GPU
+    /// only those channels are read back (12 bytes a pixel for `none`, against 64). The
+    /// summary's steps, evaluations and statuses are counted either way. An [optics]
+    /// output writes its own channels.
+    #[arg(long, value_name = "LIST", value_parser = grin_pipeline::parse_aovs)]
+    pub aovs: Option<grin_gpu::channels::Channels>,
 }
 
 /// Largest accepted image side: keeps `width * height * spp` and the frame buffer sane.
@@ -275,7 +282,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
         let Some(beauty) = &args.beauty else {
-            let renderer = Renderer::new(args.backend, !args.no_cache);
+            let renderer = Renderer::new(args.backend, !args.no_cache)
+                .with_aovs(args.aovs.unwrap_or(grin_gpu::channels::Channels::ALL));
             let (summary, to_stream) = render_one(&args, &renderer, scene, &args.output)?;
             return print_summary(&summary, args.json, to_stream);
         };
@@ -443,7 +451,8 @@ fn report_skipped(
 /// Run each job on one device, printing each summary (a skipped output: a line on
 /// stderr), or with `--json` all of them as one array at the end.
 fn render_all(args: &Args, jobs: impl Iterator<Item = Job>) -> anyhow::Result<()> {
-    let renderer = Renderer::new(args.backend, !args.no_cache);
+    let renderer = Renderer::new(args.backend, !args.no_cache)
+        .with_aovs(args.aovs.unwrap_or(grin_gpu::channels::Channels::ALL));
     let mut summaries = Vec::new();
     for job in jobs {
         let (scene, out, what, frame) = match job {
