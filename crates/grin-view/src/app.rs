@@ -26,6 +26,7 @@ use crate::settings::ViewSettings;
 use crate::worker::{FrameReply, Reply, Request, Worker};
 use crate::{ViewOptions, ViewSummary};
 
+mod layer;
 mod panel;
 
 /// Width of the panel (points).
@@ -50,6 +51,10 @@ struct Gfx {
     config: wgpu::SurfaceConfiguration,
     egui: egui_winit::State,
     renderer: egui_wgpu::Renderer,
+    /// On a CPU adapter whose surface takes copies: the panel kept in a texture
+    /// ([`layer`]), made on the first frame.
+    layered: bool,
+    layer: Option<layer::UiLayer>,
 }
 
 /// Statistics of the frames shown.
@@ -224,8 +229,14 @@ impl App {
         let format = egui_wgpu::preferred_framebuffer_format(&caps.formats)
             .map_err(|e| format!("the window's surface: {e}"))?;
         let inner = window.inner_size();
+        // On a CPU adapter the panel is drawn once and copied into each frame.
+        let layered = gpu.is_cpu_adapter() && caps.usages.contains(wgpu::TextureUsages::COPY_DST);
+        let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        if layered {
+            usage |= wgpu::TextureUsages::COPY_DST;
+        }
         let config = wgpu::SurfaceConfiguration {
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            usage,
             format,
             color_space: wgpu::SurfaceColorSpace::Auto,
             width: inner.width.max(1),
@@ -272,6 +283,8 @@ impl App {
             config,
             egui,
             renderer,
+            layered,
+            layer: None,
         })
     }
 
@@ -590,50 +603,128 @@ impl App {
             }
             _ => None,
         };
+        let textures_changed = !out.textures_delta.set.is_empty();
         for (id, deltas) in out.textures_delta.set.drain() {
             for d in deltas {
                 g.renderer.update_texture(&g.device, &g.queue, id, &d);
             }
         }
-        if let Some(frame) = frame {
-            let mut enc = g
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("egui"),
-                });
-            let user = g
-                .renderer
-                .update_buffers(&g.device, &g.queue, &mut enc, &prims, &sd);
-            let view = frame
-                .texture
-                .create_view(&wgpu::TextureViewDescriptor::default());
-            {
-                let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("egui"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                g.renderer.render(&mut pass.forget_lifetime(), &prims, &sd);
+        match frame {
+            Some(f) if g.layered => self.draw_layered(&mut g, f, prims, &sd, textures_changed),
+            None => {}
+            Some(frame) => {
+                let mut enc = g
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("egui"),
+                    });
+                let user = g
+                    .renderer
+                    .update_buffers(&g.device, &g.queue, &mut enc, &prims, &sd);
+                let view = frame
+                    .texture
+                    .create_view(&wgpu::TextureViewDescriptor::default());
+                {
+                    let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("egui"),
+                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                            view: &view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                                store: wgpu::StoreOp::Store,
+                            },
+                        })],
+                        depth_stencil_attachment: None,
+                        timestamp_writes: None,
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    g.renderer.render(&mut pass.forget_lifetime(), &prims, &sd);
+                }
+                g.queue.submit(user.into_iter().chain([enc.finish()]));
+                g.window.pre_present_notify();
+                g.queue.present(frame);
             }
-            g.queue.submit(user.into_iter().chain([enc.finish()]));
-            g.window.pre_present_notify();
-            g.queue.present(frame);
         }
         for id in out.textures_delta.free.drain() {
             g.renderer.free_texture(&id);
         }
         self.gfx = Some(g);
+    }
+
+    /// Draw `prims` into `frame` over the panel's layer ([`layer`]): the shapes under the
+    /// image into the layer when they look different (at most every
+    /// [`layer::LAYER_PERIOD`] while moving), the layer copied in, the image and what
+    /// is painted after it on top.
+    fn draw_layered(
+        &self,
+        g: &mut Gfx,
+        frame: wgpu::SurfaceTexture,
+        prims: Vec<egui::epaint::ClippedPrimitive>,
+        sd: &egui_wgpu::ScreenDescriptor,
+        textures_changed: bool,
+    ) {
+        let (under, over) = layer::split_at_image(prims, self.texture.map(|(id, _)| id));
+        let look = layer::look(&under);
+        if g.layer.as_ref().is_none_or(|l| !l.fits(&g.config)) {
+            g.layer = Some(layer::UiLayer::new(&g.device, &g.config));
+        }
+        let Some(ui_layer) = g.layer.as_mut() else {
+            return;
+        };
+        let pass = |enc: &mut wgpu::CommandEncoder, view: &wgpu::TextureView, load| {
+            enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("egui"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load,
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            })
+            .forget_lifetime()
+        };
+        let encoder = |label| {
+            g.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+        };
+        if textures_changed || ui_layer.stale(look, self.moving()) {
+            let mut enc = encoder("egui panel layer");
+            let user = g
+                .renderer
+                .update_buffers(&g.device, &g.queue, &mut enc, &under, sd);
+            let clear = wgpu::LoadOp::Clear(wgpu::Color::BLACK);
+            g.renderer
+                .render(&mut pass(&mut enc, ui_layer.view(), clear), &under, sd);
+            g.queue.submit(user.into_iter().chain([enc.finish()]));
+            ui_layer.drawn(look);
+        }
+        let mut enc = encoder("egui");
+        enc.copy_texture_to_texture(
+            ui_layer.texture().as_image_copy(),
+            frame.texture.as_image_copy(),
+            ui_layer.texture().size(),
+        );
+        let user = g
+            .renderer
+            .update_buffers(&g.device, &g.queue, &mut enc, &over, sd);
+        let view = frame
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        g.renderer
+            .render(&mut pass(&mut enc, &view, wgpu::LoadOp::Load), &over, sd);
+        g.queue.submit(user.into_iter().chain([enc.finish()]));
+        g.window.pre_present_notify();
+        g.queue.present(frame);
     }
 
     /// The render thread's texture, registered with egui when it is a new one (the

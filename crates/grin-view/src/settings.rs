@@ -145,7 +145,7 @@ impl ViewSettings {
             },
             playing: false,
             speed: 1.0,
-            target_fps: 20.0,
+            target_fps: 30.0,
         }
     }
 
