@@ -251,7 +251,8 @@ pub struct GpuRenderer<'a> {
     pub(crate) out_buffer: wgpu::Buffer,
     pub(crate) readback: wgpu::Buffer,
     pub(crate) rows_per_band: u32,
-    /// Pixels one band's buffers hold (width x rows_per_band at creation).
+    /// Pixels one band's buffers hold (room for twice the image's rows at creation,
+    /// within the adapter's band).
     pub(crate) band_capacity: u32,
     /// Flags set by the field's upload and the object arrays, kept by [`Self::retarget`].
     pub(crate) scene_flags: u32,
@@ -344,10 +345,20 @@ impl<'a> GpuRenderer<'a> {
 
         let device = &ctx.device;
         let limits = ctx.limits();
-        let rows_per_band =
-            (pixels_per_band(ctx, s.spp) / s.width.max(1)).clamp(1, s.height.max(1));
-        let out_bytes =
-            u64::from(s.width) * u64::from(rows_per_band) * std::mem::size_of::<PixelOut>() as u64;
+        let band_rows = (pixels_per_band(ctx, s.spp) / s.width.max(1)).max(1);
+        let rows_per_band = band_rows.min(s.height.max(1));
+        let pixel_bytes = std::mem::size_of::<PixelOut>() as u64;
+        // Buffers with room for an image up to twice as tall (within the adapter's band):
+        // a viewer's image that grows a little keeps its renderer (`retarget`).
+        let capacity_rows = match band_rows.min(2 * s.height.max(1)) {
+            rows if u64::from(s.width) * u64::from(rows) * pixel_bytes
+                <= limits.max_storage_buffer_binding_size =>
+            {
+                rows
+            }
+            _ => rows_per_band,
+        };
+        let out_bytes = u64::from(s.width) * u64::from(capacity_rows) * pixel_bytes;
         if out_bytes > limits.max_storage_buffer_binding_size {
             return Err(GpuError::TooLarge {
                 what: format!("a {}-pixel-wide output band", s.width),
@@ -476,7 +487,7 @@ impl<'a> GpuRenderer<'a> {
                     .min(RESUME_BYTES_MAX)
                     - RESUME_HEADER_BYTES)
                     / (2 * PIXEL_CARRY_BYTES);
-                (s.width * rows_per_band).min(u32::try_from(fits).unwrap_or(u32::MAX))
+                (s.width * capacity_rows).min(u32::try_from(fits).unwrap_or(u32::MAX))
             } else {
                 0
             };
@@ -538,7 +549,7 @@ impl<'a> GpuRenderer<'a> {
                 out_buffer,
                 readback,
                 rows_per_band,
-                band_capacity: s.width * rows_per_band,
+                band_capacity: s.width * capacity_rows,
                 scene_flags: params.flags & (FIELD_FLAGS | FLAG_MEDIUM_OBJECTS),
                 field,
                 warnings,
@@ -554,8 +565,8 @@ impl<'a> GpuRenderer<'a> {
     /// image of `spp_total` samples: frames of consecutive ranges, averaged, equal one
     /// render of `spp_total` samples. The objects, lights, sky and field on the device
     /// are kept. `Ok(false)`, with nothing changed, when the change needs other
-    /// pipelines (integrator, step policy, flags) or bigger buffers: build a new
-    /// renderer then.
+    /// pipelines (integrator, step policy, flags) or bigger buffers (the frame's bands
+    /// would be smaller than the adapter's: more of them): build a new renderer then.
     pub fn retarget(
         &mut self,
         scene: &RenderScene,
@@ -578,10 +589,11 @@ impl<'a> GpuRenderer<'a> {
         {
             return Ok(false);
         }
-        let rows = (pixels_per_band(self.ctx, p.spp) / p.width.max(1))
-            .min(self.band_capacity / p.width.max(1))
-            .min(p.height.max(1));
-        if rows == 0 {
+        let wanted = (pixels_per_band(self.ctx, p.spp) / p.width.max(1)).min(p.height.max(1));
+        let rows = wanted.min(self.band_capacity / p.width.max(1));
+        // Buffers made for a smaller image would split the frame into more bands (a
+        // submission and a wait each) than the adapter's band size asks for.
+        if rows < wanted.max(1) {
             return Ok(false);
         }
         self.params = p;
@@ -622,6 +634,12 @@ impl<'a> GpuRenderer<'a> {
     /// [`Self::retarget`] sets the adapter's band again).
     pub fn limit_band_rows(&mut self, rows: u32) {
         self.rows_per_band = self.rows_per_band.min(rows.max(1));
+    }
+
+    /// Rows of the image a band renders (a frame of `height` rows is
+    /// `height.div_ceil(rows)` bands: a submission each).
+    pub fn rows_per_band(&self) -> u32 {
+        self.rows_per_band
     }
 
     /// `name (backend, device type)` of the adapter.

@@ -184,3 +184,30 @@ fn frames_added_on_the_device_are_the_frames_read_back_and_averaged() {
     assert!((a - b).abs() < 0.02 * a, "scaled mean {b} vs {a}");
     assert_eq!(image.samples(), FRAMES * SPP, "the accumulation is kept");
 }
+
+/// A renderer made for a small image (a viewer's first preview) re-aimed at a bigger one
+/// renders it in one band while it is at most twice as tall, and asks for a new renderer
+/// beyond, rather than splitting every frame into bands of its first image's size.
+#[test]
+fn a_renderer_renders_a_grown_image_in_one_band_or_asks_to_be_rebuilt() {
+    let Some(ctx) =
+        harness::context("a_renderer_renders_a_grown_image_in_one_band_or_asks_to_be_rebuilt")
+    else {
+        return;
+    };
+    let scene = parse_scene(&scene_text(), Path::new("inline.toml")).expect("scene");
+    let field = harness::build_field(&scene, Path::new("."));
+    let sized = |w: u32, h: u32| {
+        let mut s = scene.clone();
+        (s.render.width, s.render.height) = (w, h);
+        RenderScene::new(&s, Path::new("."), field.clone()).expect("render scene")
+    };
+    let mut gpu = GpuRenderer::new(&ctx, &sized(W, H), None).expect("renderer");
+    assert_eq!(gpu.rows_per_band(), H);
+    assert!(gpu.retarget(&sized(W, 2 * H), 0, SPP).expect("retarget"));
+    assert_eq!(gpu.rows_per_band(), 2 * H, "one band for twice the rows");
+    let frame = gpu.render(&|_| {}, &AtomicBool::new(false)).expect("frame");
+    assert_eq!((frame.width, frame.height), (W, 2 * H));
+    assert!(!gpu.retarget(&sized(W, 3 * H), 0, SPP).expect("retarget"));
+    assert_eq!(gpu.rows_per_band(), 2 * H, "nothing changed");
+}

@@ -38,7 +38,7 @@ const MOVING_FOR: Duration = Duration::from_millis(150);
 /// Shortest time between two window redraws on a CPU adapter: on lavapipe the window's
 /// own drawing runs on the cores that render, so it redraws only for a new frame, input or
 /// playing time, at most this often. A GPU redraws for each new frame.
-const MIN_REDRAW: Duration = Duration::from_millis(33);
+const MIN_REDRAW: Duration = Duration::from_millis(16);
 
 /// How long a headless run waits for its screenshot's pixels.
 const CAPTURE_TIMEOUT: Duration = Duration::from_secs(120);
