@@ -16,20 +16,7 @@ use grin_scene::parse_scene;
 /// A noise ball in front of a checker wall, 2 samples a pixel, steps short enough that
 /// the rays through the ball's middle end `max_steps` (three statuses in one frame).
 fn scene_text() -> String {
-    let rest = r#"
-[medium]
-bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }
-field = { kind = "noise", noise = "fbm", octaves = 2, frequency = 1.5, amplitude = 0.03, seed = 3 }
-
-[render]
-width = 48
-height = 30
-spp = 2
-integrator = "rk4"
-step = { fixed = 0.02 }
-max_steps = 80
-"#;
-    format!("{}{rest}", harness::scenes::WALL_SET)
+    harness::scenes::noise_ball(48, 30, 2, "max_steps = 80")
 }
 
 /// The 15 channels of a pixel as words, in the device's order.

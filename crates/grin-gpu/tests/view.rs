@@ -20,19 +20,7 @@ const FRAMES: u32 = 3;
 
 /// A noise ball in front of a checker wall, jittered samples (frames differ).
 fn scene_text() -> String {
-    let rest = r#"
-[medium]
-bounds = { sphere = { center = [0.0, 0.0, 0.0], radius = 1.0 } }
-field = { kind = "noise", noise = "fbm", octaves = 2, frequency = 1.5, amplitude = 0.03, seed = 3 }
-
-[render]
-width = 40
-height = 24
-spp = 2
-integrator = "rk4"
-step = { fixed = 0.02 }
-"#;
-    format!("{}{rest}", harness::scenes::WALL_SET)
+    harness::scenes::noise_ball(W, H, SPP, "")
 }
 
 /// Whole steps (or evaluations) of a frame's rays: each pixel's mean times its samples.

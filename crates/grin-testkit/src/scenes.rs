@@ -30,3 +30,23 @@ fov_y_deg = 32.0
 shape = { plane = { point = [0.0, 0.0, 1.5], normal = [0.0, 0.0, -1.0] } }
 material = { checker = { color_a = [0.9, 0.9, 0.85], color_b = [0.1, 0.1, 0.15], scale = 0.2 } }
 "#;
+
+/// [`WALL_SET`] with an fBm noise ball of radius 1 about the origin, `width` x `height`,
+/// `spp` samples a pixel, rk4 at fixed steps of 0.02, and `extra` lines in `[render]`.
+pub fn noise_ball(width: u32, height: u32, spp: u32, extra: &str) -> String {
+    format!(
+        r#"{WALL_SET}
+[medium]
+bounds = {{ sphere = {{ center = [0.0, 0.0, 0.0], radius = 1.0 }} }}
+field = {{ kind = "noise", noise = "fbm", octaves = 2, frequency = 1.5, amplitude = 0.03, seed = 3 }}
+
+[render]
+width = {width}
+height = {height}
+spp = {spp}
+integrator = "rk4"
+step = {{ fixed = 0.02 }}
+{extra}
+"#
+    )
+}
