@@ -569,7 +569,12 @@ fn a_catmull_rom_sparse_bake_on_a_vdb_lattice_holds_the_source() {
         "max |grad n error|: trilinear {linear_grad:.3e}, Catmull-Rom {cubic_grad:.3e}"
     );
     assert_eq!(cubic["interp"], "tricubic", "{cubic}");
-    // `grin info` says how the file is sampled.
+    // The bake's summary and `grin info` say how the file is sampled.
+    assert_eq!(
+        (&cubic["gradient_of_n"], &linear["gradient_of_n"]),
+        (&true.into(), &false.into()),
+        "{cubic}"
+    );
     let info = json(&run_ok(
         grin()
             .arg("info")

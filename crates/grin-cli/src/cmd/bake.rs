@@ -455,6 +455,7 @@ fn bake_sparse(
         "finest_spacing": r.finest_spacing,
         "storage": r.storage.name(),
         "interp": sparse.interp().name(),
+        "gradient_of_n": sparse.gradient_of_n(),
         "bytes": r.bytes,
         "memory_bytes": r.memory_bytes,
         "dense_bytes": r.dense_bytes,

@@ -496,6 +496,8 @@ impl SparseField {
             ));
         }
         self.apron = apron;
+        // Trilinear sampling has no gradient of its n (nor a file code for one).
+        self.gradient_of_n &= apron == 1;
         Ok(self)
     }
     /// Whether the gradient is the derivative of the interpolated delta_n (see the field

@@ -557,6 +557,16 @@ fn an_empty_catmull_rom_bake_keeps_its_sampling_and_errors_are_checked() {
     let mut bytes = file::to_bytes(&f);
     let g = file::from_bytes(&bytes, "u.grinf").expect("read back");
     assert_eq!(g.interp(), Interp::Tricubic);
+    // Sampled trilinear after all: no gradient of n is left to write (code 1 would read
+    // as Catmull-Rom).
+    let of_n = g.with_gradient_of_n(true).expect("Catmull-Rom");
+    let lin = of_n.with_apron(0).expect("no brick");
+    assert!(!lin.gradient_of_n());
+    let back = file::from_bytes(&file::to_bytes(&lin), "u.grinf").expect("read back");
+    assert_eq!(
+        (back.interp(), back.gradient_of_n()),
+        (Interp::Trilinear, false)
+    );
     bytes[136..144].copy_from_slice(&f64::NAN.to_le_bytes());
     let n = bytes.len() - 4;
     let crc = crc32fast::hash(&bytes[..n]);
