@@ -514,7 +514,7 @@ impl Dataset {
                 ("distorted", beauty, None),
                 ("reference", bare, Some("reference")),
             ] {
-                let r = renderer.render(scene, dir, &label, &Quiet)?;
+                let r = renderer.render_beauty(scene, dir, &label, &Quiet)?;
                 for c in ["R", "G", "B"] {
                     let data = r.image.channel(c).context("a beauty render has RGB")?;
                     image.push(&format!("{name}.{c}"), data.to_vec());

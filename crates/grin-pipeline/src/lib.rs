@@ -441,10 +441,33 @@ impl Renderer {
     /// file): its `[optics]` output when it has one, else its beauty and AOVs.
     pub fn render(
         &self,
+        scene: Scene,
+        scene_dir: &Path,
+        label: &str,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Rendered> {
+        self.render_aovs(scene, scene_dir, label, progress, self.aovs)
+    }
+
+    /// [`Renderer::render`] of a beauty image alone (R, G, B: no AOV read back or
+    /// written), whatever AOVs the renderer writes otherwise.
+    pub fn render_beauty(
+        &self,
+        scene: Scene,
+        scene_dir: &Path,
+        label: &str,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Rendered> {
+        self.render_aovs(scene, scene_dir, label, progress, Channels::NONE)
+    }
+
+    fn render_aovs(
+        &self,
         mut scene: Scene,
         scene_dir: &Path,
         label: &str,
         progress: &dyn Progress,
+        aovs: Channels,
     ) -> anyhow::Result<Rendered> {
         let field = build_field(&scene, scene_dir, label)?;
         // BOS images through the camera's lens or anti-aliased: rendered as beauty images
@@ -534,7 +557,7 @@ impl Renderer {
         let setup_start = Instant::now();
         let channels = match &scene.optics {
             Some(o) => output_channels(Some(o.mode)),
-            None => Channels::RGB.and(self.aovs),
+            None => Channels::RGB.and(aovs),
         };
         let (mut frame, fr) =
             self.frame(&job, &rs, scene.medium.as_ref(), channels, &mut warnings)?;
@@ -585,7 +608,7 @@ impl Renderer {
                 image.channels = frame
                     .channels()?
                     .into_iter()
-                    .filter(|(n, _)| aov_written(self.aovs, n))
+                    .filter(|(n, _)| aov_written(aovs, n))
                     .map(|(n, d)| (n.to_owned(), d))
                     .collect();
                 image.previews.push(Preview {
