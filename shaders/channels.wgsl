@@ -41,8 +41,9 @@ const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2000.0;
 @group(0) @binding(2) var<storage, read_write> packed: array<f32>;
 @group(0) @binding(3) var<storage, read_write> totals: array<atomic<u32>>;
 
-var<workgroup> wg_steps: atomic<u32>;
-var<workgroup> wg_evals: atomic<u32>;
+// The workgroup's sums of steps and evaluations, 64-bit: [steps lo, steps hi, evals lo,
+// evals hi] (TOTAL_STEPS and TOTAL_EVALS index them too).
+var<workgroup> wg_sums: array<atomic<u32>, 4>;
 var<workgroup> wg_suspects: atomic<u32>;
 var<workgroup> wg_status: array<atomic<u32>, 8>;
 
@@ -55,12 +56,22 @@ fn add64(at: u32, v: u32) {
     }
 }
 
+// `v` added to the workgroup's 64-bit sum at wg_sums[at], wg_sums[at + 1].
+fn wg_add64(at: u32, v: u32) {
+    let old = atomicAdd(&wg_sums[at], v);
+    if old > 0xffffffffu - v {
+        atomicAdd(&wg_sums[at + 1u], 1u);
+    }
+}
+
 @compute @workgroup_size(64)
 fn channels_pack(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(local_invocation_index) li: u32,
+    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let p = gid.x;
+    // Dispatched in rows of workgroups (channels.rs's MAX_GROUPS).
+    let p = gid.y * groups.x * 64u + gid.x;
     if p < params.pixels {
         let base = p * 16u;
         let out = p * params.words;
@@ -69,8 +80,8 @@ fn channels_pack(
         }
         let steps = band[base + WORD_STEPS];
         // Whole counts of the pixel's rays (means times the samples).
-        atomicAdd(&wg_steps, u32(round(max(steps, 0.0) * params.samples)));
-        atomicAdd(&wg_evals, u32(round(max(band[base + WORD_EVALS], 0.0) * params.samples)));
+        wg_add64(TOTAL_STEPS, u32(round(max(steps, 0.0) * params.samples)));
+        wg_add64(TOTAL_EVALS, u32(round(max(band[base + WORD_EVALS], 0.0) * params.samples)));
         let status = u32(max(band[base + WORD_STATUS], 0.0));
         if status < STATUSES {
             atomicAdd(&wg_status[status], 1u);
@@ -81,8 +92,10 @@ fn channels_pack(
     }
     workgroupBarrier();
     if li == 0u {
-        add64(TOTAL_STEPS, atomicLoad(&wg_steps));
-        add64(TOTAL_EVALS, atomicLoad(&wg_evals));
+        for (var at = TOTAL_STEPS; at <= TOTAL_EVALS; at += 2u) {
+            add64(at, atomicLoad(&wg_sums[at]));
+            atomicAdd(&totals[at + 1u], atomicLoad(&wg_sums[at + 1u]));
+        }
         atomicAdd(&totals[TOTAL_SUSPECTS], atomicLoad(&wg_suspects));
     }
     if li < STATUSES {

@@ -130,6 +130,8 @@ const TOTAL_SUSPECTS: usize = 4;
 const TOTAL_STATUS: usize = 8;
 /// Bytes of `totals` (16 u32 words).
 pub(crate) const TOTALS_BYTES: u64 = 64;
+/// Workgroups along x in one dispatch (WebGPU's guaranteed limit per dimension).
+const MAX_GROUPS: u32 = 65_535;
 
 /// shaders/channels.wgsl's `PackParams`.
 #[repr(C)]
@@ -152,6 +154,9 @@ pub(crate) struct Packer {
     params: wgpu::Buffer,
     pub(crate) packed: wgpu::Buffer,
     totals: wgpu::Buffer,
+    /// The totals before the band being packed: a band packed again (its marches took
+    /// more than one submission) is counted once.
+    totals_before: wgpu::Buffer,
     totals_readback: wgpu::Buffer,
 }
 
@@ -217,6 +222,11 @@ impl Packer {
                     TOTALS_BYTES,
                     U::STORAGE | U::COPY_SRC | U::COPY_DST,
                 ),
+                totals_before: buffer(
+                    "frame totals before the band",
+                    TOTALS_BYTES,
+                    U::COPY_SRC | U::COPY_DST,
+                ),
                 totals_readback: buffer(
                     "frame totals readback",
                     TOTALS_BYTES,
@@ -236,14 +246,22 @@ impl Packer {
             .write_buffer(&self.totals, 0, &[0u8; TOTALS_BYTES as usize]);
     }
 
-    /// Pack `pixels` pixels of `band` into [`Self::packed`] and add them to the totals.
+    /// Pack `pixels` pixels of `band` into [`Self::packed`] and add them to the totals;
+    /// `again`: the same band packed once more (after the rest of its marches), its
+    /// first count taken back.
     pub(crate) fn encode(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         band: &wgpu::Buffer,
         pixels: u32,
+        again: bool,
     ) {
+        if again {
+            encoder.copy_buffer_to_buffer(&self.totals_before, 0, &self.totals, 0, TOTALS_BYTES);
+        } else {
+            encoder.copy_buffer_to_buffer(&self.totals, 0, &self.totals_before, 0, TOTALS_BYTES);
+        }
         let mut word = [0u32; 16];
         for (w, i) in word.iter_mut().zip(self.channels.list()) {
             *w = i;
@@ -273,7 +291,9 @@ impl Packer {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(pixels.div_ceil(64), 1, 1);
+        // Rows of at most MAX_GROUPS workgroups (the kernel reads the grid's width).
+        let groups = pixels.div_ceil(64);
+        pass.dispatch_workgroups(groups.min(MAX_GROUPS), groups.div_ceil(MAX_GROUPS), 1);
     }
 
     /// The frame's totals (after its last band): 64 bytes read back.

@@ -22,6 +22,9 @@ use crate::pipelines::{bind_entries, pipeline_constants, render_layout_entries};
 use crate::view::{ViewImage, ViewStats};
 use crate::{GpuContext, GpuError, specialize};
 
+/// Images of at most this many pixels get buffers with room to grow (a viewer's moving
+/// image): 64 Ki pixels, 4 MiB of pixels.
+const SMALL_IMAGE_PIXELS: u64 = 64 * 1024;
 /// Pixels per dispatch on a CPU adapter (lavapipe): big enough to keep every core busy,
 /// small enough that progress updates and cancellation stay responsive (~0.1-1 s a band).
 const PIXELS_PER_BAND_CPU: u32 = 32 * 1024;
@@ -251,8 +254,8 @@ pub struct GpuRenderer<'a> {
     pub(crate) out_buffer: wgpu::Buffer,
     pub(crate) readback: wgpu::Buffer,
     pub(crate) rows_per_band: u32,
-    /// Pixels one band's buffers hold (room for twice the image's rows at creation,
-    /// within the adapter's band).
+    /// Pixels one band's buffers hold (a small image's: room for twice its rows at
+    /// creation, within the adapter's band).
     pub(crate) band_capacity: u32,
     /// Flags set by the field's upload and the object arrays, kept by [`Self::retarget`].
     pub(crate) scene_flags: u32,
@@ -348,9 +351,11 @@ impl<'a> GpuRenderer<'a> {
         let band_rows = (pixels_per_band(ctx, s.spp) / s.width.max(1)).max(1);
         let rows_per_band = band_rows.min(s.height.max(1));
         let pixel_bytes = std::mem::size_of::<PixelOut>() as u64;
-        // Buffers with room for an image up to twice as tall (within the adapter's band):
-        // a viewer's image that grows a little keeps its renderer (`retarget`).
-        let capacity_rows = match band_rows.min(2 * s.height.max(1)) {
+        // A small image's buffers have room for one up to twice as tall (within the
+        // adapter's band): a viewer's moving image that grows a little keeps its renderer
+        // (`retarget`). A large one's are its own size.
+        let small = u64::from(s.width) * u64::from(s.height) <= SMALL_IMAGE_PIXELS;
+        let capacity_rows = match band_rows.min(if small { 2 } else { 1 } * s.height.max(1)) {
             rows if u64::from(s.width) * u64::from(rows) * pixel_bytes
                 <= limits.max_storage_buffer_binding_size =>
             {
@@ -565,8 +570,8 @@ impl<'a> GpuRenderer<'a> {
     /// image of `spp_total` samples: frames of consecutive ranges, averaged, equal one
     /// render of `spp_total` samples. The objects, lights, sky and field on the device
     /// are kept. `Ok(false)`, with nothing changed, when the change needs other
-    /// pipelines (integrator, step policy, flags) or bigger buffers (the frame's bands
-    /// would be smaller than the adapter's: more of them): build a new renderer then.
+    /// pipelines (integrator, step policy, flags) or bigger buffers (an image that is one
+    /// band on the adapter would be more in these): build a new renderer then.
     pub fn retarget(
         &mut self,
         scene: &RenderScene,
@@ -591,9 +596,9 @@ impl<'a> GpuRenderer<'a> {
         }
         let wanted = (pixels_per_band(self.ctx, p.spp) / p.width.max(1)).min(p.height.max(1));
         let rows = wanted.min(self.band_capacity / p.width.max(1));
-        // Buffers made for a smaller image would split the frame into more bands (a
-        // submission and a wait each) than the adapter's band size asks for.
-        if rows < wanted.max(1) {
+        // An image that is one band on the adapter but more than one in these buffers
+        // (made for a smaller image): a submission and a wait each, so a new renderer.
+        if rows == 0 || (wanted >= p.height && rows < p.height) {
             return Ok(false);
         }
         self.params = p;
@@ -994,7 +999,7 @@ impl<'a> GpuRenderer<'a> {
                 // The pixels, in the first submission (most bands need no other; a band
                 // that does copies them again after its last).
                 if submission == 0 {
-                    self.encode_sink(&mut encoder, &sink, first_row, rows, bytes);
+                    self.encode_sink(&mut encoder, &sink, first_row, rows, bytes, false);
                 }
                 if let Some(timer) = timer {
                     timer.resolve(&mut encoder, passes);
@@ -1030,7 +1035,7 @@ impl<'a> GpuRenderer<'a> {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("render band pixels"),
                 });
-            self.encode_sink(&mut encoder, &sink, first_row, rows, bytes);
+            self.encode_sink(&mut encoder, &sink, first_row, rows, bytes, true);
             ctx.queue.submit([encoder.finish()]);
         }
         match &mut sink {
@@ -1038,8 +1043,12 @@ impl<'a> GpuRenderer<'a> {
                 read_buffer_with(ctx, &self.readback, bytes, |band: &[PixelOut]| take(band))?;
                 self.read_back.fetch_add(bytes, Ordering::Relaxed);
             }
-            // No channel: the counts alone (nothing to map).
-            BandSink::Packed { take, .. } if bytes == 0 => take(&[]),
+            // No channel: the counts alone (nothing to map; waited for, as a read would,
+            // so progress and a cancel follow the device).
+            BandSink::Packed { take, .. } if bytes == 0 => {
+                ctx.wait_submitted()?;
+                take(&[]);
+            }
             BandSink::Packed { take, .. } => {
                 read_buffer_with(ctx, &self.readback, bytes, |band: &[f32]| take(band))?;
                 self.read_back.fetch_add(bytes, Ordering::Relaxed);
@@ -1061,7 +1070,9 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// Where the band's pixels go: copied for reading back, or added to the viewer's
-    /// image (and coloured after the frame's last band).
+    /// image (and coloured after the frame's last band). `again`: the band's pixels once
+    /// more, after the submissions that finished its marches (the first copy, in its
+    /// first submission, held some unfinished).
     fn encode_sink(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -1069,6 +1080,7 @@ impl<'a> GpuRenderer<'a> {
         first_row: u32,
         rows: u32,
         bytes: u64,
+        again: bool,
     ) {
         match sink {
             BandSink::ReadBack(_) => {
@@ -1080,6 +1092,7 @@ impl<'a> GpuRenderer<'a> {
                     encoder,
                     &self.out_buffer,
                     self.params.width * rows,
+                    again,
                 );
                 if bytes > 0 {
                     encoder.copy_buffer_to_buffer(&packer.packed, 0, &self.readback, 0, bytes);

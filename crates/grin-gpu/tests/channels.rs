@@ -45,12 +45,20 @@ fn a_render_reads_back_only_the_channels_asked_for_and_counts_the_rest_on_the_de
     let field = harness::build_field(&scene, Path::new("."));
     let rs = RenderScene::new(&scene, Path::new("."), field).expect("render scene");
     let mut gpu = GpuRenderer::new(&ctx, &rs, None).expect("renderer");
-    // Several bands: each packs and reads its own rows, the totals run over all.
+    // Several bands: each packs and reads its own rows, the totals run over all. Short
+    // rounds: a band's marches take several submissions, its pixels packed after each
+    // batch and counted once.
     gpu.limit_band_rows(7);
+    gpu.set_round_steps(4);
     let no = AtomicBool::new(false);
     let before = gpu.bytes_read_back();
     let whole = gpu.render(&|_| {}, &no).expect("whole frame");
     let whole_bytes = gpu.bytes_read_back() - before;
+    assert!(
+        gpu.last_medium_rounds() > 9,
+        "more than one submission of 8 rounds: {}",
+        gpu.last_medium_rounds()
+    );
     let expected = FrameTotals::of(&whole, 2);
     let statuses = expected.status.iter().filter(|&&n| n > 0).count();
     assert!(

@@ -22,8 +22,9 @@ pub(super) const LAYER_PERIOD: Duration = Duration::from_millis(250);
 pub(super) struct UiLayer {
     texture: wgpu::Texture,
     view: wgpu::TextureView,
-    /// [`look`] of the shapes drawn.
-    look: u64,
+    /// [`look`] of the shapes drawn; `None` before the first drawing (a new layer is
+    /// blank: drawn at once, moving or not).
+    look: Option<u64>,
     drawn: Instant,
 }
 
@@ -48,7 +49,7 @@ impl UiLayer {
         Self {
             texture,
             view,
-            look: 0,
+            look: None,
             drawn: Instant::now(),
         }
     }
@@ -62,7 +63,10 @@ impl UiLayer {
     /// Whether shapes of `look` should be drawn into the layer now: they look different,
     /// and the camera is still or the layer is [`LAYER_PERIOD`] old.
     pub(super) fn stale(&self, look: u64, moving: bool) -> bool {
-        look != self.look && (!moving || self.drawn.elapsed() >= LAYER_PERIOD)
+        match self.look {
+            None => true,
+            Some(drawn) => look != drawn && (!moving || self.drawn.elapsed() >= LAYER_PERIOD),
+        }
     }
 
     pub(super) fn view(&self) -> &wgpu::TextureView {
@@ -75,7 +79,7 @@ impl UiLayer {
 
     /// Record that shapes of `look` were drawn.
     pub(super) fn drawn(&mut self, look: u64) {
-        self.look = look;
+        self.look = Some(look);
         self.drawn = Instant::now();
     }
 }
@@ -178,6 +182,10 @@ mod tests {
         };
         let mut layer = UiLayer::new(&ctx.device, &config);
         assert!(layer.fits(&config));
+        assert!(
+            layer.stale(a, true),
+            "a new layer is drawn at once, moving or not"
+        );
         layer.drawn(a);
         assert!(
             !layer.stale(a, false) && !layer.stale(a, true),
