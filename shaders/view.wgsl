@@ -1,4 +1,4 @@
-// #import shared/types.wgsl
+// #import shared/types.wgsl shared/counts.wgsl
 //
 // The viewer's image on the device (crates/grin-gpu/src/view.rs): the render kernel's
 // pixels are added to an accumulation buffer that stays on the GPU, and the image is
@@ -41,16 +41,9 @@ const AOV_STEPS: u32 = 2u;
 const AOV_OPD: u32 = 3u;
 const AOV_STATUS: u32 = 4u;
 
-// stats: [steps lo, steps hi, evals lo, evals hi, loop-limit suspects, scale (f32 bits),
-// 0, 0]; view.rs's STAT_* indices.
-const STAT_STEPS: u32 = 0u;
-const STAT_EVALS: u32 = 2u;
-const STAT_SUSPECTS: u32 = 4u;
+// stats: [steps lo, steps hi, evals lo, evals hi, loop-limit suspects (counts.wgsl's),
+// scale (f32 bits), 0, 0]; view.rs's STAT_* indices.
 const STAT_SCALE: u32 = 5u;
-
-// gpu_data.rs's STATUS_ERROR and grin_gpu::device::LOOP_LIMIT_SUSPECT_STEPS.
-const STATUS_ERROR: u32 = 4u;
-const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2000.0;
 
 // A read-only storage buffer, not a uniform: lavapipe compiles a variant of a kernel for
 // each new value of a uniform it branches on (sizes change every frame while moving).
@@ -60,19 +53,6 @@ const LOOP_LIMIT_SUSPECT_STEPS: f32 = 2000.0;
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>>;
 @group(0) @binding(4) var display: texture_storage_2d<rgba16float, write>;
 @group(0) @binding(5) var<storage, read_write> shaded: array<vec4<f32>>;
-
-var<workgroup> wg_steps: atomic<u32>;
-var<workgroup> wg_evals: atomic<u32>;
-var<workgroup> wg_suspects: atomic<u32>;
-
-// A 64-bit counter in stats[at], stats[at + 1]: the adder whose add wraps the low word
-// carries into the high one.
-fn add64(at: u32, v: u32) {
-    let old = atomicAdd(&stats[at], v);
-    if old > 0xffffffffu - v {
-        atomicAdd(&stats[at + 1u], 1u);
-    }
-}
 
 fn is_finite(v: f32) -> bool {
     return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
@@ -88,12 +68,7 @@ fn view_accumulate(
         let q = band[gid.x];
         let i = params.first_row * params.width + gid.x;
         let w = params.weight;
-        // Per-pixel means times the samples: whole counts of the frame's rays.
-        atomicAdd(&wg_steps, u32(round(max(q.steps, 0.0) * w)));
-        atomicAdd(&wg_evals, u32(round(max(q.evals, 0.0) * w)));
-        if u32(q.status) == STATUS_ERROR && q.steps >= LOOP_LIMIT_SUSPECT_STEPS {
-            atomicAdd(&wg_suspects, 1u);
-        }
+        count_pixel(q.steps, q.evals, u32(q.status), w);
         if params.overwrite == 1u {
             var a = q;
             a.r = q.r * w;
@@ -112,9 +87,7 @@ fn view_accumulate(
     }
     workgroupBarrier();
     if li == 0u {
-        add64(STAT_STEPS, atomicLoad(&wg_steps));
-        add64(STAT_EVALS, atomicLoad(&wg_evals));
-        atomicAdd(&stats[STAT_SUSPECTS], atomicLoad(&wg_suspects));
+        flush_counts();
     }
 }
 

@@ -123,7 +123,7 @@ impl FrameTotals {
     }
 }
 
-/// `totals` indices (shaders/channels.wgsl's TOTAL_*).
+/// `totals` indices (shaders/shared/counts.wgsl's COUNT_*, channels.wgsl's TOTAL_STATUS).
 const TOTAL_STEPS: usize = 0;
 const TOTAL_EVALS: usize = 2;
 const TOTAL_SUSPECTS: usize = 4;

@@ -24,7 +24,7 @@ use crate::pipelines::bind_entries;
 use crate::render::read_buffer;
 use crate::{GpuContext, GpuError, shaders};
 
-/// `stats` indices (shaders/view.wgsl's STAT_*).
+/// `stats` indices (shaders/shared/counts.wgsl's COUNT_*, view.wgsl's STAT_SCALE).
 const STAT_STEPS: usize = 0;
 const STAT_EVALS: usize = 2;
 const STAT_SUSPECTS: usize = 4;

@@ -11,9 +11,14 @@ use grin_trace::RayStatus;
 use grin_trace::render::shade::{AMBIENT_SKY_WEIGHT, EVENTS_PER_DEPTH, status_code};
 use grin_trace::{boundary, step, trace};
 
-/// The kernel's module constants with a scalar value, by name.
+/// The render kernel's module constants with a scalar value, by name.
 fn wgsl_constants() -> BTreeMap<String, f64> {
-    let module = naga::front::wgsl::parse_str(grin_gpu::shaders::RENDER_WGSL).expect("WGSL parses");
+    constants_of(grin_gpu::shaders::RENDER_WGSL)
+}
+
+/// The module constants of the WGSL `source` with a scalar value, by name.
+fn constants_of(source: &str) -> BTreeMap<String, f64> {
+    let module = naga::front::wgsl::parse_str(source).expect("WGSL parses");
     let mut out = BTreeMap::new();
     for (_, c) in module.constants.iter() {
         let Some(name) = &c.name else { continue };
@@ -156,6 +161,28 @@ fn mirrored_constants_have_the_same_values() {
 
 /// Constants that differ on purpose, as data: each says why. A change to one of them on
 /// either side must update this list.
+/// The kernels that count a frame's rays (the viewer's image, the packed read-back) know
+/// `error` and the loop-limit suspects' steps as the renderer does.
+#[test]
+fn the_counting_kernels_mirror_the_status_and_the_loop_limit() {
+    for (name, source) in [
+        ("view.wgsl", grin_gpu::shaders::VIEW_WGSL),
+        ("channels.wgsl", grin_gpu::shaders::CHANNELS_WGSL),
+    ] {
+        let c = constants_of(source);
+        assert_eq!(
+            c.get("STATUS_ERROR"),
+            Some(&f64::from(g::STATUS_ERROR)),
+            "{name}"
+        );
+        assert_eq!(
+            c.get("LOOP_LIMIT_SUSPECT_STEPS"),
+            Some(&f64::from(grin_gpu::device::LOOP_LIMIT_SUSPECT_STEPS)),
+            "{name}"
+        );
+    }
+}
+
 #[test]
 fn deliberate_differences_are_the_documented_ones() {
     let wgsl = wgsl_constants();
