@@ -613,37 +613,11 @@ impl App {
             Some(f) if g.layered => self.draw_layered(&mut g, f, prims, &sd, textures_changed),
             None => {}
             Some(frame) => {
-                let mut enc = g
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                        label: Some("egui"),
-                    });
-                let user = g
-                    .renderer
-                    .update_buffers(&g.device, &g.queue, &mut enc, &prims, &sd);
                 let view = frame
                     .texture
                     .create_view(&wgpu::TextureViewDescriptor::default());
-                {
-                    let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("egui"),
-                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                            view: &view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                                store: wgpu::StoreOp::Store,
-                            },
-                        })],
-                        depth_stencil_attachment: None,
-                        timestamp_writes: None,
-                        occlusion_query_set: None,
-                        multiview_mask: None,
-                    });
-                    g.renderer.render(&mut pass.forget_lifetime(), &prims, &sd);
-                }
-                g.queue.submit(user.into_iter().chain([enc.finish()]));
+                let clear = wgpu::LoadOp::Clear(wgpu::Color::BLACK);
+                draw_egui(&mut g, &view, &prims, &sd, clear, |_| {});
                 g.window.pre_present_notify();
                 g.queue.present(frame);
             }
@@ -671,58 +645,26 @@ impl App {
         if g.layer.as_ref().is_none_or(|l| !l.fits(&g.config)) {
             g.layer = Some(layer::UiLayer::new(&g.device, &g.config));
         }
-        let Some(ui_layer) = g.layer.as_mut() else {
+        // Out of `g` while `g` draws (put back below).
+        let Some(mut ui_layer) = g.layer.take() else {
             return;
         };
-        let pass = |enc: &mut wgpu::CommandEncoder, view: &wgpu::TextureView, load| {
-            enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("egui"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load,
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            })
-            .forget_lifetime()
-        };
-        let encoder = |label| {
-            g.device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
-        };
         if textures_changed || ui_layer.stale(look, self.moving()) {
-            let mut enc = encoder("egui panel layer");
-            let user = g
-                .renderer
-                .update_buffers(&g.device, &g.queue, &mut enc, &under, sd);
             let clear = wgpu::LoadOp::Clear(wgpu::Color::BLACK);
-            g.renderer
-                .render(&mut pass(&mut enc, ui_layer.view(), clear), &under, sd);
-            g.queue.submit(user.into_iter().chain([enc.finish()]));
+            draw_egui(g, ui_layer.view(), &under, sd, clear, |_| {});
             ui_layer.drawn(look);
         }
-        let mut enc = encoder("egui");
-        enc.copy_texture_to_texture(
-            ui_layer.texture().as_image_copy(),
-            frame.texture.as_image_copy(),
-            ui_layer.texture().size(),
-        );
-        let user = g
-            .renderer
-            .update_buffers(&g.device, &g.queue, &mut enc, &over, sd);
         let view = frame
             .texture
             .create_view(&wgpu::TextureViewDescriptor::default());
-        g.renderer
-            .render(&mut pass(&mut enc, &view, wgpu::LoadOp::Load), &over, sd);
-        g.queue.submit(user.into_iter().chain([enc.finish()]));
+        draw_egui(g, &view, &over, sd, wgpu::LoadOp::Load, |enc| {
+            enc.copy_texture_to_texture(
+                ui_layer.texture().as_image_copy(),
+                frame.texture.as_image_copy(),
+                ui_layer.texture().size(),
+            );
+        });
+        g.layer = Some(ui_layer);
         g.window.pre_present_notify();
         g.queue.present(frame);
     }
@@ -920,6 +862,48 @@ impl ApplicationHandler for App {
             Instant::now() + Duration::from_millis(10),
         ));
     }
+}
+
+/// Draw `prims` into `view` (cleared or loaded as `load`) in one submission, after what
+/// `before` encodes.
+fn draw_egui(
+    g: &mut Gfx,
+    view: &wgpu::TextureView,
+    prims: &[egui::epaint::ClippedPrimitive],
+    sd: &egui_wgpu::ScreenDescriptor,
+    load: wgpu::LoadOp<wgpu::Color>,
+    before: impl FnOnce(&mut wgpu::CommandEncoder),
+) {
+    let mut enc = g
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("egui"),
+        });
+    before(&mut enc);
+    let user = g
+        .renderer
+        .update_buffers(&g.device, &g.queue, &mut enc, prims, sd);
+    let mut pass = enc
+        .begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("egui"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load,
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+        .forget_lifetime();
+    g.renderer.render(&mut pass, prims, sd);
+    drop(pass);
+    g.queue.submit(user.into_iter().chain([enc.finish()]));
 }
 
 /// Open the window and run until it is closed (or, headless, until the frames are done).
