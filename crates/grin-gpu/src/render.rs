@@ -652,20 +652,10 @@ impl<'a> GpuRenderer<'a> {
         self.ctx.adapter_name()
     }
 
-    /// Where `frame`'s pixels ended `error` after many steps on an adapter with a loop
-    /// limit (lavapipe): how many, what they likely are, and what traces them whole.
-    pub fn loop_limit_warning(&self, frame: &Frame) -> Option<String> {
-        let error = crate::gpu_data::STATUS_ERROR as f32;
-        let suspect = frame
-            .pixels
-            .iter()
-            .filter(|p| p.status == error && p.steps >= crate::device::LOOP_LIMIT_SUSPECT_STEPS)
-            .count();
-        self.loop_limit_warning_of(suspect as u64)
-    }
-
-    /// [`Self::loop_limit_warning`] for `suspect` such pixels, counted elsewhere (the
-    /// viewer's image on the device counts them: [`crate::view::ViewStats`]).
+    /// Where `suspect` pixels of a frame ended `error` after many steps on an adapter with
+    /// a loop limit (lavapipe): what they likely are, and what traces them whole. The
+    /// device counts them ([`FrameTotals::loop_limit_suspects`],
+    /// [`crate::view::ViewStats`]).
     pub fn loop_limit_warning_of(&self, suspect: u64) -> Option<String> {
         let limit = self.ctx.loop_limit()?;
         (suspect > 0).then(|| {
@@ -696,6 +686,27 @@ impl<'a> GpuRenderer<'a> {
     /// Render every pixel. `progress(rows_done)` is called after each band of rows;
     /// setting `cancel` stops between bands with [`GpuError::Cancelled`].
     pub fn render(&self, progress: &dyn Fn(u32), cancel: &AtomicBool) -> Result<Frame, GpuError> {
+        self.collect_frame(progress, cancel, |row, rows, pixels| {
+            // Converted straight from the mapped read-back buffer: no copy of the band.
+            let mut take = |band: &[PixelOut]| {
+                pixels.extend(band.iter().map(|p| p.to_cpu()));
+            };
+            self.render_band(row, rows, BandSink::ReadBack(&mut take))
+        })
+    }
+
+    /// A frame of every pixel, each band's added by `band(first_row, rows, pixels)`
+    /// (which returns the band's device seconds), `progress` told after each.
+    fn collect_frame(
+        &self,
+        progress: &dyn Fn(u32),
+        cancel: &AtomicBool,
+        mut band: impl FnMut(
+            u32,
+            u32,
+            &mut Vec<grin_render::image::PixelOut>,
+        ) -> Result<Option<f64>, GpuError>,
+    ) -> Result<Frame, GpuError> {
         let (width, height) = (self.params.width, self.params.height);
         let mut pixels = grin_field::alloc::try_with_capacity(
             width as usize * height as usize,
@@ -703,11 +714,7 @@ impl<'a> GpuRenderer<'a> {
         )
         .map_err(|e| GpuError::Memory(e.to_string()))?;
         self.each_band(cancel, |row, rows| {
-            // Converted straight from the mapped read-back buffer: no copy of the band.
-            let mut take = |band: &[PixelOut]| {
-                pixels.extend(band.iter().map(|p| p.to_cpu()));
-            };
-            let seconds = self.render_band(row, rows, BandSink::ReadBack(&mut take))?;
+            let seconds = band(row, rows, &mut pixels)?;
             progress(rows);
             Ok(seconds)
         })?;
@@ -733,7 +740,7 @@ impl<'a> GpuRenderer<'a> {
             let totals = FrameTotals::of(&frame, self.params.spp);
             return Ok((frame, totals));
         }
-        let (width, height) = (self.params.width, self.params.height);
+        let width = self.params.width;
         let packer = Packer::new(
             self.ctx,
             channels,
@@ -741,13 +748,8 @@ impl<'a> GpuRenderer<'a> {
             width * self.rows_per_band,
         )?;
         packer.clear_totals(self.ctx);
-        let mut pixels = grin_field::alloc::try_with_capacity(
-            width as usize * height as usize,
-            &format!("a {width}x{height} frame"),
-        )
-        .map_err(|e| GpuError::Memory(e.to_string()))?;
         let words = channels.words() as usize;
-        self.each_band(cancel, |row, rows| {
+        let frame = self.collect_frame(progress, cancel, |row, rows, pixels| {
             let n = width as usize * rows as usize;
             let mut take = |band: &[f32]| {
                 let pixel = |i: usize| channels.unpack(&band[i * words..(i + 1) * words]);
@@ -757,20 +759,11 @@ impl<'a> GpuRenderer<'a> {
                 packer: &packer,
                 take: &mut take,
             };
-            let seconds = self.render_band(row, rows, sink)?;
-            progress(rows);
-            Ok(seconds)
+            self.render_band(row, rows, sink)
         })?;
         let totals = packer.read_totals(self.ctx)?;
         self.read_back.fetch_add(TOTALS_BYTES, Ordering::Relaxed);
-        Ok((
-            Frame {
-                width,
-                height,
-                pixels,
-            },
-            totals,
-        ))
+        Ok((frame, totals))
     }
 
     /// Render every pixel into `image` (the viewer's image on the device): the frame's

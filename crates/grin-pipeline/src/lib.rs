@@ -629,9 +629,13 @@ impl Renderer {
             Some(t) => (
                 t.steps as f64 / rays.max(1.0),
                 t.evals as f64 / rays.max(1.0),
-                status_counts_of(&t.status),
+                status_counts(&t.status),
             ),
-            None => (mean(|p| p.steps), mean(|p| p.evals), status_counts(&frame)),
+            None => (
+                mean(|p| p.steps),
+                mean(|p| p.evals),
+                status_counts(&FrameTotals::of(&frame, 1).status),
+            ),
         };
         let stuck = status_counts["max_steps"] + status_counts["error"];
         if stuck > 0 {
@@ -1006,27 +1010,14 @@ fn aov_written(aovs: Channels, name: &str) -> bool {
             .any(|(_, c, names)| aovs.contains(*c) && names.contains(&name))
 }
 
-/// Pixels per `aov.status` value, by name, from the device's counts.
-fn status_counts_of(counts: &[u64; 8]) -> std::collections::BTreeMap<&'static str, usize> {
+/// Pixels per `aov.status` value, by name, from their counts by value
+/// ([`FrameTotals::status`]: the device's, or [`FrameTotals::of`] a frame).
+fn status_counts(counts: &[u64; 8]) -> std::collections::BTreeMap<&'static str, usize> {
     grin_trace::RayStatus::ALL
         .iter()
         .enumerate()
         .map(|(i, s)| (s.name(), counts[i] as usize))
         .collect()
-}
-
-/// Pixels per `aov.status` value, by name.
-pub fn status_counts(frame: &Frame) -> std::collections::BTreeMap<&'static str, usize> {
-    let names = grin_trace::RayStatus::ALL.map(|s| s.name());
-    let mut counts: std::collections::BTreeMap<_, _> = names.iter().map(|&n| (n, 0)).collect();
-    for p in &frame.pixels {
-        if let Some(name) = names.get(p.status as usize)
-            && let Some(c) = counts.get_mut(name)
-        {
-            *c += 1;
-        }
-    }
-    counts
 }
 
 /// An error's first line (wgpu's adapter errors run on with advice for the GPU backend).
